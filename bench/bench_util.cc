@@ -1,0 +1,160 @@
+#include "bench/bench_util.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+
+namespace fieldspace::bench {
+
+absl::StatusOr<Args> Args::Parse(int argc, char** argv, const std::vector<std::string>& switches) {
+  Args args;
+  for (int i = 0; i < argc; ++i) {
+    std::string a = argv[i];
+    if (a.rfind("--", 0) != 0 || a.size() == 2) {
+      args.positional_.push_back(a);
+      continue;
+    }
+    std::string name = a.substr(2);
+    if (size_t eq = name.find('='); eq != std::string::npos) {
+      args.flags_[name.substr(0, eq)] = name.substr(eq + 1);
+      continue;
+    }
+    if (std::find(switches.begin(), switches.end(), name) != switches.end()) {
+      args.flags_[name] = "";
+      continue;
+    }
+    if (i + 1 >= argc)
+      return absl::InvalidArgumentError(absl::StrCat("--", name, " needs a value"));
+    args.flags_[name] = argv[++i];
+  }
+  return args;
+}
+
+std::optional<std::string> Args::Get(const std::string& flag) const {
+  auto it = flags_.find(flag);
+  if (it == flags_.end()) return std::nullopt;
+  return it->second;
+}
+
+absl::StatusOr<int64_t> Args::GetInt(const std::string& flag, int64_t default_value) const {
+  auto v = Get(flag);
+  if (!v) return default_value;
+  int64_t out;
+  if (!absl::SimpleAtoi(*v, &out)) {
+    return absl::InvalidArgumentError(absl::StrCat("--", flag, ": not an integer: '", *v, "'"));
+  }
+  return out;
+}
+
+absl::StatusOr<double> Args::GetDouble(const std::string& flag, double default_value) const {
+  auto v = Get(flag);
+  if (!v) return default_value;
+  double out;
+  if (!absl::SimpleAtod(*v, &out) || !std::isfinite(out)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--", flag, ": not a finite number: '", *v, "'"));
+  }
+  return out;
+}
+
+absl::Status Args::CheckKnown(const std::vector<std::string>& known) const {
+  for (const auto& [name, value] : flags_) {
+    if (std::find(known.begin(), known.end(), name) == known.end()) {
+      return absl::InvalidArgumentError(absl::StrCat("unknown flag --", name));
+    }
+  }
+  return absl::OkStatus();
+}
+
+void JsonWriter::Key(const std::string& key) {
+  if (!first_.empty()) {
+    if (!first_.back()) out_ += ",";
+    first_.back() = false;
+  }
+  if (!key.empty()) absl::StrAppend(&out_, "\"", key, "\":");
+}
+
+JsonWriter& JsonWriter::BeginObject(const std::string& key) {
+  Key(key);
+  out_ += "{";
+  first_.push_back(true);
+  return *this;
+}
+
+JsonWriter& JsonWriter::EndObject() {
+  out_ += "}";
+  first_.pop_back();
+  return *this;
+}
+
+JsonWriter& JsonWriter::Int(const std::string& key, int64_t value) {
+  Key(key);
+  absl::StrAppend(&out_, value);
+  return *this;
+}
+
+static std::string FormatDouble(double v) {
+  if (!std::isfinite(v)) return "null";
+  return absl::StrFormat("%.10g", v);
+}
+
+JsonWriter& JsonWriter::Double(const std::string& key, double value) {
+  Key(key);
+  out_ += FormatDouble(value);
+  return *this;
+}
+
+JsonWriter& JsonWriter::Bool(const std::string& key, bool value) {
+  Key(key);
+  out_ += value ? "true" : "false";
+  return *this;
+}
+
+JsonWriter& JsonWriter::String(const std::string& key, const std::string& value) {
+  Key(key);
+  out_ += "\"";
+  for (char c : value) {
+    if (c == '"' || c == '\\') {
+      out_ += '\\';
+      out_ += c;
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      absl::StrAppendFormat(&out_, "\\u%04x", static_cast<unsigned char>(c));
+    } else {
+      out_ += c;
+    }
+  }
+  out_ += "\"";
+  return *this;
+}
+
+JsonWriter& JsonWriter::DoubleArray(const std::string& key, const std::vector<double>& values) {
+  Key(key);
+  out_ += "[";
+  for (size_t i = 0; i < values.size(); ++i) {
+    if (i) out_ += ",";
+    out_ += FormatDouble(values[i]);
+  }
+  out_ += "]";
+  return *this;
+}
+
+double PeakRssMb() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) {
+      double kb = 0;
+      std::sscanf(line.c_str() + 6, "%lf", &kb);
+      return kb / 1024.0;
+    }
+  }
+  return 0;
+}
+
+}  // namespace fieldspace::bench

@@ -1,0 +1,70 @@
+#ifndef FIELDSPACE_BENCH_BENCH_UTIL_H_
+#define FIELDSPACE_BENCH_BENCH_UTIL_H_
+
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+
+namespace fieldspace::bench {
+
+// Command-line arguments of one subcommand: positional arguments and `--flag value` /
+// `--flag=value` / bare `--switch` options.
+class Args {
+ public:
+  // `switches` lists the flags that take no value.
+  static absl::StatusOr<Args> Parse(int argc, char** argv,
+                                    const std::vector<std::string>& switches);
+
+  const std::vector<std::string>& positional() const { return positional_; }
+  bool Has(const std::string& flag) const { return flags_.count(flag) > 0; }
+  std::optional<std::string> Get(const std::string& flag) const;
+  absl::StatusOr<int64_t> GetInt(const std::string& flag, int64_t default_value) const;
+  absl::StatusOr<double> GetDouble(const std::string& flag, double default_value) const;
+  // InvalidArgument naming the first flag not in `known`.
+  absl::Status CheckKnown(const std::vector<std::string>& known) const;
+
+ private:
+  std::vector<std::string> positional_;
+  std::map<std::string, std::string> flags_;
+};
+
+// Minimal JSON writer for flat objects with nested objects and number arrays.
+class JsonWriter {
+ public:
+  JsonWriter& BeginObject(const std::string& key = "");
+  JsonWriter& EndObject();
+  JsonWriter& Int(const std::string& key, int64_t value);
+  JsonWriter& Double(const std::string& key, double value);
+  JsonWriter& Bool(const std::string& key, bool value);
+  JsonWriter& String(const std::string& key, const std::string& value);
+  JsonWriter& DoubleArray(const std::string& key, const std::vector<double>& values);
+  std::string str() const { return out_; }
+
+ private:
+  void Key(const std::string& key);
+  std::string out_;
+  std::vector<bool> first_;
+};
+
+// Peak resident set size of this process in MiB (VmHWM).
+double PeakRssMb();
+
+class Stopwatch {
+ public:
+  Stopwatch() : start_(std::chrono::steady_clock::now()) {}
+  double Seconds() const {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+  }
+
+ private:
+  std::chrono::steady_clock::time_point start_;
+};
+
+}  // namespace fieldspace::bench
+
+#endif  // FIELDSPACE_BENCH_BENCH_UTIL_H_

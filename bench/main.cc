@@ -1,0 +1,39 @@
+// fieldspace-bench: runs the core directly on a mesh and prints one JSON object on stdout.
+// Exit status: 0 on success, 2 on bad input (a one-line error on stderr), 1 on internal failure.
+#include <cstdio>
+#include <cstring>
+#include <string>
+
+#include "bench/commands.h"
+
+namespace {
+
+struct Command {
+  const char* name;
+  int (*run)(int argc, char** argv);
+  const char* usage;
+};
+
+constexpr Command kCommands[] = {
+    {"mesh", fieldspace::bench::RunMesh, "mesh FILE"},
+};
+
+void PrintUsage() {
+  std::fprintf(stderr, "usage: fieldspace-bench COMMAND ...\ncommands:\n");
+  for (const Command& c : kCommands) std::fprintf(stderr, "  %s\n", c.usage);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "-h") == 0) {
+    PrintUsage();
+    return argc < 2 ? 2 : 0;
+  }
+  for (const Command& c : kCommands) {
+    if (std::strcmp(argv[1], c.name) == 0) return c.run(argc - 2, argv + 2);
+  }
+  std::fprintf(stderr, "fieldspace-bench: unknown command '%s'\n", argv[1]);
+  PrintUsage();
+  return 2;
+}

@@ -1,0 +1,36 @@
+#ifndef FIELDSPACE_CORE_OPERATORS_FIELD_OPERATOR_H_
+#define FIELDSPACE_CORE_OPERATORS_FIELD_OPERATOR_H_
+
+#include "Eigen/Core"
+#include "Eigen/SparseCore"
+#include "absl/status/statusor.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/operators/field_type.h"
+
+namespace fieldspace {
+
+// A Laplace operator on per-face fields of one FieldType: stiffness S and diagonal mass M.
+struct FieldOperator {
+  FieldType type;
+  // k x k, k = dofs_per_face * #F, DOF order of DESIGN.md section 2. Sparse, symmetric, positive
+  // semi-definite; column-major with both triangles stored.
+  Eigen::SparseMatrix<double> stiffness;
+  // k: the diagonal of M, the area of the DOF's face (positive).
+  Eigen::VectorXd mass;
+
+  int64_t dofs() const { return mass.size(); }
+};
+
+// Assembles S and M for `type` on `mesh` (DESIGN.md section 2): the vector Hodge Laplacian
+// (eq. 1), the n-field connection Laplacian, or the (1,1)-tensor Laplacian (eq. 2, 14-20).
+// O(#F) time and memory, assembled in parallel.
+// InvalidArgument for an invalid type (FieldType::Validate), ResourceExhausted when S would need
+// more than 2^31 nonzeros.
+absl::StatusOr<FieldOperator> BuildFieldOperator(const TriangleMesh& mesh, const FieldType& type);
+
+// The diagonal of M: dofs_per_face * #F entries, entry p f + c = area of face f.
+Eigen::VectorXd BuildFaceMass(const TriangleMesh& mesh, int32_t dofs_per_face);
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_OPERATORS_FIELD_OPERATOR_H_
