@@ -76,8 +76,9 @@ struct FaceProperty {
 // float), `element face` with `list uchar int vertex_indices` (F, #F x 3, zero-based) followed by
 // one `float` property per entry of face_properties. Writes to a temporary file next to `path`
 // and renames it over `path` only after every write succeeded, so readers never see a partial
-// file. InvalidArgument for indices outside [0, #V), a property with a bad name or not #F values;
-// the errno's status (e.g. NotFound for a missing directory) if writing fails.
+// file. InvalidArgument for indices outside [0, #V), coordinates that are not finite floats, a
+// property with a bad name or not #F values (property values themselves may be anything, NaN
+// included); the errno's status (e.g. NotFound for a missing directory) if writing fails.
 absl::Status WritePly(const std::string& path, const VertexMatrix& V, const FaceMatrix& F,
                       const std::vector<FaceProperty>& face_properties = {});
 
