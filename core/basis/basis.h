@@ -36,13 +36,37 @@ struct BasisOptions {
   std::function<void(BasisPhase phase, double fraction)> progress;
   // Checked at least every 100 ms; when it becomes true the build returns Cancelled.
   const std::atomic<bool>* cancel = nullptr;
+  // Refuse (ResourceExhausted) when U would need more than this many bytes: estimated as
+  // sigma * k nonzeros before building, exact after the regions are known (8 bytes a nonzero).
+  int64_t max_basis_bytes = int64_t{16} << 30;
+  // Convergence of each local eigenproblem: ||S_bar x - theta x|| <= tolerance (theta + tau) for
+  // unit x (eigenvector errors ~ tolerance, eigenvalue errors ~ tolerance^2, relative).
+  double eigen_tolerance = 1e-5;
+  // Vector fields: solve the local problems through the factored form S = B B^T when S matches it
+  // (see BasisStats::hodge_factor_used); false forces the generic path (tests, comparisons).
+  bool use_factored_vector_operator = true;
 };
 
+// Wall-clock seconds per phase. sampling: dual graph + farthest point sampling; regions: growing
+// the regions and laying out U's sparsity; eigensolve: local matrices, factorizations and
+// eigenproblems, writing U's values; total: the whole BuildBasis call.
 struct BasisTimings {
   double sampling_seconds = 0;
   double regions_seconds = 0;
   double eigensolve_seconds = 0;
   double total_seconds = 0;
+};
+
+// How the local eigenproblems were solved (diagnostics).
+struct BasisStats {
+  // Vector fields only: S matched its factored form B B^T, so the local shift-inverses used the
+  // Woodbury form (see local_problem.h); false means the generic path (factoring S_bar).
+  bool hodge_factor_used = false;
+  int32_t dense_regions = 0;       // solved densely (tiny regions)
+  int32_t lanczos_fallbacks = 0;   // LOBPCG did not converge; Spectra's Lanczos did
+  int64_t lobpcg_iterations = 0;   // summed over regions
+  int64_t max_region_faces = 0;
+  double mean_region_faces = 0;
 };
 
 // A subspace basis U (k x d) of locally supported fields.
@@ -55,14 +79,32 @@ struct Basis {
   Eigen::SparseMatrix<float, Eigen::RowMajor> U;
   std::vector<int32_t> sample_faces;      // sample (center) face of each region
   std::vector<double> local_eigenvalues;  // d: eigenvalue of each column's local problem (eq. 7)
+  // max over faces of the dual-graph distance to the nearest sample (FPS's rho): the regions
+  // cover every face when radius >= coverage_radius.
+  double coverage_radius = 0;
+  int64_t uncovered_faces = 0;  // faces in no region (rows of U without entries)
   BasisTimings timings;
+  BasisStats stats;
 
   int32_t dimension() const { return static_cast<int32_t>(U.cols()); }
   int32_t num_regions() const { return static_cast<int32_t>(sample_faces.size()); }
 };
 
-// Builds the basis (section 4) for `op` on `mesh`. InvalidArgument for bad parameters, Cancelled
-// when options.cancel fires, ResourceExhausted when the estimated nnz(U) is beyond memory.
+// Builds the basis (section 4) for `op` on `mesh`:
+// 1. dual graph (dual_graph.h) and farthest point sampling, samples per component in proportion
+//    to its area (sampling.h): R = ceil(d / m) regions;
+// 2. radius r = sqrt(sigma A / (d pi)) (eq. 12, A the total area, also with weights), region =
+//    faces within dual distance r of the sample (regions.h);
+// 3. per region the m lowest eigenpairs of S_bar = V^T S V (eqs. 5, 7), columns V phi_i of U.
+// Column j belongs to region j / m, field j % m. When m does not divide d, the last region (the
+// last sample of the last component) contributes only d - m (R - 1) fields, its lowest ones, so
+// that U has exactly d columns. Each column is normalized (unit M-norm) with its largest-magnitude
+// entry positive. The result does not depend on the thread count (regions are independent and
+// each is solved deterministically).
+// Errors: InvalidArgument for bad parameters (d < 1 or > k, sigma <= 0 or non-finite, bad
+// weights, fields_per_region < 1, more components than regions, operator/mesh size mismatch),
+// Cancelled when options.cancel fires, ResourceExhausted when U would exceed
+// options.max_basis_bytes or 2^31 - 1 nonzeros.
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options);
 

@@ -1,6 +1,8 @@
 #ifndef FIELDSPACE_CORE_OPERATORS_FIELD_OPERATOR_H_
 #define FIELDSPACE_CORE_OPERATORS_FIELD_OPERATOR_H_
 
+#include <utility>
+
 #include "Eigen/Core"
 #include "Eigen/SparseCore"
 #include "absl/status/statusor.h"
@@ -19,6 +21,21 @@ struct FieldOperator {
   Eigen::VectorXd mass;
 
   int64_t dofs() const { return mass.size(); }
+
+  FieldOperator() = default;
+  FieldOperator(const FieldOperator&) = default;
+  FieldOperator& operator=(const FieldOperator&) = default;
+  // Eigen 3.4's SparseMatrix has no move operations (a "move" deep-copies hundreds of MB on
+  // large meshes, e.g. every time a StatusOr<FieldOperator> is returned); swap instead.
+  FieldOperator(FieldOperator&& other) noexcept : type(other.type), mass(std::move(other.mass)) {
+    stiffness.swap(other.stiffness);
+  }
+  FieldOperator& operator=(FieldOperator&& other) noexcept {
+    type = other.type;
+    stiffness.swap(other.stiffness);
+    mass = std::move(other.mass);
+    return *this;
+  }
 };
 
 // Assembles S and M for `type` on `mesh` (DESIGN.md section 2): the vector Hodge Laplacian

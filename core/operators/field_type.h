@@ -2,9 +2,12 @@
 #define FIELDSPACE_CORE_OPERATORS_FIELD_TYPE_H_
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 
 namespace fieldspace {
 
@@ -35,6 +38,12 @@ struct FieldType {
     return a.kind == b.kind && (a.kind != FieldKind::kNField || a.n == b.n);
   }
 };
+
+// Parses a field type name: "vector", "tensor", "nfield" (symmetry order from `n`, required) or
+// "nfieldN" (`n`, if given, must agree). `n` is rejected for vector and tensor fields.
+// InvalidArgument for anything else, including n outside [1, 64].
+absl::StatusOr<FieldType> ParseFieldType(absl::string_view name,
+                                         std::optional<int32_t> n = std::nullopt);
 
 }  // namespace fieldspace
 

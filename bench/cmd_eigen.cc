@@ -1,0 +1,115 @@
+// `fieldspace-bench eigen MESH --field vector|nfield|tensor [--n N] --count K --dim D
+//  [--sigma S] [--seed N] [--method auto|dense|sparse] [--full]`:
+// the reduced eigenproblem of paper section 8 ("Laplace spectrum", Table 6): the K lowest
+// eigenvalues of (U^T S U) y = lambda (U^T M U) y in a D-dimensional local basis, on the mesh
+// scaled to unit total area. With --full also the full-space reference eigenvalues (CHOLMOD +
+// Spectra) and their relative errors. Prints
+//   {"reduced":[...],"full":[...],"relative_errors":[...],
+//    "seconds":{"basis","reduced_system","solve","full"},"method","dim","nnz_u"}
+// ("full" and "relative_errors" empty and seconds.full 0 without --full).
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "bench/bench_util.h"
+#include "bench/cmd_operator.h"
+#include "bench/cmd_subspace.h"
+#include "bench/commands.h"
+#include "core/operators/field_operator.h"
+#include "core/operators/reference_solvers.h"
+#include "core/subspace/reduced_system.h"
+#include "core/subspace/spectrum.h"
+
+namespace fieldspace::bench {
+
+int RunEigen(int argc, char** argv) {
+  auto args = Args::Parse(argc, argv, {"full"});
+  if (!args.ok()) return ReportError(args.status());
+  if (auto st = args->CheckKnown({"field", "n", "count", "dim", "sigma", "seed", "method", "full"});
+      !st.ok()) {
+    return ReportError(st);
+  }
+  if (args->positional().size() != 1 || !args->Has("count") || !args->Has("dim")) {
+    return ReportError(absl::InvalidArgumentError(
+        "usage: fieldspace-bench eigen MESH --field vector|nfield|tensor [--n N] --count K "
+        "--dim D [--sigma S] [--seed N] [--method auto|dense|sparse] [--full]"));
+  }
+  auto type = FieldTypeFromArgs(*args);
+  if (!type.ok()) return ReportError(type.status());
+  auto count = args->GetInt("count", 0);
+  if (!count.ok()) return ReportError(count.status());
+  if (*count < 1 || *count > 100000) {
+    return ReportError(absl::InvalidArgumentError("--count must be in [1, 100000]"));
+  }
+  ReducedEigenOptions options;
+  options.count = static_cast<int32_t>(*count);
+  options.compute_vectors = true;  // the eigenfields are part of the timed work
+  const std::string method = args->Get("method").value_or("auto");
+  if (method == "dense") {
+    options.method = ReducedEigenMethod::kDense;
+  } else if (method == "sparse") {
+    options.method = ReducedEigenMethod::kSparse;
+  } else if (method != "auto") {
+    return ReportError(absl::InvalidArgumentError("--method must be auto, dense or sparse"));
+  }
+
+  auto mesh = LoadUnitAreaMesh(args->positional()[0]);
+  if (!mesh.ok()) return ReportError(mesh.status());
+  auto op = BuildFieldOperator(*mesh, *type);
+  if (!op.ok()) return ReportError(op.status());
+
+  Stopwatch basis_watch;
+  auto basis = BuildBenchBasis(*mesh, *op, *args);
+  if (!basis.ok()) return ReportError(basis.status());
+  const double basis_seconds = basis_watch.Seconds();
+
+  Stopwatch reduced_watch;
+  auto system = ReducedSystem::Build(*basis, *op);
+  if (!system.ok()) return ReportError(system.status());
+  const double reduced_seconds = reduced_watch.Seconds();
+
+  Stopwatch solve_watch;
+  auto reduced = ReducedEigenpairs(**system, options);
+  if (!reduced.ok()) return ReportError(reduced.status());
+  const double solve_seconds = solve_watch.Seconds();
+
+  std::vector<double> full_values, relative_errors;
+  double full_seconds = 0;
+  if (args->Has("full")) {
+    Stopwatch full_watch;
+    EigenOptions full_options;
+    full_options.count = options.count;
+    full_options.compute_vectors = false;
+    auto full = ReferenceEigenpairs(*op, full_options);
+    if (!full.ok()) return ReportError(full.status());
+    full_seconds = full_watch.Seconds();
+    for (int64_t i = 0; i < full->values.size(); ++i) {
+      full_values.push_back(full->values[i]);
+      const double f = full->values[i];
+      relative_errors.push_back(f != 0 ? (reduced->values[i] - f) / std::abs(f) : 0.0);
+    }
+  }
+
+  JsonWriter json;
+  json.BeginObject()
+      .DoubleArray("reduced", std::vector<double>(reduced->values.data(),
+                                                  reduced->values.data() + reduced->values.size()))
+      .DoubleArray("full", full_values)
+      .DoubleArray("relative_errors", relative_errors)
+      .BeginObject("seconds")
+      .Double("basis", basis_seconds)
+      .Double("reduced_system", reduced_seconds)
+      .Double("solve", solve_seconds)
+      .Double("full", full_seconds)
+      .EndObject()
+      .String("method", reduced->method == ReducedEigenMethod::kDense ? "dense" : "sparse")
+      .Int("dim", (*basis)->dimension())
+      .Int("nnz_u", (*basis)->U.nonZeros())
+      .EndObject();
+  std::printf("%s\n", json.str().c_str());
+  return 0;
+}
+
+}  // namespace fieldspace::bench

@@ -1,0 +1,307 @@
+// `fieldspace-bench serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] [--sessions S]
+//  [--edits E] [--watch W] [--threads T] [--server HOST:PORT]`: load on fieldspaced's interactive
+// path. Without --server it starts an in-process server on 127.0.0.1:0 with a temporary store.
+// Uploads MESH, builds (or finds) the basis, then runs S concurrent design sessions of E edits each
+// (add / move / remove constraints on random faces, W watched faces) and prints the latency
+// distribution of the server-side edit time and of the client round trip, and the throughput.
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "bench/bench_util.h"
+#include "bench/commands.h"
+#include "core/mesh/mesh_io.h"
+#include "fieldspace/v1/fieldspace.grpc.pb.h"
+#include "grpcpp/grpcpp.h"
+#include "server/field_server.h"
+#include "server/status_util.h"
+
+namespace fieldspace::bench {
+namespace {
+
+namespace v1 = ::fieldspace::v1;
+
+struct Percentiles {
+  double p50 = 0, p90 = 0, p99 = 0, max = 0, mean = 0;
+};
+
+Percentiles Summarize(std::vector<double> v) {
+  Percentiles p;
+  if (v.empty()) return p;
+  std::sort(v.begin(), v.end());
+  auto at = [&](double q) { return v[std::min(v.size() - 1, static_cast<size_t>(q * v.size()))]; };
+  p.p50 = at(0.5);
+  p.p90 = at(0.9);
+  p.p99 = at(0.99);
+  p.max = v.back();
+  double sum = 0;
+  for (double x : v) sum += x;
+  p.mean = sum / v.size();
+  return p;
+}
+
+void WritePercentiles(JsonWriter& j, const std::string& key, const Percentiles& p) {
+  j.BeginObject(key);
+  j.Double("p50", p.p50).Double("p90", p.p90).Double("p99", p.p99).Double("max", p.max);
+  j.Double("mean", p.mean);
+  j.EndObject();
+}
+
+absl::Status FromGrpc(const grpc::Status& s, const std::string& what) {
+  if (s.ok()) return absl::OkStatus();
+  absl::Status st = server::FromGrpcStatus(s);
+  return absl::Status(st.code(), absl::StrCat(what, ": ", st.message()));
+}
+
+struct SessionResult {
+  absl::Status status;
+  double open_ms = 0;
+  std::vector<double> server_ms;
+  std::vector<double> round_trip_ms;
+  int refactorizations = 0;
+};
+
+SessionResult RunSession(v1::FieldSpace::Stub* stub, const std::string& basis_id, int32_t num_faces,
+                         int32_t values_per_face, int edits, int watch, uint32_t seed) {
+  SessionResult out;
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int32_t> face(0, num_faces - 1);
+  std::normal_distribution<double> value(0.0, 1.0);
+  grpc::ClientContext context;
+  auto stream = stub->Design(&context);
+  v1::DesignRequest open;
+  open.mutable_open()->set_basis_id(basis_id);
+  open.mutable_open()->mutable_weights()->set_mu_s(1.0);
+  open.mutable_open()->mutable_weights()->set_mu_b(0.0);
+  open.mutable_open()->mutable_weights()->set_mu_c(1.0);
+  for (int i = 0; i < watch; ++i) open.mutable_open()->add_watch_faces(face(rng));
+  open.mutable_open()->set_watch_encoding(v1::FIELD_ENCODING_AMBIENT);
+  v1::DesignUpdate update;
+  auto t0 = std::chrono::steady_clock::now();
+  if (!stream->Write(open) || !stream->Read(&update)) {
+    out.status = FromGrpc(stream->Finish(), "Design open");
+    return out;
+  }
+  out.open_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  std::vector<int32_t> live;  // constraint ids in the session
+  int32_t next_id = 1;
+  for (int e = 0; e < edits; ++e) {
+    v1::DesignRequest r;
+    r.set_seq(e + 1);
+    const int kind = live.size() < 4 ? 0 : (live.size() > 24 ? 2 : static_cast<int>(rng() % 3));
+    auto fill = [&](google::protobuf::RepeatedField<double>* v) {
+      for (int c = 0; c < values_per_face; ++c) v->Add(value(rng));
+    };
+    if (kind == 0) {
+      v1::Constraint* c = r.mutable_add()->mutable_constraint();
+      r.mutable_add()->set_id(next_id);
+      c->set_face(face(rng));
+      fill(c->mutable_value());
+      c->set_encoding(v1::FIELD_ENCODING_AMBIENT);
+      live.push_back(next_id++);
+    } else if (kind == 1) {
+      r.mutable_move()->set_id(live[rng() % live.size()]);
+      r.mutable_move()->set_face(face(rng));
+      fill(r.mutable_move()->mutable_value());
+      r.mutable_move()->set_encoding(v1::FIELD_ENCODING_AMBIENT);
+    } else {
+      const size_t k = rng() % live.size();
+      r.mutable_remove()->set_id(live[k]);
+      live.erase(live.begin() + static_cast<std::ptrdiff_t>(k));
+    }
+    t0 = std::chrono::steady_clock::now();
+    if (!stream->Write(r) || !stream->Read(&update)) break;
+    out.round_trip_ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    out.server_ms.push_back(update.timings().total_ms());
+    out.refactorizations += update.timings().refactorized() ? 1 : 0;
+  }
+  stream->WritesDone();
+  out.status = FromGrpc(stream->Finish(), "Design");
+  return out;
+}
+
+}  // namespace
+
+int RunServeLoad(int argc, char** argv) {
+  auto args = Args::Parse(argc, argv, {});
+  if (!args.ok()) return ReportError(args.status());
+  if (auto st = args->CheckKnown(
+          {"dim", "field", "n", "sessions", "edits", "watch", "threads", "server"});
+      !st.ok()) {
+    return ReportError(st);
+  }
+  if (args->positional().size() != 1) {
+    return ReportError(absl::InvalidArgumentError(
+        "usage: fieldspace-bench serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] "
+        "[--sessions S] [--edits E] [--watch W] [--threads T] [--server HOST:PORT]"));
+  }
+  auto dim = args->GetInt("dim", 0);
+  auto sessions = args->GetInt("sessions", 4);
+  auto edits = args->GetInt("edits", 200);
+  auto watch = args->GetInt("watch", 16);
+  auto threads = args->GetInt("threads", 0);
+  auto n = args->GetInt("n", 4);
+  for (const auto* v : {&dim, &sessions, &edits, &watch, &threads, &n}) {
+    if (!v->ok()) return ReportError(v->status());
+  }
+  if (*dim < 1 || *sessions < 1 || *edits < 1 || *watch < 0) {
+    return ReportError(
+        absl::InvalidArgumentError("need --dim >= 1, --sessions >= 1, --edits >= 1"));
+  }
+  const std::string field = args->Get("field").value_or("vector");
+  v1::FieldType type;
+  int32_t values_per_face = 3;
+  if (field == "vector") {
+    type.set_kind(v1::FIELD_KIND_VECTOR);
+  } else if (field == "nfield") {
+    type.set_kind(v1::FIELD_KIND_NFIELD);
+    type.set_n(static_cast<int32_t>(*n));
+  } else if (field == "tensor") {
+    type.set_kind(v1::FIELD_KIND_TENSOR);
+    values_per_face = 6;
+  } else {
+    return ReportError(absl::InvalidArgumentError("--field must be vector, nfield or tensor"));
+  }
+
+  auto mesh = ReadMeshFile(args->positional()[0]);
+  if (!mesh.ok()) return ReportError(mesh.status());
+
+  std::unique_ptr<server::FieldServer> local;
+  std::filesystem::path store;
+  std::string address = args->Get("server").value_or("");
+  if (address.empty()) {
+    store =
+        std::filesystem::temp_directory_path() / absl::StrCat("fieldspace_serve_load_", ::getpid());
+    server::FieldServerOptions options;
+    options.store_dir = store.string();
+    options.threads = static_cast<int32_t>(*threads);
+    auto started = server::FieldServer::Start(options);
+    if (!started.ok()) return ReportError(started.status());
+    local = std::move(*started);
+    address = local->address();
+  }
+  auto cleanup = [&] {
+    local.reset();
+    if (!store.empty()) std::filesystem::remove_all(store);
+  };
+  grpc::ChannelArguments channel_args;
+  channel_args.SetMaxReceiveMessageSize(-1);
+  channel_args.SetMaxSendMessageSize(-1);
+  auto channel =
+      grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), channel_args);
+  auto stub = v1::FieldSpace::NewStub(channel);
+
+  // Upload as raw arrays, in 4 MiB chunks.
+  Stopwatch upload_watch;
+  std::string raw(reinterpret_cast<const char*>(mesh->arrays.vertices.data()),
+                  sizeof(double) * mesh->arrays.vertices.size());
+  raw.append(reinterpret_cast<const char*>(mesh->arrays.faces.data()),
+             sizeof(int32_t) * mesh->arrays.faces.size());
+  v1::MeshInfo info;
+  {
+    grpc::ClientContext context;
+    auto writer = stub->UploadMesh(&context, &info);
+    for (size_t offset = 0; offset == 0 || offset < raw.size(); offset += 4 << 20) {
+      v1::UploadMeshRequest r;
+      if (offset == 0) {
+        r.mutable_header()->set_name(std::filesystem::path(args->positional()[0]).filename());
+        r.mutable_header()->set_format(v1::MESH_FORMAT_RAW);
+        r.mutable_header()->set_num_vertices(mesh->arrays.vertices.rows());
+        r.mutable_header()->set_num_faces(mesh->arrays.faces.rows());
+        r.mutable_header()->set_total_bytes(raw.size());
+      }
+      r.set_offset(offset);
+      r.set_data(raw.substr(offset, 4 << 20));
+      if (!writer->Write(r)) break;
+    }
+    writer->WritesDone();
+    if (auto st = FromGrpc(writer->Finish(), "UploadMesh"); !st.ok()) {
+      cleanup();
+      return ReportError(st);
+    }
+  }
+  const double upload_seconds = upload_watch.Seconds();
+
+  Stopwatch build_watch;
+  v1::BuildBasisRequest build;
+  build.set_mesh_id(info.id());
+  *build.mutable_field() = type;
+  build.set_dimension(static_cast<int32_t>(*dim));
+  v1::BasisInfo basis;
+  {
+    grpc::ClientContext context;
+    auto reader = stub->BuildBasis(&context, build);
+    v1::BuildBasisProgress p;
+    while (reader->Read(&p)) {
+      if (p.has_basis()) basis = p.basis();
+    }
+    if (auto st = FromGrpc(reader->Finish(), "BuildBasis"); !st.ok()) {
+      cleanup();
+      return ReportError(st);
+    }
+  }
+  const double build_seconds = build_watch.Seconds();
+
+  Stopwatch load_watch;
+  std::vector<SessionResult> results(static_cast<size_t>(*sessions));
+  std::vector<std::thread> workers;
+  for (int64_t s = 0; s < *sessions; ++s) {
+    workers.emplace_back([&, s] {
+      results[s] = RunSession(stub.get(), basis.id(), info.num_faces(), values_per_face,
+                              static_cast<int>(*edits), static_cast<int>(*watch),
+                              static_cast<uint32_t>(1000 + s));
+    });
+  }
+  for (auto& w : workers) w.join();
+  const double load_seconds = load_watch.Seconds();
+  std::vector<double> server_ms, round_trip_ms, open_ms;
+  int refactorizations = 0;
+  for (const SessionResult& r : results) {
+    if (!r.status.ok()) {
+      cleanup();
+      return ReportError(r.status);
+    }
+    server_ms.insert(server_ms.end(), r.server_ms.begin(), r.server_ms.end());
+    round_trip_ms.insert(round_trip_ms.end(), r.round_trip_ms.begin(), r.round_trip_ms.end());
+    open_ms.push_back(r.open_ms);
+    refactorizations += r.refactorizations;
+  }
+  JsonWriter j;
+  j.BeginObject();
+  j.String("command", "serve-load");
+  j.String("mesh", args->positional()[0]);
+  j.Int("faces", info.num_faces());
+  j.String("field", field);
+  j.Int("dimension", basis.columns());
+  j.String("server", local != nullptr ? "in-process" : address);
+  j.Double("upload_seconds", upload_seconds);
+  j.Double("build_seconds", build_seconds);
+  j.Int("sessions", *sessions);
+  j.Int("edits", static_cast<int64_t>(server_ms.size()));
+  j.Int("watched_faces", *watch);
+  j.Int("refactorizations", refactorizations);
+  j.Double("edits_per_second", static_cast<double>(server_ms.size()) / load_seconds);
+  WritePercentiles(j, "open_ms", Summarize(open_ms));
+  WritePercentiles(j, "server_edit_ms", Summarize(server_ms));
+  WritePercentiles(j, "round_trip_ms", Summarize(round_trip_ms));
+  j.Double("peak_rss_mb", PeakRssMb());
+  j.EndObject();
+  std::printf("%s\n", j.str().c_str());
+  cleanup();
+  return 0;
+}
+
+}  // namespace fieldspace::bench

@@ -1,0 +1,28 @@
+#ifndef FIELDSPACE_BENCH_CMD_SUBSPACE_H_
+#define FIELDSPACE_BENCH_CMD_SUBSPACE_H_
+
+// Helpers shared by the approx, eigen and design subcommands (defined in cmd_approx.cc).
+
+#include <memory>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "bench/bench_util.h"
+#include "core/basis/basis.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/operators/field_operator.h"
+
+namespace fieldspace::bench {
+
+// Reads a mesh and scales it to unit total area (vertices * 1/sqrt(A)) before validating it, so
+// that errors and weights are comparable across meshes.
+absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path);
+
+// BuildBasis with --dim (required), --sigma (default 40) and --seed (default 0).
+absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
+                                                             const FieldOperator& op,
+                                                             const Args& args);
+
+}  // namespace fieldspace::bench
+
+#endif  // FIELDSPACE_BENCH_CMD_SUBSPACE_H_

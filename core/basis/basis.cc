@@ -1,0 +1,395 @@
+#include "core/basis/basis.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <numeric>
+#include <thread>
+
+#include "absl/strings/str_format.h"
+#include "core/basis/dual_graph.h"
+#include "core/basis/local_eigensolver.h"
+#include "core/basis/local_problem.h"
+#include "core/basis/progress.h"
+#include "core/basis/regions.h"
+#include "core/basis/sampling.h"
+#include "tbb/blocked_range.h"
+#include "tbb/enumerable_thread_specific.h"
+#include "tbb/parallel_for.h"
+#include "tbb/task_arena.h"
+
+namespace fieldspace {
+namespace {
+
+using basis_internal::DiskEigenvalueEstimate;
+using basis_internal::HodgeFactorData;
+using basis_internal::HodgeLocalOperator;
+using basis_internal::LocalEigenOptions;
+using basis_internal::LocalEigenResult;
+using basis_internal::ProgressTicker;
+using basis_internal::RegionWorkspace;
+using basis_internal::RestrictedLocalOperator;
+
+double SecondsSince(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+uint64_t Mix(uint64_t a, uint64_t b) {
+  uint64_t x = a ^ (b + 0x9e3779b97f4a7c15ull + (a << 6) + (a >> 2));
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
+  return x ^ (x >> 31);
+}
+
+absl::Status ValidateInputs(const TriangleMesh& mesh, const FieldOperator& op,
+                            const BasisOptions& options, int32_t* m_out) {
+  const BasisParams& p = options.params;
+  const int32_t dpf = op.type.dofs_per_face();
+  const int64_t k = static_cast<int64_t>(dpf) * mesh.num_faces();
+  if (op.dofs() != k || op.stiffness.rows() != k || op.stiffness.cols() != k) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "operator size (S %d x %d, mass %d) does not match the mesh: %d faces x %d DOFs = %d",
+        op.stiffness.rows(), op.stiffness.cols(), op.dofs(), mesh.num_faces(), dpf, k));
+  }
+  if (p.dimension < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("dimension must be >= 1 (got %d)", p.dimension));
+  }
+  if (p.dimension > k) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "dimension %d exceeds the number of DOFs (%d) of %s fields on this mesh", p.dimension, k,
+        op.type.ToString()));
+  }
+  if (!std::isfinite(p.sigma) || !(p.sigma > 0.0)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("sigma must be finite and > 0 (got %g)", p.sigma));
+  }
+  const int32_t m = p.fields_per_region.value_or(op.type.default_fields_per_region());
+  if (m < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("fields_per_region must be >= 1 (got %d)", m));
+  }
+  if (p.face_weights.size() != 0 && p.face_weights.size() != mesh.num_faces()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "face_weights has %d entries; the mesh has %d faces (one weight per face, or none)",
+        p.face_weights.size(), mesh.num_faces()));
+  }
+  for (Eigen::Index f = 0; f < p.face_weights.size(); ++f) {
+    const double w = p.face_weights[f];
+    if (!std::isfinite(w) || !(w > 0.0)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "face_weights[%d] = %g; adaptivity weights must be finite and > 0", f, w));
+    }
+  }
+  if (!std::isfinite(options.eigen_tolerance) || !(options.eigen_tolerance > 0.0) ||
+      options.eigen_tolerance >= 1.0) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("eigen_tolerance must be in (0, 1) (got %g)", options.eigen_tolerance));
+  }
+  if (options.threads < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("threads must be >= 0 (got %d)", options.threads));
+  }
+  for (Eigen::Index i = 0; i < op.mass.size(); ++i) {
+    if (!std::isfinite(op.mass[i]) || !(op.mass[i] > 0.0)) {
+      return absl::InvalidArgumentError(
+          absl::StrFormat("mass[%d] = %g; the mass must be finite and > 0", i, op.mass[i]));
+    }
+  }
+  // Cheap memory guard before any work: the paper's rule of thumb, about sigma nonzeros per row.
+  const double estimate_bytes = 8.0 * p.sigma * static_cast<double>(k);
+  if (estimate_bytes > static_cast<double>(options.max_basis_bytes)) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "the basis would need about %.3g GiB (sigma %g x %d DOFs x 8 bytes), beyond the limit "
+        "of %.3g GiB; lower sigma",
+        estimate_bytes / (1 << 30), p.sigma, k,
+        static_cast<double>(options.max_basis_bytes) / (1 << 30)));
+  }
+  *m_out = m;
+  return absl::OkStatus();
+}
+
+// Smooth start vectors for a region's local problem (in the phi = M^1/2 Phi scaling of eq. 4):
+// one fixed direction (the sample face's x axis) projected to every face, as the field type
+// represents it, times a bump that vanishes at the region's rim. The lowest Dirichlet eigenfields
+// of a disk look like that, so LOBPCG starts close to them (about 1.5 iterations fewer than from
+// random vectors). Returns up to m columns.
+Eigen::MatrixXd SmoothStartFields(const TriangleMesh& mesh, const FieldType& type,
+                                  const std::vector<int32_t>& faces, int32_t sample, int32_t m) {
+  const int32_t dpf = type.dofs_per_face();
+  const int32_t nfr = static_cast<int32_t>(faces.size());
+  const Eigen::Vector3d cs = mesh.face_barycenters().row(sample).transpose();
+  const Eigen::Vector3d dir = mesh.frame_x().row(sample).transpose();
+  double rmax = 0;
+  for (int32_t f : faces) {
+    rmax = std::max(rmax, (mesh.face_barycenters().row(f).transpose() - cs).norm());
+  }
+  const int32_t cols = std::min(m, type.kind == FieldKind::kTensor ? 3 : 2);
+  Eigen::MatrixXd X(static_cast<Eigen::Index>(dpf) * nfr, cols);
+  const int32_t turns = type.kind == FieldKind::kNField ? type.n
+                        : type.kind == FieldKind::kTensor ? 2
+                                                          : 1;
+  for (int32_t i = 0; i < nfr; ++i) {
+    const int32_t f = faces[i];
+    const Eigen::Vector3d c = mesh.face_barycenters().row(f).transpose();
+    const Eigen::Vector3d nf = mesh.face_normals().row(f).transpose();
+    const double t = rmax > 0 ? (c - cs).norm() / rmax : 0.0;
+    const double bump = std::cos(0.5 * M_PI * std::min(t, 1.0)) * std::sqrt(mesh.face_areas()[f]);
+    const Eigen::Vector3d d = dir - dir.dot(nf) * nf;
+    const double angle =
+        turns * std::atan2(d.dot(mesh.frame_y().row(f)), d.dot(mesh.frame_x().row(f)));
+    const double ca = std::cos(angle), sa = std::sin(angle);
+    if (type.kind == FieldKind::kTensor) {
+      // Mandel-Voigt (a11, a22, sqrt(2) a12): identity, and d d^T - I/2 at two angles.
+      const double fields[3][3] = {{1.0, 1.0, 0.0},
+                                   {0.5 * ca, -0.5 * ca, M_SQRT1_2 * sa},
+                                   {-0.5 * sa, 0.5 * sa, M_SQRT1_2 * ca}};
+      for (int32_t c2 = 0; c2 < cols; ++c2) {
+        for (int32_t q = 0; q < 3; ++q) X(3 * i + q, c2) = bump * fields[c2][q];
+      }
+    } else {
+      const double fields[2][2] = {{ca, sa}, {-sa, ca}};
+      for (int32_t c2 = 0; c2 < cols; ++c2) {
+        for (int32_t q = 0; q < 2; ++q) X(2 * i + q, c2) = bump * fields[c2][q];
+      }
+    }
+  }
+  return X;
+}
+
+// The body of BuildBasis, run inside the task arena.
+absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
+                            const BasisOptions& options, int32_t m, ProgressTicker& ticker) {
+  const auto t_start = std::chrono::steady_clock::now();
+  const BasisParams& params = options.params;
+  const int32_t d = params.dimension;
+  const int32_t dpf = op.type.dofs_per_face();
+  const int64_t k = op.dofs();
+  const int32_t num_regions = static_cast<int32_t>((static_cast<int64_t>(d) + m - 1) / m);
+  auto poll = [&ticker] { return ticker.Poll(); };
+
+  Basis basis;
+  basis.type = op.type;
+  basis.params = params;
+
+  // 1. Sampling.
+  ticker.SetPhase(BasisPhase::kSampling, 0.0);
+  ticker.ReportNow();
+  auto t0 = std::chrono::steady_clock::now();
+  absl::StatusOr<DualGraph> graph = BuildDualGraph(mesh, params.face_weights);
+  if (!graph.ok()) return graph.status();
+  absl::StatusOr<std::vector<int32_t>> per_component =
+      AllocateSamplesPerComponent(mesh, num_regions);
+  if (!per_component.ok()) return per_component.status();
+  absl::StatusOr<SamplingResult> sampling =
+      FarthestPointSampling(mesh, *graph, *per_component, params.seed, poll);
+  if (!sampling.ok()) return sampling.status();
+  basis.sample_faces = std::move(sampling->samples);
+  basis.coverage_radius = sampling->coverage_radius;
+  basis.timings.sampling_seconds = SecondsSince(t0);
+
+  // 2. Regions and the sparsity of U.
+  ticker.SetPhase(BasisPhase::kRegions, 0.0);
+  ticker.ReportNow();
+  t0 = std::chrono::steady_clock::now();
+  basis.radius = std::sqrt(params.sigma * mesh.total_area() / (d * M_PI));
+  RegionOptions region_options;
+  region_options.radius = basis.radius;
+  region_options.min_faces = (m + dpf - 1) / dpf;
+  absl::StatusOr<std::vector<std::vector<int32_t>>> regions =
+      GrowRegions(*graph, basis.sample_faces, region_options, poll);
+  if (!regions.ok()) return regions.status();
+  graph = DualGraph();  // free it
+  auto fields_of = [&](int32_t r) { return r + 1 < num_regions ? m : d - m * (num_regions - 1); };
+  // Position of each (region, face) pair's entries within the face's rows of U: regions in
+  // column order, so every row's column indices come out ascending.
+  const int32_t nf = mesh.num_faces();
+  std::vector<std::vector<int32_t>> slot(num_regions);
+  std::vector<int64_t> per_face(nf, 0);
+  int64_t max_region = 0, sum_region = 0;
+  for (int32_t r = 0; r < num_regions; ++r) {
+    const std::vector<int32_t>& faces = (*regions)[r];
+    if (static_cast<int64_t>(faces.size()) * dpf < fields_of(r)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "region %d (sample face %d) has only %d DOFs for %d fields: its component is too "
+          "small; lower fields_per_region",
+          r, basis.sample_faces[r], static_cast<int64_t>(faces.size()) * dpf, fields_of(r)));
+    }
+    slot[r].resize(faces.size());
+    for (size_t i = 0; i < faces.size(); ++i) {
+      const int64_t s = per_face[faces[i]];
+      slot[r][i] = static_cast<int32_t>(std::min<int64_t>(s, std::numeric_limits<int32_t>::max()));
+      per_face[faces[i]] = s + fields_of(r);
+    }
+    max_region = std::max<int64_t>(max_region, faces.size());
+    sum_region += faces.size();
+    if ((r & 63) == 0 && ticker.Poll()) return ProgressTicker::CancelledError();
+  }
+  int64_t nnz = 0;
+  for (int32_t f = 0; f < nf; ++f) {
+    nnz += per_face[f] * dpf;
+    basis.uncovered_faces += per_face[f] == 0;
+  }
+  if (nnz > std::numeric_limits<int32_t>::max()) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "U would have %d nonzeros, beyond the 2^31 - 1 of its 32-bit indices; lower sigma or "
+        "the dimension",
+        nnz));
+  }
+  if (8.0 * nnz > static_cast<double>(options.max_basis_bytes)) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "U would need %.3g GiB (%d nonzeros), beyond the limit of %.3g GiB; lower sigma",
+        8.0 * nnz / (1 << 30), nnz, static_cast<double>(options.max_basis_bytes) / (1 << 30)));
+  }
+  basis.stats.max_region_faces = max_region;
+  basis.stats.mean_region_faces = static_cast<double>(sum_region) / num_regions;
+  Eigen::SparseMatrix<float, Eigen::RowMajor>& U = basis.U;
+  U.resize(k, d);
+  U.resizeNonZeros(nnz);
+  {
+    int32_t* outer = U.outerIndexPtr();
+    outer[0] = 0;
+    for (int32_t f = 0; f < nf; ++f) {
+      for (int32_t c = 0; c < dpf; ++c) {
+        const int64_t row = static_cast<int64_t>(dpf) * f + c;
+        outer[row + 1] = outer[row] + static_cast<int32_t>(per_face[f]);
+      }
+    }
+  }
+  std::vector<int64_t>().swap(per_face);
+  basis.timings.regions_seconds = SecondsSince(t0);
+
+  // 3. Local eigenproblems, written straight into U.
+  ticker.SetPhase(BasisPhase::kEigensolve, 0.0);
+  ticker.ReportNow();
+  t0 = std::chrono::steady_clock::now();
+  Eigen::VectorXd inv_sqrt_mass = op.mass.cwiseSqrt().cwiseInverse();
+  HodgeFactorData hodge;
+  if (op.type.kind == FieldKind::kVector && options.use_factored_vector_operator) {
+    hodge = basis_internal::BuildHodgeFactorData(mesh);
+    absl::StatusOr<bool> matches = basis_internal::HodgeFactorMatches(mesh, op, hodge, poll);
+    if (!matches.ok()) return matches.status();
+    basis.stats.hodge_factor_used = *matches;
+  }
+  const bool use_hodge = basis.stats.hodge_factor_used;
+  basis.local_eigenvalues.assign(d, 0.0);
+  tbb::enumerable_thread_specific<std::unique_ptr<RegionWorkspace>> workspaces;
+  std::atomic<int32_t> done{0};
+  std::atomic<bool> failed{false};
+  std::atomic<int32_t> dense_regions{0}, lanczos{0};
+  std::atomic<int64_t> iterations{0};
+  std::mutex error_mutex;
+  absl::Status error;
+  const Eigen::VectorXd& area = mesh.face_areas();
+  float* values = U.valuePtr();
+  int32_t* columns = U.innerIndexPtr();
+  const int32_t* outer = U.outerIndexPtr();
+  auto solve_region = [&](int32_t r, RegionWorkspace& ws) -> absl::Status {
+    const std::vector<int32_t>& faces = (*regions)[r];
+    double region_area = 0.0;
+    for (int32_t f : faces) region_area += area[f];
+    const double lambda = DiskEigenvalueEstimate(region_area);
+    std::unique_ptr<basis_internal::LocalOperator> local;
+    if (use_hodge) {
+      local = std::make_unique<HodgeLocalOperator>(mesh, hodge, faces, 0.1 * lambda, ws);
+    } else {
+      local = std::make_unique<RestrictedLocalOperator>(op, inv_sqrt_mass, faces, 0.01 * lambda, ws);
+    }
+    const Eigen::MatrixXd start =
+        SmoothStartFields(mesh, op.type, faces, basis.sample_faces[r], fields_of(r));
+    LocalEigenOptions eo;
+    eo.count = fields_of(r);
+    eo.guard = 0;
+    eo.initial = &start;
+    eo.tolerance = options.eigen_tolerance;
+    eo.seed = Mix(params.seed, static_cast<uint64_t>(r));
+    if (getenv("FS_GUARD")) eo.guard = atoi(getenv("FS_GUARD"));
+    if (getenv("FS_NRELAX")) {}
+    absl::StatusOr<LocalEigenResult> res = SolveLocalEigenproblem(*local, eo, poll);
+    if (!res.ok()) {
+      if (absl::IsCancelled(res.status())) return res.status();
+      return absl::Status(res.status().code(),
+                          absl::StrFormat("region %d (sample face %d, %d faces): %s", r,
+                                          basis.sample_faces[r], faces.size(),
+                                          res.status().message()));
+    }
+    if (res->dense) dense_regions.fetch_add(1, std::memory_order_relaxed);
+    if (res->lanczos_fallback) lanczos.fetch_add(1, std::memory_order_relaxed);
+    iterations.fetch_add(res->iterations, std::memory_order_relaxed);
+    const int32_t first_col = r * m;
+    const int32_t nfr = static_cast<int32_t>(faces.size());
+    for (int32_t c = 0; c < eo.count; ++c) {
+      auto phi = res->vectors.col(c);
+      Eigen::Index imax = 0;
+      phi.cwiseAbs().maxCoeff(&imax);
+      const double sign = phi[imax] < 0 ? -1.0 : 1.0;
+      basis.local_eigenvalues[first_col + c] = res->values[c];
+      for (int32_t i = 0; i < nfr; ++i) {
+        const int64_t f = faces[i];
+        for (int32_t q = 0; q < dpf; ++q) {
+          const int64_t row = dpf * f + q;
+          const int64_t pos = outer[row] + slot[r][i] + c;
+          values[pos] = static_cast<float>(sign * phi[dpf * i + q] * inv_sqrt_mass[row]);
+          columns[pos] = first_col + c;
+        }
+      }
+    }
+    return absl::OkStatus();
+  };
+  tbb::parallel_for(
+      tbb::blocked_range<int32_t>(0, num_regions, 1),
+      [&](const tbb::blocked_range<int32_t>& range) {
+        std::unique_ptr<RegionWorkspace>& ws = workspaces.local();
+        if (!ws) ws = std::make_unique<RegionWorkspace>();
+        for (int32_t r = range.begin(); r != range.end(); ++r) {
+          if (failed.load(std::memory_order_relaxed)) return;
+          absl::Status s = solve_region(r, *ws);
+          if (!s.ok()) {
+            std::lock_guard<std::mutex> lock(error_mutex);
+            if (error.ok()) error = s;
+            failed.store(true, std::memory_order_relaxed);
+            return;
+          }
+          ticker.SetFraction(static_cast<double>(done.fetch_add(1) + 1) / num_regions);
+          if (ticker.Poll()) {
+            failed.store(true, std::memory_order_relaxed);
+            return;
+          }
+        }
+      },
+      tbb::simple_partitioner());
+  if (ticker.cancelled()) return ProgressTicker::CancelledError();
+  if (!error.ok()) return error;
+  basis.stats.dense_regions = dense_regions.load();
+  basis.stats.lanczos_fallbacks = lanczos.load();
+  basis.stats.lobpcg_iterations = iterations.load();
+  basis.timings.eigensolve_seconds = SecondsSince(t0);
+  basis.timings.total_seconds = SecondsSince(t_start);
+  ticker.SetPhase(BasisPhase::kAssembly, 1.0);
+  ticker.ReportNow();
+  return basis;
+}
+
+}  // namespace
+
+absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
+                                 const BasisOptions& options) {
+  const auto t_start = std::chrono::steady_clock::now();
+  int32_t m = 0;
+  absl::Status valid = ValidateInputs(mesh, op, options, &m);
+  if (!valid.ok()) return valid;
+  ProgressTicker ticker(options.progress, options.cancel);
+  if (ticker.cancelled()) return ProgressTicker::CancelledError();
+  const int threads = options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
+  tbb::task_arena arena(threads);
+  absl::StatusOr<Basis> result;
+  arena.execute([&] { result = Build(mesh, op, options, m, ticker); });
+  if (result.ok()) result->timings.total_seconds = SecondsSince(t_start);
+  return result;
+}
+
+}  // namespace fieldspace

@@ -1,0 +1,60 @@
+#ifndef FIELDSPACE_CORE_BASIS_BASIS_IO_H_
+#define FIELDSPACE_CORE_BASIS_BASIS_IO_H_
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "core/basis/basis.h"
+
+namespace fieldspace {
+
+// Binary basis file, format version 1 (little-endian):
+//   preamble, 32 bytes: magic "FSBASIS\0", u32 version, u32 byte-order mark 0x01020304,
+//     u64 header size, u32 CRC-32C of the header, u32 CRC-32C of the preamble's first 28 bytes;
+//   header: field type, parameters, radius, sizes (k, d, nnz(U), regions, weights), timings and
+//     stats, the caller's mesh id (e.g. a content hash of the mesh);
+//   sections, in this order, each "u32 tag, u32 0, u64 payload bytes, payload, u32 CRC-32C of the
+//     payload": sample faces (int32 x regions), local eigenvalues (float64 x d), adaptivity
+//     weights (float64 x #weights), U's CSR row pointers (int32 x (k + 1)), column indices
+//     (int32 x nnz), values (float32 x nnz).
+// Loading checks the magic, version, byte order, every checksum, that the file has exactly the
+// size the header implies (before allocating anything), and U's CSR structure; any failure is
+// DataLoss with the reason. A checksum per section detects any changed byte.
+
+struct LoadedBasis {
+  std::string mesh_id;
+  Basis basis;
+};
+
+// Header-only view of a basis file (cheap: reads the preamble and header).
+struct BasisFileInfo {
+  std::string mesh_id;
+  FieldType type;
+  BasisParams params;  // face_weights left empty; see num_weights
+  int64_t num_weights = 0;
+  int64_t rows = 0;  // k
+  int64_t nnz = 0;   // nonzeros of U
+  int32_t num_regions = 0;
+  int64_t file_bytes = 0;
+};
+
+// Writes `basis` to `path` atomically: a temporary file in the same folder, fsync, rename over
+// `path`, fsync of the folder. Errors from the file system keep their errno meaning (NotFound for
+// a missing folder, PermissionDenied, ...).
+absl::Status SaveBasisFile(const std::string& path, const Basis& basis, std::string_view mesh_id);
+
+// NotFound when `path` does not exist; DataLoss for anything damaged, truncated or foreign.
+absl::StatusOr<LoadedBasis> LoadBasisFile(const std::string& path);
+absl::StatusOr<BasisFileInfo> ReadBasisFileInfo(const std::string& path);
+
+// The same format in memory.
+absl::StatusOr<std::string> EncodeBasis(const Basis& basis, std::string_view mesh_id);
+absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes);
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_BASIS_BASIS_IO_H_

@@ -1,0 +1,227 @@
+#include "core/basis/local_eigensolver.h"
+
+#include <Spectra/SymEigsShiftSolver.h>
+
+#include <algorithm>
+#include <cmath>
+#include <exception>
+
+#include "Eigen/Cholesky"
+#include "Eigen/Eigenvalues"
+#include "Eigen/QR"
+#include "absl/strings/str_format.h"
+
+namespace fieldspace::basis_internal {
+namespace {
+
+uint64_t SplitMix64(uint64_t& state) {
+  uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+
+// Deterministic start vectors, uniform in [-1, 1).
+Eigen::MatrixXd RandomBlock(int32_t n, int32_t p, uint64_t seed) {
+  Eigen::MatrixXd X(n, p);
+  uint64_t state = seed;
+  for (int32_t j = 0; j < p; ++j) {
+    for (int32_t i = 0; i < n; ++i) {
+      X(i, j) = static_cast<double>(SplitMix64(state) >> 11) * 0x1.0p-52 - 1.0;
+    }
+  }
+  return X;
+}
+
+// Orthonormal basis of the column span of B (n x q, q <= n): Householder QR, so the result is
+// orthonormal even when columns of B are nearly dependent.
+Eigen::MatrixXd Orthonormalize(const Eigen::MatrixXd& B) {
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr(B);
+  return qr.householderQ() * Eigen::MatrixXd::Identity(B.rows(), B.cols());
+}
+
+absl::StatusOr<LocalEigenResult> SolveDense(LocalOperator& op, int32_t m) {
+  const int32_t n = op.size();
+  Eigen::MatrixXd S;
+  op.ApplyStiffness(Eigen::MatrixXd::Identity(n, n), &S);
+  const Eigen::MatrixXd Ssym = 0.5 * (S + S.transpose());
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Ssym);
+  if (es.info() != Eigen::Success) {
+    return absl::InternalError("dense local eigensolver failed");
+  }
+  LocalEigenResult result;
+  result.values = es.eigenvalues().head(m);
+  result.vectors = es.eigenvectors().leftCols(m);
+  result.dense = true;
+  return result;
+}
+
+// Spectra adapter: the shift-inverse of the local operator as a Spectra shift-solve operation.
+class ShiftInverseOp {
+ public:
+  using Scalar = double;
+  explicit ShiftInverseOp(LocalOperator& op) : op_(op), x_(op.size(), 1) {}
+  Eigen::Index rows() const { return op_.size(); }
+  Eigen::Index cols() const { return op_.size(); }
+  void set_shift(double) {}  // the factorization is of S_bar + tau I, i.e. sigma = -tau
+  void perform_op(const double* x_in, double* y_out) const {
+    x_ = Eigen::Map<const Eigen::VectorXd>(x_in, op_.size());
+    op_.ApplyShiftInverse(x_, &y_);
+    Eigen::Map<Eigen::VectorXd>(y_out, op_.size()) = y_.col(0);
+  }
+
+ private:
+  LocalOperator& op_;
+  mutable Eigen::MatrixXd x_, y_;
+};
+
+absl::StatusOr<LocalEigenResult> SolveLanczos(LocalOperator& op, int32_t m, double tolerance) {
+  const int32_t n = op.size();
+  ShiftInverseOp sop(op);
+  const int32_t ncv = std::min(n, std::max(2 * m + 1, 20));
+  try {
+    Spectra::SymEigsShiftSolver<ShiftInverseOp> eigs(sop, m, ncv, -op.shift());
+    eigs.init();
+    eigs.compute(Spectra::SortRule::LargestMagn, 1000, std::min(1e-10, tolerance * tolerance),
+                 Spectra::SortRule::SmallestAlge);
+    if (eigs.info() != Spectra::CompInfo::Successful) {
+      return absl::InternalError("local eigenproblem: Spectra's Lanczos did not converge");
+    }
+    LocalEigenResult result;
+    const Eigen::MatrixXd X = Orthonormalize(eigs.eigenvectors());
+    Eigen::MatrixXd SX;
+    op.ApplyStiffness(X, &SX);
+    Eigen::MatrixXd H = X.transpose() * SX;
+    H = 0.5 * (H + H.transpose()).eval();
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(H);
+    result.values = es.eigenvalues();
+    result.vectors = X * es.eigenvectors();
+    result.lanczos_fallback = true;
+    return result;
+  } catch (const std::exception& e) {
+    return absl::InternalError(absl::StrFormat("local eigenproblem: Spectra failed: %s", e.what()));
+  }
+}
+
+}  // namespace
+
+absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
+                                                        const LocalEigenOptions& options,
+                                                        const std::function<bool()>& poll) {
+  const int32_t n = op.size();
+  const int32_t m = options.count;
+  if (m < 1 || m > n) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("local eigenproblem: %d eigenpairs of a %d x %d problem", m, n, n));
+  }
+  const int32_t p = m + std::max(0, options.guard);
+  if (n <= std::max(options.dense_max_size, 3 * p)) return SolveDense(op, m);
+
+  absl::Status prepared = op.PrepareShiftInverse(poll);
+  if (!prepared.ok()) return prepared;
+  const double tau = op.shift();
+
+  // LOBPCG (Knyazev 2001) on the trial basis B = [X, W, P] with the products S B carried along
+  // (only S W is computed per iteration; S X and S P follow from the Rayleigh-Ritz coefficients),
+  // Rayleigh-Ritz through the Cholesky factor of the Gram matrix B^T B. When that Gram matrix is
+  // too ill-conditioned, P is dropped for the iteration (a restart). Convergence is confirmed with
+  // an exactly recomputed S X before returning.
+  Eigen::MatrixXd X0 = RandomBlock(n, p, options.seed);
+  if (options.initial != nullptr && options.initial->rows() == n) {
+    const Eigen::Index k = std::min<Eigen::Index>(p, options.initial->cols());
+    X0.leftCols(k) = options.initial->leftCols(k);
+  }
+  Eigen::MatrixXd X = Orthonormalize(X0);
+  Eigen::MatrixXd SX, W, SW, P, SP, R;
+  op.ApplyStiffness(X, &SX);
+  Eigen::VectorXd theta;
+  {
+    Eigen::MatrixXd H = X.transpose() * SX;
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (H + H.transpose()));
+    X = X * es.eigenvectors();
+    SX = SX * es.eigenvectors();
+    theta = es.eigenvalues();
+  }
+  LocalEigenResult result;
+  bool verified = false;  // SX recomputed exactly since the last update
+  for (int32_t it = 1; it <= options.max_iterations; ++it) {
+    if (poll && poll()) return absl::CancelledError("basis construction cancelled");
+    R = SX - X * theta.asDiagonal();
+    auto converged = [&] {
+      for (int32_t i = 0; i < m; ++i) {
+        if (R.col(i).norm() > options.tolerance * (std::abs(theta[i]) + tau)) return false;
+      }
+      return true;
+    };
+    if (converged()) {
+      if (!verified) {
+        op.ApplyStiffness(X, &SX);
+        verified = true;
+        R = SX - X * theta.asDiagonal();
+      }
+      if (converged()) {
+        result.values = theta.head(m);
+        result.vectors = X.leftCols(m);
+        result.iterations = it - 1;
+        return result;
+      }
+    }
+    op.ApplyShiftInverse(R, &W);
+    W -= X * (X.transpose() * W);
+    for (int32_t c = 0; c < p; ++c) {
+      const double norm = W.col(c).norm();
+      if (norm > 0) W.col(c) /= norm;
+    }
+    op.ApplyStiffness(W, &SW);
+    if (P.cols() > 0) {
+      for (int32_t c = 0; c < p; ++c) {
+        const double norm = P.col(c).norm();
+        if (norm > 0) {
+          P.col(c) /= norm;
+          SP.col(c) /= norm;
+        }
+      }
+    }
+    bool solved = false;
+    for (int attempt = 0; attempt < 2 && !solved; ++attempt) {
+      const bool with_p = attempt == 0 && P.cols() > 0;
+      if (attempt == 1 && P.cols() == 0) break;
+      const int32_t q = with_p ? 3 * p : 2 * p;
+      Eigen::MatrixXd B(n, q), SB(n, q);
+      B.leftCols(p) = X;
+      B.middleCols(p, p) = W;
+      SB.leftCols(p) = SX;
+      SB.middleCols(p, p) = SW;
+      if (with_p) {
+        B.rightCols(p) = P;
+        SB.rightCols(p) = SP;
+      }
+      const Eigen::MatrixXd G = B.transpose() * B;
+      Eigen::MatrixXd H = B.transpose() * SB;
+      H = 0.5 * (H + H.transpose()).eval();
+      Eigen::LLT<Eigen::MatrixXd> llt(G);
+      if (llt.info() != Eigen::Success) continue;
+      const Eigen::MatrixXd L = llt.matrixL();
+      if (L.diagonal().minCoeff() < 1e-7) continue;  // nearly dependent columns
+      // Standard symmetric problem L^-1 H L^-T y = theta y, c = L^-T y.
+      Eigen::MatrixXd A = llt.matrixL().solve(H);
+      A = llt.matrixL().solve(A.transpose().eval());
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (A + A.transpose()));
+      if (es.info() != Eigen::Success) continue;
+      const Eigen::MatrixXd C =
+          llt.matrixU().solve(Eigen::MatrixXd(es.eigenvectors().leftCols(p)));
+      X = B * C;
+      SX = SB * C;
+      P = B.rightCols(q - p) * C.bottomRows(q - p);
+      SP = SB.rightCols(q - p) * C.bottomRows(q - p);
+      theta = es.eigenvalues().head(p);
+      solved = true;
+    }
+    if (!solved) break;  // hand over to Lanczos
+    verified = false;
+  }
+  if (poll && poll()) return absl::CancelledError("basis construction cancelled");
+  return SolveLanczos(op, m, options.tolerance);
+}
+
+}  // namespace fieldspace::basis_internal

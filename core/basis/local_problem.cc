@@ -1,0 +1,416 @@
+#include "core/basis/local_problem.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include "Eigen/SparseCore"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace fieldspace::basis_internal {
+namespace {
+
+// Builds the lower-triangular CSC of an n x n matrix from unsorted (column, row, value) entries
+// with row >= column, summing duplicates, and adds `diagonal_shift` to every diagonal entry
+// (creating it when absent). `marker` is scratch of size >= n, all -1 on entry and on exit.
+void AssembleLower(int32_t n, const std::vector<int32_t>& cols, const std::vector<int32_t>& rows,
+                   const std::vector<double>& vals, double diagonal_shift,
+                   std::vector<int32_t>& marker, LowerCsc* out) {
+  const size_t m = cols.size();
+  std::vector<int32_t> start(static_cast<size_t>(n) + 1, 0);
+  for (size_t t = 0; t < m; ++t) ++start[cols[t] + 1];
+  for (int32_t j = 0; j < n; ++j) start[j + 1] += start[j];
+  std::vector<int32_t> bucket_rows(m);
+  std::vector<double> bucket_vals(m);
+  {
+    std::vector<int32_t> cursor(start.begin(), start.end() - 1);
+    for (size_t t = 0; t < m; ++t) {
+      const int32_t q = cursor[cols[t]]++;
+      bucket_rows[q] = rows[t];
+      bucket_vals[q] = vals[t];
+    }
+  }
+  out->n = n;
+  out->outer.assign(static_cast<size_t>(n) + 1, 0);
+  out->inner.clear();
+  out->values.clear();
+  out->inner.reserve(m / 2 + n);
+  out->values.reserve(m / 2 + n);
+  for (int32_t j = 0; j < n; ++j) {
+    const size_t col_begin = out->inner.size();
+    marker[j] = static_cast<int32_t>(col_begin);
+    out->inner.push_back(j);
+    out->values.push_back(diagonal_shift);
+    for (int32_t q = start[j]; q < start[j + 1]; ++q) {
+      const int32_t r = bucket_rows[q];
+      if (marker[r] < 0) {
+        marker[r] = static_cast<int32_t>(out->inner.size());
+        out->inner.push_back(r);
+        out->values.push_back(bucket_vals[q]);
+      } else {
+        out->values[marker[r]] += bucket_vals[q];
+      }
+    }
+    for (size_t q = col_begin; q < out->inner.size(); ++q) marker[out->inner[q]] = -1;
+    out->outer[j + 1] = static_cast<int32_t>(out->inner.size());
+  }
+}
+
+// Frame coordinates (t_x, t_y) of the edge vector p_{k+2} - p_{k+1} of face f, computed exactly
+// as the vector Laplacian's assembly does so that B B^T reproduces S to the last bits.
+inline void EdgeVectorInFrame(const TriangleMesh& mesh, int32_t f, int k, double* tx, double* ty) {
+  const FaceMatrix& F = mesh.faces();
+  const VertexMatrix& V = mesh.vertices();
+  const Eigen::Vector3d x = mesh.frame_x().row(f).transpose();
+  const Eigen::Vector3d y = mesh.frame_y().row(f).transpose();
+  const Eigen::Vector3d d = (V.row(F(f, (k + 2) % 3)) - V.row(F(f, (k + 1) % 3))).transpose();
+  *tx = d.dot(x);
+  *ty = d.dot(y);
+}
+
+uint64_t SplitMix64(uint64_t& state) {
+  uint64_t z = (state += 0x9e3779b97f4a7c15ull);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- RestrictedLocalOperator
+
+RestrictedLocalOperator::RestrictedLocalOperator(const FieldOperator& op,
+                                                 const Eigen::VectorXd& inv_sqrt_mass,
+                                                 const std::vector<int32_t>& faces, double tau,
+                                                 RegionWorkspace& ws)
+    : tau_(tau), ws_(ws) {
+  const int32_t dpf = op.type.dofs_per_face();
+  const int32_t nfr = static_cast<int32_t>(faces.size());
+  n_ = dpf * nfr;
+  if (ws.dof_map.size() != static_cast<size_t>(op.dofs())) ws.dof_map.assign(op.dofs(), -1);
+  for (int32_t i = 0; i < nfr; ++i) {
+    for (int32_t c = 0; c < dpf; ++c) ws.dof_map[dpf * static_cast<int64_t>(faces[i]) + c] = dpf * i + c;
+  }
+  const Eigen::SparseMatrix<double>& S = op.stiffness;
+  outer_.assign(static_cast<size_t>(n_) + 1, 0);
+  inner_.clear();
+  values_.clear();
+  for (int32_t l = 0; l < n_; ++l) {
+    const int64_t g = dpf * static_cast<int64_t>(faces[l / dpf]) + l % dpf;
+    const double sg = inv_sqrt_mass[g];
+    for (Eigen::SparseMatrix<double>::InnerIterator it(S, g); it; ++it) {
+      const int32_t r = ws.dof_map[it.row()];
+      if (r < 0) continue;
+      inner_.push_back(r);
+      values_.push_back(it.value() * inv_sqrt_mass[it.row()] * sg);
+    }
+    outer_[l + 1] = static_cast<int32_t>(inner_.size());
+  }
+  for (int32_t i = 0; i < nfr; ++i) {
+    for (int32_t c = 0; c < dpf; ++c) ws.dof_map[dpf * static_cast<int64_t>(faces[i]) + c] = -1;
+  }
+}
+
+void RestrictedLocalOperator::ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) {
+  // One pass over S_bar for all p columns (row-major blocks keep each row's p values together).
+  const int32_t p = static_cast<int32_t>(X.cols());
+  RowBlock xr = X;
+  RowBlock yr = RowBlock::Zero(n_, p);
+  for (int32_t j = 0; j < n_; ++j) {
+    const double* xj = xr.row(j).data();
+    for (int32_t q = outer_[j]; q < outer_[j + 1]; ++q) {
+      double* yi = yr.row(inner_[q]).data();
+      const double v = values_[q];
+      for (int32_t c = 0; c < p; ++c) yi[c] += v * xj[c];
+    }
+  }
+  *Y = yr;
+}
+
+absl::Status RestrictedLocalOperator::PrepareShiftInverse(const std::function<bool()>& poll) {
+  std::vector<int32_t> cols, rows;
+  std::vector<double> vals;
+  cols.reserve(inner_.size() / 2 + n_);
+  rows.reserve(inner_.size() / 2 + n_);
+  vals.reserve(inner_.size() / 2 + n_);
+  for (int32_t j = 0; j < n_; ++j) {
+    for (int32_t q = outer_[j]; q < outer_[j + 1]; ++q) {
+      if (inner_[q] < j) continue;
+      cols.push_back(j);
+      rows.push_back(inner_[q]);
+      vals.push_back(values_[q]);
+    }
+  }
+  if (ws_.marker.size() < static_cast<size_t>(n_)) ws_.marker.resize(n_, -1);
+  LowerCsc A;
+  AssembleLower(n_, cols, rows, vals, tau_, ws_.marker, &A);
+  return ws_.cholesky.Factorize(A, poll);
+}
+
+void RestrictedLocalOperator::ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) {
+  *Y = X;
+  ws_.cholesky.SolveInPlace(Y->data(), static_cast<int32_t>(Y->cols()));
+}
+
+// ---------------------------------------------------------------- Hodge factor
+
+HodgeFactorData BuildHodgeFactorData(const TriangleMesh& mesh) {
+  HodgeFactorData data;
+  const FaceMatrix& F = mesh.faces();
+  const FaceMatrix& FE = mesh.face_edges();
+  const Eigen::VectorXd& area = mesh.face_areas();
+  std::vector<double> mv(mesh.num_vertices(), 0.0), me(mesh.num_edges(), 0.0);
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      mv[F(f, k)] += area[f];
+      me[FE(f, k)] += area[f];
+    }
+  }
+  // The operator uses inverse masses 3 / sum(incident areas).
+  data.inv_sqrt_vertex_mass.resize(mv.size());
+  data.inv_sqrt_edge_mass.resize(me.size());
+  for (size_t v = 0; v < mv.size(); ++v) data.inv_sqrt_vertex_mass[v] = std::sqrt(3.0 / mv[v]);
+  for (size_t e = 0; e < me.size(); ++e) data.inv_sqrt_edge_mass[e] = std::sqrt(3.0 / me[e]);
+  return data;
+}
+
+absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOperator& op,
+                                        const HodgeFactorData& data,
+                                        const std::function<bool()>& poll) {
+  const int32_t nf = mesh.num_faces();
+  const int64_t k = 2 * static_cast<int64_t>(nf);
+  const Eigen::SparseMatrix<double>& S = op.stiffness;
+  if (op.type.kind != FieldKind::kVector || S.rows() != k || S.cols() != k) return false;
+  const FaceMatrix& F = mesh.faces();
+  const FaceMatrix& FE = mesh.face_edges();
+  uint64_t state = 0x5eed5eedULL;
+  for (int trial = 0; trial < 2; ++trial) {
+    Eigen::VectorXd x(k);
+    for (int64_t i = 0; i < k; ++i) {
+      x[i] = static_cast<double>(SplitMix64(state) >> 11) * 0x1.0p-52 - 1.0;
+    }
+    // y1 = S x and the entrywise scale |S| |x| (S symmetric: row i = column i).
+    Eigen::VectorXd y1(k), scale(k);
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, k, 16384),
+                      [&](const tbb::blocked_range<int64_t>& r) {
+                        for (int64_t j = r.begin(); j != r.end(); ++j) {
+                          double s = 0.0, a = 0.0;
+                          for (Eigen::SparseMatrix<double>::InnerIterator it(S, j); it; ++it) {
+                            s += it.value() * x[it.row()];
+                            a += std::abs(it.value() * x[it.row()]);
+                          }
+                          y1[j] = s;
+                          scale[j] = a;
+                        }
+                      });
+    if (poll && poll()) return absl::CancelledError("basis construction cancelled");
+    // z = B^T x (vertex part, edge part), then y2 = B z.
+    std::vector<double> zv(mesh.num_vertices(), 0.0), ze(mesh.num_edges(), 0.0);
+    for (int32_t f = 0; f < nf; ++f) {
+      for (int kk = 0; kk < 3; ++kk) {
+        double tx, ty;
+        EdgeVectorInFrame(mesh, f, kk, &tx, &ty);
+        const int32_t v = F(f, kk);
+        const int32_t e = FE(f, kk);
+        zv[v] += (-0.5 * ty * x[2 * f] + 0.5 * tx * x[2 * f + 1]) * data.inv_sqrt_vertex_mass[v];
+        ze[e] += (tx * x[2 * f] + ty * x[2 * f + 1]) * data.inv_sqrt_edge_mass[e];
+      }
+    }
+    std::atomic<bool> mismatch{false};
+    tbb::parallel_for(tbb::blocked_range<int32_t>(0, nf, 8192),
+                      [&](const tbb::blocked_range<int32_t>& r) {
+                        for (int32_t f = r.begin(); f != r.end(); ++f) {
+                          double y2[2] = {0.0, 0.0};
+                          for (int kk = 0; kk < 3; ++kk) {
+                            double tx, ty;
+                            EdgeVectorInFrame(mesh, f, kk, &tx, &ty);
+                            const double a = zv[F(f, kk)] * data.inv_sqrt_vertex_mass[F(f, kk)];
+                            const double b = ze[FE(f, kk)] * data.inv_sqrt_edge_mass[FE(f, kk)];
+                            y2[0] += -0.5 * ty * a + tx * b;
+                            y2[1] += 0.5 * tx * a + ty * b;
+                          }
+                          for (int c = 0; c < 2; ++c) {
+                            const int64_t i = 2 * static_cast<int64_t>(f) + c;
+                            if (!(std::abs(y1[i] - y2[c]) <= 1e-10 * scale[i] + 1e-300)) {
+                              if (getenv("FS_DEBUG")) fprintf(stderr, "mismatch f %d c %d y1 %g y2 %g scale %g\n", f, c, y1[i], y2[c], scale[i]);
+                              mismatch.store(true, std::memory_order_relaxed);
+                            }
+                          }
+                        }
+                      });
+    if (mismatch.load()) return false;
+  }
+  return true;
+}
+
+// ---------------------------------------------------------------- HodgeLocalOperator
+
+HodgeLocalOperator::HodgeLocalOperator(const TriangleMesh& mesh, const HodgeFactorData& data,
+                                       const std::vector<int32_t>& faces, double tau,
+                                       RegionWorkspace& ws)
+    : tau_(tau), ws_(ws) {
+  const FaceMatrix& F = mesh.faces();
+  const FaceMatrix& FE = mesh.face_edges();
+  const Eigen::VectorXd& area = mesh.face_areas();
+  const int32_t nfr = static_cast<int32_t>(faces.size());
+  n_ = 2 * nfr;
+  if (ws.vertex_map.size() != static_cast<size_t>(mesh.num_vertices())) {
+    ws.vertex_map.assign(mesh.num_vertices(), -1);
+  }
+  if (ws.edge_map.size() != static_cast<size_t>(mesh.num_edges())) {
+    ws.edge_map.assign(mesh.num_edges(), -1);
+  }
+  // Local numbering in order of first appearance; vertices first, edges after (offset below).
+  std::vector<int32_t> local_vertices, local_edges;
+  std::vector<uint8_t> edge_count;
+  local_vertices.reserve(nfr / 2 + 16);
+  local_edges.reserve(3 * nfr / 2 + 16);
+  b_cols_.resize(6 * static_cast<size_t>(nfr));
+  for (int32_t i = 0; i < nfr; ++i) {
+    const int32_t f = faces[i];
+    for (int k = 0; k < 3; ++k) {
+      int32_t& lv = ws.vertex_map[F(f, k)];
+      if (lv < 0) {
+        lv = static_cast<int32_t>(local_vertices.size());
+        local_vertices.push_back(F(f, k));
+      }
+      int32_t& le = ws.edge_map[FE(f, k)];
+      if (le < 0) {
+        le = static_cast<int32_t>(local_edges.size());
+        local_edges.push_back(FE(f, k));
+        edge_count.push_back(0);
+      }
+      ++edge_count[le];
+      b_cols_[6 * i + k] = lv;
+      b_cols_[6 * i + 3 + k] = le;
+    }
+  }
+  num_vertices_ = static_cast<int32_t>(local_vertices.size());
+  num_nodes_ = num_vertices_ + static_cast<int32_t>(local_edges.size());
+  boundary_edge_.resize(local_edges.size());
+  for (size_t e = 0; e < local_edges.size(); ++e) boundary_edge_[e] = edge_count[e] == 1;
+  b_vals_.resize(12 * static_cast<size_t>(nfr));
+  for (int32_t i = 0; i < nfr; ++i) {
+    const int32_t f = faces[i];
+    const double s = 1.0 / std::sqrt(area[f]);  // V = M^-1/2
+    double* row0 = &b_vals_[12 * i];
+    double* row1 = row0 + 6;
+    for (int k = 0; k < 3; ++k) {
+      double tx, ty;
+      EdgeVectorInFrame(mesh, f, k, &tx, &ty);
+      const double wv = s * data.inv_sqrt_vertex_mass[F(f, k)];
+      const double we = s * data.inv_sqrt_edge_mass[FE(f, k)];
+      row0[k] = -0.5 * ty * wv;
+      row1[k] = 0.5 * tx * wv;
+      row0[3 + k] = tx * we;
+      row1[3 + k] = ty * we;
+      b_cols_[6 * i + 3 + k] += num_vertices_;
+    }
+  }
+  for (int32_t v : local_vertices) ws.vertex_map[v] = -1;
+  for (int32_t e : local_edges) ws.edge_map[e] = -1;
+}
+
+void HodgeLocalOperator::ApplyBt(const Eigen::MatrixXd& X, Eigen::MatrixXd* Z) {
+  // Row-major blocks: one pass over B_D for all p columns.
+  const int32_t p = static_cast<int32_t>(X.cols());
+  xr_ = X;
+  zr_.setZero(num_nodes_, p);
+  const int32_t nfr = n_ / 2;
+  for (int32_t i = 0; i < nfr; ++i) {
+    const int32_t* cols = &b_cols_[6 * i];
+    const double* v = &b_vals_[12 * i];
+    const double* x0 = xr_.row(2 * i).data();
+    const double* x1 = xr_.row(2 * i + 1).data();
+    for (int k = 0; k < 6; ++k) {
+      double* z = zr_.row(cols[k]).data();
+      const double a = v[k], b = v[6 + k];
+      for (int32_t c = 0; c < p; ++c) z[c] += a * x0[c] + b * x1[c];
+    }
+  }
+  *Z = zr_;
+}
+
+void HodgeLocalOperator::ApplyB(const Eigen::MatrixXd& Z, Eigen::MatrixXd* Y, bool subtract) {
+  const int32_t p = static_cast<int32_t>(Z.cols());
+  zr_ = Z;
+  yr_.setZero(n_, p);
+  const int32_t nfr = n_ / 2;
+  for (int32_t i = 0; i < nfr; ++i) {
+    const int32_t* cols = &b_cols_[6 * i];
+    const double* v = &b_vals_[12 * i];
+    double* y0 = yr_.row(2 * i).data();
+    double* y1 = yr_.row(2 * i + 1).data();
+    for (int k = 0; k < 6; ++k) {
+      const double* z = zr_.row(cols[k]).data();
+      const double a = v[k], b = v[6 + k];
+      for (int32_t c = 0; c < p; ++c) {
+        y0[c] += a * z[c];
+        y1[c] += b * z[c];
+      }
+    }
+  }
+  if (subtract) {
+    *Y -= yr_;
+  } else {
+    *Y = yr_;
+  }
+}
+
+void HodgeLocalOperator::ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) {
+  ApplyBt(X, &z_);
+  ApplyB(z_, Y, /*subtract=*/false);
+}
+
+absl::Status HodgeLocalOperator::PrepareShiftInverse(const std::function<bool()>& poll) {
+  // K = tau I + B_D^T B_D from each face's 2 x 6 block: vertex-vertex and edge-edge products
+  // always, vertex-edge products only for region-boundary edges (elsewhere the two faces of the
+  // edge cancel exactly: the discrete gradients and co-gradients are orthogonal), and never for
+  // a vertex with its opposite edge (J t . t = 0).
+  const int32_t nfr = n_ / 2;
+  std::vector<int32_t> cols, rows;
+  std::vector<double> vals;
+  cols.reserve(13 * static_cast<size_t>(nfr));
+  rows.reserve(13 * static_cast<size_t>(nfr));
+  vals.reserve(13 * static_cast<size_t>(nfr));
+  auto add = [&](int32_t a, int32_t b, double v) {
+    cols.push_back(std::min(a, b));
+    rows.push_back(std::max(a, b));
+    vals.push_back(v);
+  };
+  for (int32_t i = 0; i < nfr; ++i) {
+    const int32_t* c = &b_cols_[6 * i];
+    const double* r0 = &b_vals_[12 * i];
+    const double* r1 = r0 + 6;
+    for (int j = 0; j < 3; ++j) {
+      for (int k = j; k < 3; ++k) {
+        add(c[j], c[k], r0[j] * r0[k] + r1[j] * r1[k]);
+        add(c[3 + j], c[3 + k], r0[3 + j] * r0[3 + k] + r1[3 + j] * r1[3 + k]);
+      }
+    }
+    for (int k = 0; k < 3; ++k) {
+      if (!boundary_edge_[c[3 + k] - num_vertices_]) continue;
+      for (int j = 0; j < 3; ++j) {
+        if (j == k) continue;
+        add(c[j], c[3 + k], r0[j] * r0[3 + k] + r1[j] * r1[3 + k]);
+      }
+    }
+  }
+  if (ws_.marker.size() < static_cast<size_t>(num_nodes_)) ws_.marker.resize(num_nodes_, -1);
+  LowerCsc K;
+  AssembleLower(num_nodes_, cols, rows, vals, tau_, ws_.marker, &K);
+  return ws_.cholesky.Factorize(K, poll);
+}
+
+void HodgeLocalOperator::ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) {
+  ApplyBt(X, &z_);
+  ws_.cholesky.SolveInPlace(z_.data(), static_cast<int32_t>(z_.cols()));
+  *Y = X;
+  ApplyB(z_, Y, /*subtract=*/true);
+  *Y /= tau_;
+}
+
+}  // namespace fieldspace::basis_internal

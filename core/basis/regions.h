@@ -1,0 +1,28 @@
+#ifndef FIELDSPACE_CORE_BASIS_REGIONS_H_
+#define FIELDSPACE_CORE_BASIS_REGIONS_H_
+
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/basis/dual_graph.h"
+
+namespace fieldspace {
+
+struct RegionOptions {
+  double radius = 0.0;    // dual-graph distance r (eq. 12)
+  int32_t min_faces = 1;  // regions smaller than this grow past r to this size
+};
+
+// The support region of each sample (paper section 4): the faces within dual-graph distance
+// `radius` of the sample (Dijkstra truncated at r), as ascending face indices. Regions are grown
+// in parallel (run inside the caller's task arena) with per-thread scratch, O(region size) each.
+// `poll` is called regularly from worker threads; true aborts with Cancelled.
+absl::StatusOr<std::vector<std::vector<int32_t>>> GrowRegions(
+    const DualGraph& graph, const std::vector<int32_t>& samples, const RegionOptions& options,
+    const std::function<bool()>& poll);
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_BASIS_REGIONS_H_

@@ -1,0 +1,51 @@
+#include "core/operators/field_operator.h"
+
+#include "core/common/status_macros.h"
+#include "core/operators/nfield_laplacian.h"
+#include "core/operators/tensor_laplacian.h"
+#include "core/operators/vector_laplacian.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace fieldspace {
+
+Eigen::VectorXd BuildFaceMass(const TriangleMesh& mesh, int32_t dofs_per_face) {
+  const int32_t nf = mesh.num_faces();
+  Eigen::VectorXd mass(static_cast<Eigen::Index>(dofs_per_face) * nf);
+  const Eigen::VectorXd& area = mesh.face_areas();
+  tbb::parallel_for(tbb::blocked_range<int32_t>(0, nf, 16384),
+                    [&](const tbb::blocked_range<int32_t>& r) {
+                      for (int32_t f = r.begin(); f != r.end(); ++f) {
+                        for (int32_t c = 0; c < dofs_per_face; ++c) {
+                          mass[static_cast<Eigen::Index>(dofs_per_face) * f + c] = area[f];
+                        }
+                      }
+                    });
+  return mass;
+}
+
+absl::StatusOr<FieldOperator> BuildFieldOperator(const TriangleMesh& mesh, const FieldType& type) {
+  RETURN_IF_ERROR(type.Validate());
+  // Initialized from prvalues only (guaranteed elision): assigning would deep-copy.
+  absl::StatusOr<Eigen::SparseMatrix<double>> stiffness =
+      [&]() -> absl::StatusOr<Eigen::SparseMatrix<double>> {
+    switch (type.kind) {
+      case FieldKind::kVector:
+        return BuildVectorHodgeStiffness(mesh);
+      case FieldKind::kNField:
+        return BuildNFieldStiffness(mesh, type.n);
+      case FieldKind::kTensor:
+        return BuildTensorStiffness(mesh);
+    }
+    return absl::InvalidArgumentError("unknown field kind");
+  }();
+  if (!stiffness.ok()) return stiffness.status();
+  // Built in place and swapped, never copied: Eigen sparse matrices have no move operations.
+  absl::StatusOr<FieldOperator> op(absl::in_place);
+  op->type = type;
+  op->stiffness.swap(*stiffness);
+  op->mass = BuildFaceMass(mesh, type.dofs_per_face());
+  return op;
+}
+
+}  // namespace fieldspace

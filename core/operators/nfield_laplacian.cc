@@ -1,0 +1,46 @@
+#include "core/operators/nfield_laplacian.h"
+
+#include <cmath>
+
+#include "absl/strings/str_format.h"
+#include "core/operators/edge_transport.h"
+#include "core/operators/face_block_assembly.h"
+
+namespace fieldspace {
+
+absl::StatusOr<Eigen::SparseMatrix<double>> BuildNFieldStiffness(const TriangleMesh& mesh,
+                                                                 int32_t n) {
+  if (n < 1 || n > 64) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("n-field Laplacian: n = %d outside [1, 64]", n));
+  }
+  const EdgeTransport transport = ComputeEdgeTransport(mesh);
+  auto rotation = [&](int32_t e, double* T) {
+    // e^{i n (theta_0 - theta_1)} by repeated squaring (exact rotations, no trigonometry),
+    // renormalized against rounding drift.
+    double zr = transport.edges[e].cos_delta;
+    double zi = transport.edges[e].sin_delta;
+    double pr = 1.0, pi = 0.0;
+    for (int32_t m = n; m > 0; m >>= 1) {
+      if (m & 1) {
+        const double r = pr * zr - pi * zi;
+        pi = pr * zi + pi * zr;
+        pr = r;
+      }
+      const double r = zr * zr - zi * zi;
+      zi = 2.0 * zr * zi;
+      zr = r;
+    }
+    const double inv = 1.0 / std::sqrt(pr * pr + pi * pi);
+    pr *= inv;
+    pi *= inv;
+    // R(n (theta_0 - theta_1)) maps representation vectors of face f1 to face f0.
+    T[0] = pr;
+    T[1] = -pi;
+    T[2] = pi;
+    T[3] = pr;
+  };
+  return operators_internal::AssembleConnectionLaplacian<2>(mesh, transport, rotation);
+}
+
+}  // namespace fieldspace

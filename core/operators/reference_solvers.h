@@ -1,0 +1,92 @@
+#ifndef FIELDSPACE_CORE_OPERATORS_REFERENCE_SOLVERS_H_
+#define FIELDSPACE_CORE_OPERATORS_REFERENCE_SOLVERS_H_
+
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+#include "Eigen/Core"
+#include "Eigen/SparseCore"
+#include "absl/status/statusor.h"
+#include "core/linalg/eigensolver.h"
+#include "core/linalg/sparse_cholesky.h"
+#include "core/operators/field_operator.h"
+
+namespace fieldspace {
+
+// Full-space solvers for the problems the subspace methods approximate (DESIGN.md section 4):
+// references for tests, for measuring subspace errors, and for generating test fields. They
+// factorize k x k systems with CHOLMOD, so cost grows superlinearly with the mesh.
+
+// The K lowest eigenpairs of S x = lambda M x for `op` (eigenvectors in the DOF order of op,
+// M-orthonormal). Errors as LowestEigenpairs.
+absl::StatusOr<EigenResult> ReferenceEigenpairs(const FieldOperator& op,
+                                                const EigenOptions& options = {});
+
+// B = S M^-1 S (k x k, sparse, symmetric PSD): the biharmonic energy matrix of eq. 8. Its rows
+// couple faces up to two rings apart, so it holds several times the nonzeros of S.
+Eigen::SparseMatrix<double> BiharmonicMatrix(const FieldOperator& op);
+
+// A soft constraint: weight * ||X_face - value||^2 is added to the data term ||C X - c||^2.
+struct SoftConstraint {
+  int32_t face = 0;
+  Eigen::VectorXd value;  // dofs_per_face DOFs of the face (DOF representation)
+  double weight = 1.0;    // finite, > 0
+};
+
+// A hard (interpolation) constraint: X_face = value exactly.
+struct HardConstraint {
+  int32_t face = 0;
+  Eigen::VectorXd value;  // dofs_per_face DOFs of the face
+};
+
+// The model problem (eq. 8), optionally with hard constraints:
+//   min mu_s X^T S X + mu_b X^T B X + mu_c sum_j weight_j ||X_{face_j} - value_j||^2
+//   subject to X_{face} = value for every hard constraint,
+// i.e. C selects the soft-constrained faces' DOFs, scaled by sqrt(weight_j).
+struct ModelProblem {
+  double mu_s = 0.0;  // harmonic (Dirichlet) energy weight, >= 0
+  double mu_b = 0.0;  // biharmonic energy weight, >= 0
+  double mu_c = 1.0;  // data term weight, >= 0
+  std::vector<SoftConstraint> soft;
+  std::vector<HardConstraint> hard;  // at most one per face
+};
+
+// Normal equations of eq. 9 before hard constraints are applied:
+// A = mu_s S + mu_b B + mu_c C^T C (k x k, sparse, symmetric PSD), b = mu_c C^T c (k).
+struct ModelSystem {
+  Eigen::SparseMatrix<double> A;
+  Eigen::VectorXd b;
+
+  ModelSystem() = default;
+  ModelSystem(const ModelSystem&) = default;
+  ModelSystem& operator=(const ModelSystem&) = default;
+  // Eigen 3.4's SparseMatrix has no move operations (a "move" deep-copies); swap instead.
+  ModelSystem(ModelSystem&& other) noexcept : b(std::move(other.b)) { A.swap(other.A); }
+  ModelSystem& operator=(ModelSystem&& other) noexcept {
+    A.swap(other.A);
+    b = std::move(other.b);
+    return *this;
+  }
+};
+absl::StatusOr<ModelSystem> AssembleModelSystem(const FieldOperator& op,
+                                                const ModelProblem& problem);
+
+// Solves the model problem in the full space: the free DOFs satisfy A_ff X_f = b_f - A_fh X_h
+// (hard-constrained DOFs X_h eliminated), hard-constrained DOFs take their values exactly.
+// Returns X (k, DOF order of op). InvalidArgument for bad weights, faces or values (including a
+// face with two hard constraints); FailedPrecondition when the reduced system is singular (e.g.
+// only mu_s > 0 with no constraints: the energy has a kernel).
+absl::StatusOr<Eigen::VectorXd> SolveModelProblem(const FieldOperator& op,
+                                                  const ModelProblem& problem,
+                                                  const CholeskyOptions& cholesky = {});
+
+// Smoothing (the eq. 8 instance with a mass-weighted data term):
+//   min ||X - field||_M^2 + lambda X^T S X  <=>  (M + lambda S) X = M field.
+// field: k entries; lambda finite, >= 0.
+absl::StatusOr<Eigen::VectorXd> SmoothField(const FieldOperator& op, const Eigen::VectorXd& field,
+                                            double lambda, const CholeskyOptions& cholesky = {});
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_OPERATORS_REFERENCE_SOLVERS_H_

@@ -1,0 +1,249 @@
+#include "core/operators/vector_laplacian.h"
+
+#include <algorithm>
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <new>
+#include <numeric>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/strings/str_format.h"
+#include "core/operators/face_block_assembly.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+
+namespace fieldspace {
+namespace {
+
+using operators_internal::AssembleFaceBlocks;
+using operators_internal::FaceRowWriter;
+using operators_internal::kFaceGrain;
+
+// Doubles per face in the edge-vector table (6 used, padded to a cache line).
+constexpr size_t kStride = 8;
+
+// 64-byte aligned storage for the per-face tables.
+template <typename T>
+struct CacheAlignedAllocator {
+  using value_type = T;
+  CacheAlignedAllocator() = default;
+  template <typename U>
+  CacheAlignedAllocator(const CacheAlignedAllocator<U>&) {}
+  T* allocate(size_t n) {
+    return static_cast<T*>(::operator new (n * sizeof(T), std::align_val_t{64}));
+  }
+  void deallocate(T* p, size_t) { ::operator delete (p, std::align_val_t{64}); }
+  friend bool operator==(const CacheAlignedAllocator&, const CacheAlignedAllocator&) {
+    return true;
+  }
+};
+
+// Faces around each vertex as packed corners 4 f + k (face f, corner k at the vertex; shifts
+// instead of divisions in the hot loop), ascending in f (counting sort over faces in order), so
+// the stars of a face's three vertices can be merged.
+struct VertexStars {
+  std::vector<int64_t> offset;   // #V + 1
+  std::vector<int32_t> corners;  // 3F
+};
+
+VertexStars BuildVertexStars(const TriangleMesh& mesh) {
+  const FaceMatrix& F = mesh.faces();
+  const int32_t nf = mesh.num_faces();
+  VertexStars s;
+  s.offset.assign(static_cast<size_t>(mesh.num_vertices()) + 1, 0);
+  for (int32_t f = 0; f < nf; ++f) {
+    for (int k = 0; k < 3; ++k) ++s.offset[F(f, k) + 1];
+  }
+  std::partial_sum(s.offset.begin(), s.offset.end(), s.offset.begin());
+  s.corners.resize(3 * static_cast<size_t>(nf));
+  std::vector<int64_t> cursor(s.offset.begin(), s.offset.end() - 1);
+  for (int32_t f = 0; f < nf; ++f) {
+    for (int k = 0; k < 3; ++k) s.corners[cursor[F(f, k)]++] = 4 * f + k;
+  }
+  return s;
+}
+
+// One contribution of a shared vertex to block (f, g): vertex v is corner kf of f, corner kg of g.
+struct SharedVertex {
+  int32_t v;
+  int32_t kf;
+  int32_t kg;
+};
+
+// Walks the faces sharing a vertex with face f in ascending order: a 3-way merge of the (sorted)
+// stars of f's vertices. For each distinct face g calls visit(g, shared, count), shared[0..count)
+// the vertices f and g share, sorted by vertex index. prefetch(g) is called first for every
+// neighbor.
+template <typename Prefetch, typename Visit>
+inline void ForEachVertexNeighbor(const VertexStars& stars, const FaceMatrix& F, int32_t f,
+                                  Prefetch prefetch, Visit visit) {
+  const int32_t* head[3];
+  const int32_t* end[3];
+  int32_t vertex[3];
+  for (int k = 0; k < 3; ++k) {
+    vertex[k] = F(f, k);
+    head[k] = stars.corners.data() + stars.offset[vertex[k]];
+    end[k] = stars.corners.data() + stars.offset[vertex[k] + 1];
+  }
+  // The per-face data of the neighbors is scattered in memory: request all of it up front so the
+  // cache misses overlap instead of following one another through the merge.
+  for (int k = 0; k < 3; ++k) {
+    for (const int32_t* c = head[k]; c != end[k]; ++c) prefetch(*c >> 2);
+  }
+  constexpr int32_t kDone = std::numeric_limits<int32_t>::max();
+  while (true) {
+    int32_t next[3];
+    for (int k = 0; k < 3; ++k) next[k] = head[k] != end[k] ? (*head[k] >> 2) : kDone;
+    const int32_t g = std::min(next[0], std::min(next[1], next[2]));
+    if (g == kDone) return;
+    SharedVertex shared[3];
+    int count = 0;
+    for (int k = 0; k < 3; ++k) {
+      if (next[k] == g) {
+        shared[count++] = {vertex[k], k, *head[k] & 3};
+        ++head[k];
+      }
+    }
+    // Sum in a canonical order (by vertex index) so that block (g, f) computed from g's side is
+    // bitwise the transpose of block (f, g): S is exactly symmetric.
+    operators_internal::SmallSort(
+        shared, count, [](const SharedVertex& a, const SharedVertex& b) { return a.v < b.v; });
+    visit(g, shared, count);
+  }
+}
+
+}  // namespace
+
+absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const TriangleMesh& mesh) {
+  const int32_t nf = mesh.num_faces();
+  const int32_t nv = mesh.num_vertices();
+  const int32_t ne = mesh.num_edges();
+  if (4 * static_cast<int64_t>(nf) > std::numeric_limits<int32_t>::max()) {
+    return absl::ResourceExhaustedError(
+        absl::StrFormat("vector Laplacian: %d faces is beyond 32-bit corner indices", nf));
+  }
+  const FaceMatrix& F = mesh.faces();
+  const FaceMatrix& FE = mesh.face_edges();
+  const FaceMatrix& FN = mesh.face_neighbors();
+  const PairMatrix& EF = mesh.edge_faces();
+  const VertexMatrix& V = mesh.vertices();
+  const Eigen::VectorXd& area = mesh.face_areas();
+
+  const VertexStars stars = BuildVertexStars(mesh);
+
+  // Edge vectors t_fk = p_{k+2} - p_{k+1} (counter-clockwise, opposite corner k) in face f's frame.
+  // They give both terms: area_f grad phi_k|f = J t_fk / 2 and area_f J grad psi_e|f = t_fk.
+  // Rows padded to one 64-byte cache line: the neighbor loop reads whole rows of random faces.
+  std::vector<double, CacheAlignedAllocator<double>> t(kStride * static_cast<size_t>(nf));
+  tbb::parallel_for(tbb::blocked_range<int32_t>(0, nf, kFaceGrain),
+                    [&](const tbb::blocked_range<int32_t>& r) {
+                      for (int32_t f = r.begin(); f != r.end(); ++f) {
+                        const Eigen::Vector3d x = mesh.frame_x().row(f).transpose();
+                        const Eigen::Vector3d y = mesh.frame_y().row(f).transpose();
+                        for (int k = 0; k < 3; ++k) {
+                          const Eigen::Vector3d d =
+                              (V.row(F(f, (k + 2) % 3)) - V.row(F(f, (k + 1) % 3))).transpose();
+                          t[kStride * f + 2 * k] = d.dot(x);
+                          t[kStride * f + 2 * k + 1] = d.dot(y);
+                        }
+                      }
+                    });
+
+  // Inverse lumped vertex masses 3 / sum(incident areas) and CR edge masses 3 / sum(incident).
+  std::vector<double> inv_mv(nv);
+  tbb::parallel_for(tbb::blocked_range<int32_t>(0, nv, 8192),
+                    [&](const tbb::blocked_range<int32_t>& r) {
+                      for (int32_t v = r.begin(); v != r.end(); ++v) {
+                        double sum = 0.0;
+                        for (int64_t i = stars.offset[v]; i < stars.offset[v + 1]; ++i) {
+                          sum += area[stars.corners[i] >> 2];
+                        }
+                        inv_mv[v] = 3.0 / sum;
+                      }
+                    });
+  std::vector<double> inv_me(ne);
+  tbb::parallel_for(tbb::blocked_range<int32_t>(0, ne, 8192),
+                    [&](const tbb::blocked_range<int32_t>& r) {
+                      for (int32_t e = r.begin(); e != r.end(); ++e) {
+                        double sum = area[EF(e, 0)];
+                        if (EF(e, 1) != kNoFace) sum += area[EF(e, 1)];
+                        inv_me[e] = 3.0 / sum;
+                      }
+                    });
+
+  // Distinct faces sharing a vertex with f: the star sizes summed, minus the repeats. A face
+  // sharing m >= 1 edges with f shares min(m + 1, 3) vertices (two vertices of a triangle always
+  // span one of its edges, and an edge has at most two faces), f itself shares 3.
+  auto count = [&](int32_t f) {
+    int64_t n = -2;
+    for (int k = 0; k < 3; ++k) n += stars.offset[F(f, k) + 1] - stars.offset[F(f, k)];
+    for (int k = 0; k < 3; ++k) {
+      const int32_t g = FN(f, k);
+      if (g == kNoFace) continue;
+      int m = 0, first = 3;
+      for (int j = 0; j < 3; ++j) {
+        if (FN(f, j) == g) {
+          ++m;
+          first = std::min(first, j);
+        }
+      }
+      if (first == k) n -= std::min(m + 1, 3) - 1;  // count each neighbor once
+    }
+    return static_cast<int32_t>(n);
+  };
+
+  auto fill = [&](int32_t f, FaceRowWriter<2>& writer) {
+    const double* tf = &t[kStride * f];
+    auto prefetch = [&](int32_t g) { __builtin_prefetch(&t[kStride * g]); };
+    ForEachVertexNeighbor(stars, F, f, prefetch, [&](int32_t g, const SharedVertex* shared, int n) {
+      const double* tg = &t[kStride * g];
+      double block[4] = {0.0, 0.0, 0.0, 0.0};
+      // Vertex (divergence) term: q = J t / 2 = (-t_y / 2, t_x / 2).
+      for (int i = 0; i < n; ++i) {
+        const double w = inv_mv[shared[i].v];
+        const double a[2] = {-0.5 * tf[2 * shared[i].kf + 1], 0.5 * tf[2 * shared[i].kf]};
+        const double b[2] = {-0.5 * tg[2 * shared[i].kg + 1], 0.5 * tg[2 * shared[i].kg]};
+        for (int c = 0; c < 2; ++c) {
+          for (int d = 0; d < 2; ++d) block[2 * c + d] += w * (a[c] * b[d]);
+        }
+      }
+      // Edge (curl) term over the edges f and g share, in ascending edge order.
+      std::array<std::array<int32_t, 3>, 3> edges;  // (edge, kf, kg)
+      int m = 0;
+      if (g == f) {
+        for (int k = 0; k < 3; ++k) edges[m++] = {FE(f, k), k, k};
+      } else if (n == 2) {
+        // The usual case: one shared edge, opposite the corners that are not shared.
+        const int kf = 3 - shared[0].kf - shared[1].kf;
+        const int kg = 3 - shared[0].kg - shared[1].kg;
+        edges[m++] = {FE(f, kf), kf, kg};
+      } else if (n == 3) {
+        // f and g share all three vertices (a closed two-triangle "pillow"): every common edge.
+        for (int k = 0; k < 3; ++k) {
+          if (FN(f, k) != g) continue;
+          const int32_t e = FE(f, k);
+          int l = 0;
+          while (l < 2 && FE(g, l) != e) ++l;
+          edges[m++] = {e, k, l};
+        }
+        operators_internal::SmallSort(edges.data(), m,
+                                      [](const auto& a, const auto& b) { return a[0] < b[0]; });
+      }
+      for (int i = 0; i < m; ++i) {
+        const double w = inv_me[edges[i][0]];
+        const double* a = tf + 2 * edges[i][1];
+        const double* b = tg + 2 * edges[i][2];
+        for (int c = 0; c < 2; ++c) {
+          for (int d = 0; d < 2; ++d) block[2 * c + d] += w * (a[c] * b[d]);
+        }
+      }
+      writer.Add(g, block);
+    });
+  };
+
+  return AssembleFaceBlocks<2>(nf, count, fill);
+}
+
+}  // namespace fieldspace

@@ -1,0 +1,130 @@
+#ifndef FIELDSPACE_CORE_SUBSPACE_DESIGN_SESSION_H_
+#define FIELDSPACE_CORE_SUBSPACE_DESIGN_SESSION_H_
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <vector>
+
+#include "Eigen/Core"
+#include "Eigen/SparseCore"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/types/span.h"
+#include "core/subspace/model_problem.h"
+#include "core/subspace/reduced_system.h"
+#include "core/subspace/supernodal_cholesky.h"
+
+namespace fieldspace {
+
+class KktSolver;
+
+enum class ConstraintKind : uint8_t { kSoft = 0, kHard = 1 };
+
+struct ConstraintInfo {
+  ConstraintKind kind = ConstraintKind::kSoft;
+  FieldConstraint constraint;
+};
+
+struct DesignSessionOptions {
+  ReducedSolveOptions solve;
+};
+
+// An interactive design session on one basis (paper section 8, DESIGN.md section 4): the model
+// problem (eq. 8) reduced to the subspace (eq. 10, 11), with soft and hard constraints edited one
+// at a time.
+//
+// Cost model: the energy matrix A = U^T (mu_S S + mu_B B) U is factorized once per (mu_S, mu_B)
+// (sparse supernodal Cholesky on the basis's shared symbolic analysis). Constraints never touch
+// that factorization: each one keeps Z = A^-1 U_f^T (2-3 columns, one multi-RHS solve when it
+// is added or moved to another face), and every edit refactorizes only the small dense matrix
+// H = U_C A^-1 U_C^T + E over the current constraint rows (Woodbury for soft constraints, Schur
+// complement for hard ones; see KktSolver). An edit costs O(nnz(L) + d r + r^3) for r constraint
+// rows instead of a refactorization. Changing mu_S or mu_B refactorizes A and recomputes Z;
+// changing only mu_C does not.
+//
+// Every successful call leaves coefficients() = the minimizer for the current weights and
+// constraint set, equal (up to the solver tolerance) to SolveReducedModelProblem(problem()).
+// A failed call leaves the session exactly as it was.
+//
+// Thread-compatible: one session per thread (or external locking); any number of sessions share
+// the immutable ReducedSystem.
+class DesignSession {
+ public:
+  // InvalidArgument for invalid weights (see ValidateWeights) or a null system;
+  // FailedPrecondition when the energy matrix cannot be factorized.
+  static absl::StatusOr<std::unique_ptr<DesignSession>> Create(
+      std::shared_ptr<const ReducedSystem> system, const EnergyWeights& weights,
+      const DesignSessionOptions& options = {});
+  ~DesignSession();
+  DesignSession(const DesignSession&) = delete;
+  DesignSession& operator=(const DesignSession&) = delete;
+
+  // Adds constraint `id` (any caller-chosen integer). AlreadyExists for an id in use;
+  // InvalidArgument for a bad face id, value size, non-finite value or non-positive soft weight;
+  // FailedPrecondition when a hard constraint would make the hard constraints linearly dependent
+  // in the subspace (e.g. a second hard constraint on the same face).
+  absl::Status AddConstraint(int64_t id, ConstraintKind kind, const FieldConstraint& constraint);
+  // Replaces constraint `id`'s face, value and weight (its kind stays). NotFound for an unknown
+  // id; otherwise the errors of AddConstraint. Moving within the same face (new value or weight)
+  // needs no solve with A.
+  absl::Status MoveConstraint(int64_t id, const FieldConstraint& constraint);
+  // NotFound for an unknown id.
+  absl::Status RemoveConstraint(int64_t id);
+  // Removes every constraint (the solution becomes 0).
+  void ClearConstraints();
+  // New weights (InvalidArgument if invalid, see ValidateWeights). Refactorizes A when mu_S or
+  // mu_B change; FailedPrecondition (session unchanged) if that factorization fails.
+  absl::Status SetWeights(const EnergyWeights& weights);
+
+  // d: the current reduced solution x.
+  const Eigen::VectorXd& coefficients() const { return coefficients_; }
+  // The lifted field U x at the given faces (see LiftFaces in projection.h), or at all faces.
+  absl::StatusOr<Eigen::VectorXd> LiftFaces(absl::Span<const int32_t> faces) const;
+  absl::StatusOr<Eigen::VectorXd> LiftAll() const;
+
+  const EnergyWeights& weights() const { return weights_; }
+  int32_t num_constraints() const { return static_cast<int32_t>(ids_by_slot_.size()); }
+  int32_t num_hard_constraints() const { return num_hard_; }
+  bool HasConstraint(int64_t id) const { return slot_by_id_.count(id) > 0; }
+  // NotFound for an unknown id.
+  absl::StatusOr<ConstraintInfo> GetConstraint(int64_t id) const;
+  // The current problem (soft and hard constraints in increasing id order), as solved by
+  // SolveReducedModelProblem or, in the full space, SolveModelProblem.
+  ModelProblem problem() const;
+  const ReducedSystem& system() const { return *system_; }
+  // Of the last solve: backward error and refinement steps; of the factorization: the diagonal
+  // shift that was needed.
+  double last_backward_error() const { return last_backward_error_; }
+  int32_t last_refinement_steps() const { return last_refinement_steps_; }
+  double regularization() const { return regularization_; }
+
+ private:
+  DesignSession(std::shared_ptr<const ReducedSystem> system, const DesignSessionOptions& options);
+  // Factorizes mu_S U^T S U + mu_B U^T B U into the given outputs.
+  absl::Status FactorizeEnergy(const EnergyWeights& weights, Eigen::SparseMatrix<double>* A,
+                               std::unique_ptr<SupernodalFactor>* factor, double* tau) const;
+  void Resolve();
+  double SoftE(double weight) const { return 1.0 / (weights_.constraint * weight); }
+
+  using Record = ConstraintInfo;
+
+  std::shared_ptr<const ReducedSystem> system_;
+  DesignSessionOptions options_;
+  EnergyWeights weights_;
+  Eigen::SparseMatrix<double> A_;  // d x d, on the system's shared pattern
+  std::unique_ptr<SupernodalFactor> factor_;
+  double regularization_ = 0;
+  std::unique_ptr<KktSolver> kkt_;
+  std::map<int64_t, int32_t> slot_by_id_;
+  std::vector<int64_t> ids_by_slot_;
+  std::vector<Record> records_;  // by slot
+  int32_t num_hard_ = 0;
+  Eigen::VectorXd coefficients_;
+  double last_backward_error_ = 0;
+  int32_t last_refinement_steps_ = 0;
+};
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_SUBSPACE_DESIGN_SESSION_H_

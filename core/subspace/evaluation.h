@@ -1,0 +1,68 @@
+#ifndef FIELDSPACE_CORE_SUBSPACE_EVALUATION_H_
+#define FIELDSPACE_CORE_SUBSPACE_EVALUATION_H_
+
+#include <cstdint>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/statusor.h"
+#include "absl/types/span.h"
+#include "core/operators/field_operator.h"
+#include "core/operators/reference_solvers.h"
+#include "core/subspace/reduced_system.h"
+
+namespace fieldspace {
+
+// The evaluation protocol of paper section 6 ("Approximation"): random smooth test fields, their
+// projection errors, and the error of the reduced model problem against the full-space one. The
+// full-space systems are factorized with the supernodal Cholesky of supernodal_cholesky.h (the
+// same numerics as CHOLMOD's supernodal method, with fast dense kernels: CHOLMOD on the reference
+// BLAS of our platform takes ~10x longer on these k x k systems). Only the factorization code is
+// shared with the reduced path; the systems are assembled independently.
+
+struct TestFieldOptions {
+  int32_t count = 50;            // number of fields, >= 1
+  int32_t min_constraints = 10;  // per field, uniform in [min, max], 1 <= min <= max <= #F
+  int32_t max_constraints = 50;
+  uint64_t seed = 0;
+};
+
+struct TestFieldSet {
+  Eigen::MatrixXd fields;                                // k x count, DOF order of the operator
+  std::vector<std::vector<HardConstraint>> constraints;  // per field, the interpolated values
+};
+
+// Test fields (section 6): each is the minimizer of the biharmonic energy X^T B X (B = S M^-1 S)
+// subject to hard interpolation constraints at min..max distinct random faces, solved in the full
+// space. Constraint values are random unit vectors: a unit tangent vector (frame coordinates) for
+// vector fields, a unit representation vector for n-fields, a unit Mandel-Voigt vector for
+// tensors. Deterministic for a seed (own integer-to-real mapping, independent of the standard
+// library's distributions). One symbolic analysis of B; per field the constrained rows and
+// columns are replaced by the identity (same pattern) and only the numeric factorization reruns.
+// InvalidArgument for bad options; FailedPrecondition if a constrained B is singular.
+absl::StatusOr<TestFieldSet> GenerateTestFields(const FieldOperator& op,
+                                                const TestFieldOptions& options);
+
+// The smoothing weights of the minimization experiment: lambda_j = 25 j (1^T M 1) / (1^T S 1) for
+// j = 1..count (1 the all-ones DOF vector), i.e. smoothing strengths relative to the operator's
+// own scale. FailedPrecondition if 1^T S 1 <= 0.
+absl::StatusOr<std::vector<double>> SmoothingWeights(const FieldOperator& op, int32_t count = 5);
+
+// For each field X_f (columns of `fields`, k x m) and lambda: the smoothing instance of eq. 8
+// (C = I with the data term weighted by M: min ||X - X_f||_M^2 + lambda X^T S X) solved in the
+// full space, (M + lambda S) X = M X_f, and in the subspace, (U^T M U + lambda U^T S U) x =
+// U^T M X_f; the error is ||X - U x||_M / ||X||_M. Returns m x lambdas.size() errors.
+absl::StatusOr<Eigen::MatrixXd> SmoothingErrors(const FieldOperator& op,
+                                                const ReducedSystem& system,
+                                                const Eigen::Ref<const Eigen::MatrixXd>& fields,
+                                                absl::Span<const double> lambdas);
+
+struct ErrorSummary {
+  double mean = 0;
+  double max = 0;
+};
+ErrorSummary Summarize(const Eigen::Ref<const Eigen::MatrixXd>& errors);
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_SUBSPACE_EVALUATION_H_

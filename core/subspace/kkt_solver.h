@@ -1,0 +1,115 @@
+#ifndef FIELDSPACE_CORE_SUBSPACE_KKT_SOLVER_H_
+#define FIELDSPACE_CORE_SUBSPACE_KKT_SOLVER_H_
+
+// Internal to core/subspace: the constrained-solve engine behind DesignSession and
+// SolveReducedModelProblem. Not a public API.
+
+#include <cstdint>
+#include <vector>
+
+#include "Eigen/Cholesky"
+#include "Eigen/Core"
+#include "Eigen/SparseCore"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "core/subspace/model_problem.h"
+#include "core/subspace/supernodal_cholesky.h"
+
+namespace fieldspace {
+
+// A sparse row of length d (a row of U, in double).
+struct SparseRow {
+  std::vector<int32_t> cols;
+  std::vector<double> vals;
+  double Dot(const double* x) const {
+    double v = 0;
+    for (size_t q = 0; q < cols.size(); ++q) v += vals[q] * x[cols[q]];
+    return v;
+  }
+};
+
+// Rows dofs_per_face * face + c (c < dofs_per_face) of the basis: the constraint rows U_f.
+std::vector<SparseRow> BasisRowsOfFace(const ReducedSystem& system, int32_t face);
+
+// Factorizes `A` (on the system's shared pattern or any pattern with its own analysis) with the
+// regularization policy of ReducedSolveOptions: diagonal scaled by (1 + tau), tau raised 1000x
+// on failure up to max_regularization. Returns the tau used through `tau`.
+absl::StatusOr<SupernodalFactor> FactorizeRegularized(
+    std::shared_ptr<const SupernodalSymbolic> symbolic, const Eigen::SparseMatrix<double>& A,
+    const ReducedSolveOptions& options, double* tau);
+
+// Solves the saddle-point system
+//   A x + R^T nu = b,    R x - E nu = t
+// given a factorization F of A (possibly regularized: A_hat). R stacks the constraints' rows
+// (p = rows_per_group rows per constraint, the rows of U at its face), E = diag(e) with
+// e = 1 / (mu_C w) on a soft constraint's rows and 0 on a hard one's. For soft rows, nu = the
+// scaled residual; this is exactly the minimizer of x^T A x - 2 b^T x + sum_soft (R_i x -
+// t_i)^2 / e_i subject to R_h x = t_h. With Z = F^-1 R^T (d x r, kept per constraint) and
+// H = R Z + E (r x r):
+//   x0 = F^-1 b,  H nu = R x0 - t,  x = x0 - Z nu,
+// followed by iterative refinement against the true A (residuals are cheap sparse products, each
+// correction one solve with F). Adding a constraint costs p solves with F plus O(r p nnz(row))
+// for H's new entries; every change refactorizes H (O(r^3), r = p * #constraints, small).
+class KktSolver {
+ public:
+  KktSolver(int64_t dim, int32_t rows_per_group, const ReducedSolveOptions& options);
+
+  // The true matrix (for residuals) and the factorization used for solves; both must stay alive
+  // and unchanged until the next call. Recomputes Z and R Z for all constraints (one multi-RHS
+  // solve).
+  void SetMatrix(const Eigen::SparseMatrix<double>* A, const SupernodalFactor* factor);
+
+  int32_t num_groups() const { return num_groups_; }
+  // Appends a constraint (rows: p sparse rows; target: p values; e >= 0, 0 for hard). Before the
+  // first SetMatrix() this only records it (SetMatrix solves for all groups at once).
+  void Append(std::vector<SparseRow> rows, const Eigen::VectorXd& target, double e, bool hard);
+  // Replaces group g's rows (recomputing its Z columns), target and e.
+  void Replace(int32_t g, std::vector<SparseRow> rows, const Eigen::VectorXd& target, double e);
+  void SetTarget(int32_t g, const Eigen::VectorXd& target);
+  void SetE(int32_t g, double e);
+  // Removes group g; the last group moves into slot g (callers track ids by slot).
+  void RemoveSwapLast(int32_t g);
+  const std::vector<SparseRow>& GroupRows(int32_t g) const { return rows_[g]; }
+  Eigen::VectorXd GroupTarget(int32_t g) const { return t_.segment(g * p_, p_); }
+  double GroupE(int32_t g) const { return e_[g * p_]; }
+  bool GroupHard(int32_t g) const { return hard_[g] != 0; }
+
+  // Factorizes H = R Z + E with the hard rows first. FailedPrecondition when the hard rows are
+  // linearly dependent in the A^-1 inner product (pivot ratio below dependence_tolerance), e.g.
+  // the same face constrained twice. On error the previous factorization of H is kept.
+  absl::Status FactorizeSchur();
+
+  // The solution x (d) for right-hand side b (nullptr: b = 0). Precondition: FactorizeSchur()
+  // succeeded since the last change.
+  ReducedSolution Solve(const Eigen::VectorXd* b) const;
+
+ private:
+  void EnsureCapacity(int64_t rows);
+  // Z columns and H entries of group g against all current groups.
+  void ComputeGroup(int32_t g);
+  // H^-1 v (v: r values).
+  Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;
+
+  int64_t d_;
+  int32_t p_;
+  ReducedSolveOptions options_;
+  const Eigen::SparseMatrix<double>* A_ = nullptr;
+  const SupernodalFactor* factor_ = nullptr;
+  int32_t num_groups_ = 0;
+  std::vector<std::vector<SparseRow>> rows_;  // per group, p rows
+  std::vector<char> hard_;                    // per group
+  Eigen::VectorXd t_;                         // per row (capacity)
+  Eigen::VectorXd e_;                         // per row (capacity)
+  Eigen::MatrixXd Z_;                         // d x capacity
+  Eigen::MatrixXd K_;                         // capacity x capacity: R Z
+  // Factorization of the scaled, permuted H: order_[i] = row of H at position i (hard first),
+  // scale_ = 1 / sqrt(diag(H)).
+  std::vector<int64_t> order_;
+  Eigen::VectorXd scale_;
+  Eigen::LLT<Eigen::MatrixXd> schur_;
+  bool schur_valid_ = false;
+};
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_SUBSPACE_KKT_SOLVER_H_

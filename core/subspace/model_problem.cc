@@ -1,0 +1,124 @@
+#include "core/subspace/model_problem.h"
+
+#include <cmath>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "core/subspace/kkt_solver.h"
+
+namespace fieldspace {
+
+absl::Status ValidateWeights(const EnergyWeights& w) {
+  const auto bad = [](const char* name, double v, const char* rule) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("energy weight ", name, " = ", v, " is invalid: must be ", rule));
+  };
+  if (!std::isfinite(w.harmonic) || w.harmonic < 0) {
+    return bad("harmonic (mu_S)", w.harmonic, "finite and >= 0");
+  }
+  if (!std::isfinite(w.biharmonic) || w.biharmonic < 0) {
+    return bad("biharmonic (mu_B)", w.biharmonic, "finite and >= 0");
+  }
+  if (!std::isfinite(w.constraint) || w.constraint <= 0) {
+    return bad("constraint (mu_C)", w.constraint, "finite and > 0");
+  }
+  if (w.harmonic + w.biharmonic <= 0) {
+    return absl::InvalidArgumentError(
+        "energy weights: harmonic (mu_S) and biharmonic (mu_B) are both 0; at least one must be "
+        "positive");
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c, bool soft) {
+  if (c.face < 0 || c.face >= system.num_faces()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("constraint face id ", c.face, " is outside [0, ", system.num_faces(), ")"));
+  }
+  if (c.value.size() != system.dofs_per_face()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("constraint on face ", c.face, " has ", c.value.size(), " values; a ",
+                     system.type().ToString(), " field has ", system.dofs_per_face(), " per face"));
+  }
+  if (!c.value.allFinite()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("constraint on face ", c.face, " has a non-finite value"));
+  }
+  if (soft && (!std::isfinite(c.weight) || c.weight <= 0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "soft constraint on face ", c.face, " has weight ", c.weight, "; must be finite and > 0"));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& system,
+                                                         const ModelProblem& problem,
+                                                         const ReducedSolveOptions& options) {
+  EnergyWeights w{problem.mu_s, problem.mu_b, problem.mu_c};
+  if (!std::isfinite(w.constraint) || w.constraint < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "energy weight constraint (mu_c) = ", w.constraint, " must be finite and >= 0"));
+  }
+  {
+    EnergyWeights check = w;
+    check.constraint = 1.0;  // mu_c = 0 is allowed here (no soft term)
+    RETURN_IF_ERROR(ValidateWeights(check));
+  }
+  for (const SoftConstraint& c : problem.soft) {
+    RETURN_IF_ERROR(ValidateConstraint(system, {c.face, c.value, c.weight}, true));
+  }
+  for (const HardConstraint& c : problem.hard) {
+    RETURN_IF_ERROR(ValidateConstraint(system, {c.face, c.value, 1.0}, false));
+  }
+  const int64_t d = system.dimension();
+  // A_s = U^T (mu_S S + mu_B B) U + mu_C sum_soft w_i U_i^T U_i, b = mu_C sum_soft w_i U_i^T c_i.
+  Eigen::SparseMatrix<double> A = system.stiffness();
+  {
+    double* a = A.valuePtr();
+    const double* s = system.stiffness().valuePtr();
+    const double* bl = system.bilaplacian().valuePtr();
+    for (int64_t p = 0; p < A.nonZeros(); ++p) a[p] = w.harmonic * s[p] + w.biharmonic * bl[p];
+  }
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(d);
+  if (!problem.soft.empty() && w.constraint > 0) {
+    std::vector<Eigen::Triplet<double>> triplets;
+    for (const SoftConstraint& c : problem.soft) {
+      const double mu = w.constraint * c.weight;
+      const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
+      for (size_t comp = 0; comp < rows.size(); ++comp) {
+        const SparseRow& row = rows[comp];
+        for (size_t q = 0; q < row.cols.size(); ++q) {
+          b[row.cols[q]] += mu * row.vals[q] * c.value[comp];
+          for (size_t s = 0; s < row.cols.size(); ++s) {
+            triplets.emplace_back(row.cols[s], row.cols[q], mu * row.vals[s] * row.vals[q]);
+          }
+        }
+      }
+    }
+    Eigen::SparseMatrix<double> C(d, d);
+    C.setFromTriplets(triplets.begin(), triplets.end());
+    Eigen::SparseMatrix<double> sum = A + C;
+    sum.makeCompressed();
+    A = std::move(sum);
+  }
+  std::shared_ptr<const SupernodalSymbolic> symbolic = system.pattern_symbolic();
+  if (!symbolic->SamePattern(A)) {
+    ASSIGN_OR_RETURN(symbolic, SupernodalSymbolic::Analyze(A));
+  }
+  double tau = 0;
+  ASSIGN_OR_RETURN(SupernodalFactor factor, FactorizeRegularized(symbolic, A, options, &tau));
+
+  KktSolver kkt(d, system.dofs_per_face(), options);
+  for (const HardConstraint& c : problem.hard) {
+    kkt.Append(BasisRowsOfFace(system, c.face), c.value, 0.0, /*hard=*/true);
+  }
+  kkt.SetMatrix(&A, &factor);
+  RETURN_IF_ERROR(kkt.FactorizeSchur());
+  ReducedSolution solution = kkt.Solve(&b);
+  solution.regularization = tau;
+  return solution;
+}
+
+}  // namespace fieldspace

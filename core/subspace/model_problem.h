@@ -1,0 +1,92 @@
+#ifndef FIELDSPACE_CORE_SUBSPACE_MODEL_PROBLEM_H_
+#define FIELDSPACE_CORE_SUBSPACE_MODEL_PROBLEM_H_
+
+#include <cstdint>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "core/operators/reference_solvers.h"
+#include "core/subspace/reduced_system.h"
+
+namespace fieldspace {
+
+// The problem itself is the full-space ModelProblem of core/operators/reference_solvers.h (eq. 8
+// with soft constraints weighted per constraint and optional hard constraints), so that callers
+// build one description and solve it in the full space (SolveModelProblem) or in a subspace
+// (SolveReducedModelProblem below) and compare.
+
+// The weights of the model problem (eq. 8) for interactive sessions:
+//   mu_S X^T S X + mu_B X^T B X + mu_C sum_soft w_i |X_f(i) - c_i|^2,  X_f(i) = X at face f(i)
+// (the |.|^2 of the constraint term is the plain Euclidean norm of the face's DOFs, as in eq. 8,
+// not weighted by area). Valid weights: all finite, mu_S >= 0, mu_B >= 0, mu_S + mu_B > 0,
+// mu_C > 0.
+struct EnergyWeights {
+  double harmonic = 1.0;    // mu_S
+  double biharmonic = 0.0;  // mu_B
+  double constraint = 1.0;  // mu_C (scales every soft constraint's weight)
+};
+
+// InvalidArgument (naming the weight) unless `weights` is valid.
+absl::Status ValidateWeights(const EnergyWeights& weights);
+
+// A constraint on one face's DOFs (DESIGN.md section 2: 2 values for vector and n-fields in the
+// face frame, 3 Mandel-Voigt values for tensors). Soft: the term mu_C * weight * |X_f - value|^2
+// (weight finite and > 0). Hard: X_f = value exactly (weight ignored).
+struct FieldConstraint {
+  int32_t face = 0;
+  Eigen::VectorXd value;
+  double weight = 1.0;
+};
+
+// InvalidArgument unless `c` names a face of `system`, has dofs_per_face finite values and (for a
+// soft constraint) a finite positive weight.
+absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c, bool soft);
+
+// How reduced systems are factorized and solved (DesignSession and SolveReducedModelProblem).
+struct ReducedSolveOptions {
+  // The energy matrix A = U^T (mu_S S + mu_B B) U is only positive semi-definite in general (its
+  // kernel holds fields of zero energy in span(U), e.g. the harmonic fields of a surface of genus
+  // g > 0 if the subspace contains them). It is factorized with each diagonal entry scaled by
+  // (1 + regularization); if that still fails, the shift is raised 1000x at a time up to
+  // max_regularization (then FailedPrecondition). The solve then runs iterative refinement
+  // against the unregularized system, so that whenever the constraints make the problem well
+  // posed the result is that of the exact (unregularized) problem; directions no constraint
+  // controls get the minimum-norm-like solution of the regularized system.
+  double regularization = 1e-13;
+  double max_regularization = 1e-6;
+  // Refinement stops when the normwise backward error of the constrained (KKT) system drops
+  // below `tolerance` or after max_refinement_steps corrections.
+  double tolerance = 1e-12;
+  int32_t max_refinement_steps = 4;
+  // Hard constraints are linearly dependent when, after scaling to unit diagonal, the Schur
+  // complement G A^-1 G^T has a pivot below this (the sine squared of the angle between a
+  // constraint row and the span of the others): FailedPrecondition.
+  double dependence_tolerance = 1e-10;
+  bool parallel = true;
+};
+
+struct ReducedSolution {
+  Eigen::VectorXd coefficients;  // d: the minimizer x in the subspace
+  double backward_error = 0;     // of the final iterate (see ReducedSolveOptions::tolerance)
+  int32_t refinement_steps = 0;
+  double regularization = 0;  // the diagonal shift the factorization needed
+};
+
+// Solves the reduced problem (eq. 10, 11) from scratch: factorizes
+//   U^T (mu_s S + mu_b B) U + mu_c sum_soft w_i U_i^T U_i   (U_i: the rows of U at face f(i))
+// and imposes the hard constraints U_h x = c_h with a Schur complement on that factorization.
+// Use DesignSession for repeated solves with changing constraints.
+// Weights: finite, mu_s, mu_b, mu_c >= 0 and mu_s + mu_b > 0 (mu_c = 0 disables the soft
+// constraints). Errors: InvalidArgument for invalid weights or constraints (bad face id, wrong
+// value size, non-finite value, non-positive soft weight); FailedPrecondition when the hard
+// constraints are linearly dependent in the subspace (e.g. the same face twice, or more
+// constraint DOFs than d) or the system cannot be factorized.
+absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& system,
+                                                         const ModelProblem& problem,
+                                                         const ReducedSolveOptions& options = {});
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_SUBSPACE_MODEL_PROBLEM_H_

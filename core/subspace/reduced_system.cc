@@ -1,0 +1,404 @@
+#include "core/subspace/reduced_system.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "core/linalg/sparse_checks.h"
+#include "core/subspace/subspace_util.h"
+#include "oneapi/tbb/blocked_range.h"
+#include "oneapi/tbb/enumerable_thread_specific.h"
+#include "oneapi/tbb/parallel_for.h"
+#include "oneapi/tbb/task_arena.h"
+
+namespace fieldspace {
+namespace {
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// Per-thread state of the product pass. Rows of U are processed in groups of spatially close
+// faces (rows sharing their dominant column): a group touches only a few hundred columns, so its
+// contributions are summed in small dense local matrices that stay in cache, then added once to
+// the thread's dense accumulators of the current band of output columns (column c - band_begin
+// holds rows a <= c: only the upper triangle is accumulated).
+struct ProductWorkspace {
+  std::vector<double> s, b, m;  // band accumulators, width x d each
+  // Sparse accumulator for one row of S U.
+  std::vector<double> spa;
+  std::vector<char> mark;
+  std::vector<std::pair<int32_t, double>> su_row;
+  // The group's rows: U and S U entries (global columns, ascending), flattened.
+  std::vector<int64_t> u_begin, su_begin;
+  std::vector<int32_t> u_cols, su_cols;
+  std::vector<double> u_vals, su_vals, row_mass;
+  // Local numbering of the group's columns (ascending global order) and local accumulators,
+  // column-major L x L (entry (la, lb) at lb * L + la, la <= lb).
+  std::vector<int32_t> local_of;
+  std::vector<int32_t> local_cols;
+  std::vector<double> ls, lb, lm;
+};
+
+struct Entry {
+  int32_t row, col;
+  double s, b, m;
+};
+
+}  // namespace
+
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
+    std::shared_ptr<const Basis> basis, const FieldOperator& op,
+    const ReducedSystemOptions& options) {
+  const auto t_start = std::chrono::steady_clock::now();
+  if (basis == nullptr) return absl::InvalidArgumentError("ReducedSystem: no basis");
+  const BasisMatrix& U = basis->U;
+  const int64_t k = U.rows();
+  const int64_t d = U.cols();
+  if (!(basis->type == op.type)) {
+    return absl::InvalidArgumentError(absl::StrCat("ReducedSystem: basis is for ",
+                                                   basis->type.ToString(), ", operator for ",
+                                                   op.type.ToString()));
+  }
+  if (d < 1) return absl::InvalidArgumentError("ReducedSystem: basis has no columns");
+  if (d >= (int64_t{1} << 31) / 2) {
+    return absl::InvalidArgumentError("ReducedSystem: basis dimension too large");
+  }
+  if (k != op.dofs() || op.stiffness.rows() != k || op.stiffness.cols() != k) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "ReducedSystem: basis has ", k, " rows but the operator has ", op.dofs(), " DOFs and a ",
+        op.stiffness.rows(), " x ", op.stiffness.cols(), " stiffness"));
+  }
+  if (k % op.type.dofs_per_face() != 0) {
+    return absl::InvalidArgumentError(
+        "ReducedSystem: DOF count is not a multiple of the DOFs "
+        "per face");
+  }
+  if (options.threads < 0 || options.accumulator_budget_bytes <= 0) {
+    return absl::InvalidArgumentError(
+        "ReducedSystem: threads must be >= 0 and the "
+        "accumulator budget > 0");
+  }
+  if (options.threads > 0) {
+    // Run everything (the parallel loops included) in an arena of that many threads.
+    tbb::task_arena arena(options.threads);
+    ReducedSystemOptions inner = options;
+    inner.threads = 0;
+    absl::StatusOr<std::shared_ptr<const ReducedSystem>> result;
+    arena.execute([&] { result = Build(std::move(basis), op, inner); });
+    return result;
+  }
+  RETURN_IF_ERROR(CheckPositiveVector(op.mass, k, "ReducedSystem: operator mass"));
+  RETURN_IF_ERROR(CheckFiniteValues(op.stiffness, "ReducedSystem: operator stiffness"));
+  RETURN_IF_ERROR(CheckBasisMatrix(U, "ReducedSystem"));
+
+  auto sys = std::shared_ptr<ReducedSystem>(new ReducedSystem());
+  sys->mass_ = op.mass;
+  const Eigen::SparseMatrix<double>& S = op.stiffness;
+  const Eigen::VectorXd& mass = op.mass;
+
+  std::vector<Entry> entries;
+  std::atomic<bool> cancelled{false};
+  std::atomic<int64_t> work_done{0};
+  // Output columns per band: d x d accumulators for all threads when they fit the budget.
+  const auto band_width_for = [&](int64_t dim) {
+    const int64_t threads = std::max(1, tbb::this_task_arena::max_concurrency());
+    const int64_t bytes_per_column = 3 * 8 * dim * threads;
+    return std::clamp<int64_t>(options.accumulator_budget_bytes / bytes_per_column, 1, dim);
+  };
+  auto compute_products = [&]() {
+    // Groups: rows ordered by their dominant column (counting sort), split into chunks of at
+    // most kMaxGroupRows. Rows without entries (faces no basis field covers) still have S U
+    // entries through their neighbors; they form their own groups.
+    constexpr int64_t kMaxGroupRows = 4096;
+    std::vector<int32_t> key(k);
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, k, 8192),
+                      [&](const tbb::blocked_range<int64_t>& r) {
+                        for (int64_t i = r.begin(); i < r.end(); ++i) {
+                          const BasisRow u = GetBasisRow(U, i);
+                          int32_t best = static_cast<int32_t>(d);  // "no entry" bucket
+                          float best_abs = -1;
+                          for (int64_t q = 0; q < u.size; ++q) {
+                            if (std::abs(u.vals[q]) > best_abs) {
+                              best_abs = std::abs(u.vals[q]);
+                              best = u.cols[q];
+                            }
+                          }
+                          key[i] = best;
+                        }
+                      });
+    std::vector<int64_t> bucket(d + 2, 0);
+    for (int64_t i = 0; i < k; ++i) ++bucket[key[i] + 1];
+    for (int64_t c = 0; c <= d; ++c) bucket[c + 1] += bucket[c];
+    std::vector<int32_t> order(k);
+    {
+      std::vector<int64_t> fill(bucket.begin(), bucket.end() - 1);
+      for (int64_t i = 0; i < k; ++i) order[fill[key[i]]++] = static_cast<int32_t>(i);
+    }
+    std::vector<int64_t> group_begin;
+    for (int64_t c = 0; c <= d; ++c) {
+      for (int64_t g = bucket[c]; g < bucket[c + 1]; g += kMaxGroupRows) group_begin.push_back(g);
+    }
+    group_begin.push_back(k);
+    std::vector<int32_t>().swap(key);
+    const int64_t num_groups = static_cast<int64_t>(group_begin.size()) - 1;
+    const int64_t num_bands = (d + band_width_for(d) - 1) / band_width_for(d);
+    const int64_t total_work = std::max<int64_t>(1, num_groups * num_bands);
+    const int64_t report_every = std::max<int64_t>(1, total_work / 100);
+
+    const int64_t band_width = band_width_for(d);
+    tbb::enumerable_thread_specific<ProductWorkspace> workspaces;
+    for (int64_t band_begin = 0; band_begin < d && !cancelled.load(); band_begin += band_width) {
+      const int64_t band_end = std::min(d, band_begin + band_width);
+      const int64_t width = band_end - band_begin;
+      for (ProductWorkspace& w : workspaces) {
+        std::fill(w.s.begin(), w.s.end(), 0.0);
+        std::fill(w.b.begin(), w.b.end(), 0.0);
+        std::fill(w.m.begin(), w.m.end(), 0.0);
+      }
+      tbb::parallel_for(
+          tbb::blocked_range<int64_t>(0, num_groups, 1),
+          [&](const tbb::blocked_range<int64_t>& range) {
+            ProductWorkspace& w = workspaces.local();
+            if (w.s.size() != static_cast<size_t>(width * d)) {
+              w.s.assign(width * d, 0.0);
+              w.b.assign(width * d, 0.0);
+              w.m.assign(width * d, 0.0);
+            }
+            if (w.spa.empty()) {
+              w.spa.assign(d, 0.0);
+              w.mark.assign(d, 0);
+              w.local_of.assign(d, -1);
+            }
+            for (int64_t g = range.begin(); g < range.end(); ++g) {
+              if (cancelled.load(std::memory_order_relaxed)) return;
+              if (options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed)) {
+                cancelled.store(true);
+                return;
+              }
+              if (const int64_t done = work_done.fetch_add(1) + 1;
+                  options.progress && done % report_every == 0) {
+                options.progress(static_cast<double>(done) / static_cast<double>(total_work));
+              }
+              // Pass 1: the group's rows of U and S U, and the columns they touch.
+              w.u_begin.assign(1, 0);
+              w.su_begin.assign(1, 0);
+              w.u_cols.clear();
+              w.u_vals.clear();
+              w.su_cols.clear();
+              w.su_vals.clear();
+              w.row_mass.clear();
+              w.local_cols.clear();
+              const auto touch = [&](int32_t c) {
+                if (w.local_of[c] < 0) {
+                  w.local_of[c] = 0;
+                  w.local_cols.push_back(c);
+                }
+              };
+              for (int64_t t = group_begin[g]; t < group_begin[g + 1]; ++t) {
+                const int64_t i = order[t];
+                const BasisRow u = GetBasisRow(U, i);
+                for (int64_t q = 0; q < u.size; ++q) {
+                  w.u_cols.push_back(u.cols[q]);
+                  w.u_vals.push_back(static_cast<double>(u.vals[q]));
+                  touch(u.cols[q]);
+                }
+                w.u_begin.push_back(static_cast<int64_t>(w.u_cols.size()));
+                // Row i of S U (S symmetric: row i = column i).
+                w.su_row.clear();
+                for (Eigen::SparseMatrix<double>::InnerIterator it(S, i); it; ++it) {
+                  const BasisRow uj = GetBasisRow(U, it.row());
+                  const double sij = it.value();
+                  for (int64_t q = 0; q < uj.size; ++q) {
+                    const int32_t c = uj.cols[q];
+                    if (!w.mark[c]) {
+                      w.mark[c] = 1;
+                      w.spa[c] = 0.0;
+                      w.su_row.emplace_back(c, 0.0);
+                    }
+                    w.spa[c] += sij * static_cast<double>(uj.vals[q]);
+                  }
+                }
+                for (auto& [c, v] : w.su_row) {
+                  v = w.spa[c];
+                  w.mark[c] = 0;
+                }
+                std::sort(w.su_row.begin(), w.su_row.end());
+                for (const auto& [c, v] : w.su_row) {
+                  w.su_cols.push_back(c);
+                  w.su_vals.push_back(v);
+                  touch(c);
+                }
+                w.su_begin.push_back(static_cast<int64_t>(w.su_cols.size()));
+                w.row_mass.push_back(mass[i]);
+              }
+              // Local numbering in ascending global order, so that a <= b iff la <=
+              // lb.
+              std::sort(w.local_cols.begin(), w.local_cols.end());
+              const int64_t L = static_cast<int64_t>(w.local_cols.size());
+              for (int64_t l = 0; l < L; ++l) w.local_of[w.local_cols[l]] = static_cast<int32_t>(l);
+              for (int32_t& c : w.u_cols) c = w.local_of[c];
+              for (int32_t& c : w.su_cols) c = w.local_of[c];
+              w.ls.assign(L * L, 0.0);
+              w.lb.assign(L * L, 0.0);
+              w.lm.assign(L * L, 0.0);
+              // Pass 2: U^T S U: sum_i U_ia (S U)_ib; U^T B U: (S U)_ia (S U)_ib /
+              // m_i; U^T M U: U_ia U_ib m_i (a <= b).
+              const int64_t rows = static_cast<int64_t>(w.row_mass.size());
+              for (int64_t t = 0; t < rows; ++t) {
+                const int32_t* uc = w.u_cols.data() + w.u_begin[t];
+                const double* uv = w.u_vals.data() + w.u_begin[t];
+                const int64_t nu = w.u_begin[t + 1] - w.u_begin[t];
+                const int32_t* sc = w.su_cols.data() + w.su_begin[t];
+                const double* sv = w.su_vals.data() + w.su_begin[t];
+                const int64_t ns = w.su_begin[t + 1] - w.su_begin[t];
+                const double mi = w.row_mass[t];
+                const double inv_mi = 1.0 / mi;
+                for (int64_t q = 0; q < ns; ++q) {
+                  const int64_t cb = sc[q];
+                  double* col_s = w.ls.data() + cb * L;
+                  double* col_b = w.lb.data() + cb * L;
+                  const double svq = sv[q];
+                  for (int64_t p = 0; p < nu && uc[p] <= cb; ++p) col_s[uc[p]] += uv[p] * svq;
+                  const double bv = svq * inv_mi;
+                  for (int64_t p = 0; p <= q; ++p) col_b[sc[p]] += sv[p] * bv;
+                }
+                for (int64_t q = 0; q < nu; ++q) {
+                  double* col_m = w.lm.data() + static_cast<int64_t>(uc[q]) * L;
+                  const double mv = uv[q] * mi;
+                  for (int64_t p = 0; p <= q; ++p) col_m[uc[p]] += uv[p] * mv;
+                }
+              }
+              // Add the local sums to the band accumulators.
+              for (int64_t lcol = 0; lcol < L; ++lcol) {
+                const int64_t c = w.local_cols[lcol];
+                if (c < band_begin || c >= band_end) continue;
+                const int64_t base = (c - band_begin) * d;
+                const double* ls = w.ls.data() + lcol * L;
+                const double* lbv = w.lb.data() + lcol * L;
+                const double* lm = w.lm.data() + lcol * L;
+                for (int64_t lrow = 0; lrow <= lcol; ++lrow) {
+                  const int64_t a = w.local_cols[lrow];
+                  w.s[base + a] += ls[lrow];
+                  w.b[base + a] += lbv[lrow];
+                  w.m[base + a] += lm[lrow];
+                }
+              }
+              for (int32_t c : w.local_cols) w.local_of[c] = -1;
+            }
+          });
+      // Reduce the thread-local accumulators and keep the entries of this band.
+      ProductWorkspace* total = nullptr;
+      for (ProductWorkspace& w : workspaces) {
+        if (w.s.size() != static_cast<size_t>(width * d)) continue;
+        if (total == nullptr) {
+          total = &w;
+          continue;
+        }
+        tbb::parallel_for(tbb::blocked_range<int64_t>(0, width * d, 1 << 16),
+                          [&](const tbb::blocked_range<int64_t>& r) {
+                            for (int64_t t = r.begin(); t < r.end(); ++t) {
+                              total->s[t] += w.s[t];
+                              total->b[t] += w.b[t];
+                              total->m[t] += w.m[t];
+                            }
+                          });
+      }
+      if (total == nullptr) continue;
+      for (int64_t c = band_begin; c < band_end; ++c) {
+        const int64_t base = (c - band_begin) * d;
+        for (int64_t a = 0; a <= c; ++a) {
+          const double sv = total->s[base + a];
+          const double bv = total->b[base + a];
+          const double mv = total->m[base + a];
+          if (sv != 0.0 || bv != 0.0 || mv != 0.0) {
+            entries.push_back({static_cast<int32_t>(a), static_cast<int32_t>(c), sv, bv, mv});
+          }
+        }
+      }
+    }
+  };
+  compute_products();
+  if (cancelled.load()) return absl::CancelledError("ReducedSystem: cancelled");
+
+  // All diagonal entries are stored (the factorization needs them), even an all-zero column's.
+  {
+    std::vector<char> has_diagonal(d, 0);
+    for (const Entry& e : entries) {
+      if (e.row == e.col) has_diagonal[e.row] = 1;
+    }
+    for (int64_t c = 0; c < d; ++c) {
+      if (!has_diagonal[c]) {
+        entries.push_back({static_cast<int32_t>(c), static_cast<int32_t>(c), 0.0, 0.0, 0.0});
+      }
+    }
+  }
+  // One symmetric pattern for all three matrices: triplets carry entry ids, then values are
+  // filled position by position.
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(2 * entries.size());
+  for (size_t t = 0; t < entries.size(); ++t) {
+    const Entry& e = entries[t];
+    triplets.emplace_back(e.row, e.col, static_cast<double>(t));
+    if (e.row != e.col) triplets.emplace_back(e.col, e.row, static_cast<double>(t));
+  }
+  Eigen::SparseMatrix<double> ids(d, d);
+  ids.setFromTriplets(triplets.begin(), triplets.end());
+  ids.makeCompressed();
+  std::vector<Eigen::Triplet<double>>().swap(triplets);
+  sys->stiffness_ = ids;
+  sys->bilaplacian_ = ids;
+  sys->mass_matrix_ = ids;
+  int64_t nnz_s = 0, nnz_b = 0, nnz_m = 0;
+  for (int64_t p = 0; p < ids.nonZeros(); ++p) {
+    const Entry& e = entries[static_cast<size_t>(ids.valuePtr()[p])];
+    sys->stiffness_.valuePtr()[p] = e.s;
+    sys->bilaplacian_.valuePtr()[p] = e.b;
+    sys->mass_matrix_.valuePtr()[p] = e.m;
+    nnz_s += e.s != 0.0;
+    nnz_b += e.b != 0.0;
+    nnz_m += e.m != 0.0;
+  }
+  std::vector<Entry>().swap(entries);
+  sys->stats_.stiffness_nonzeros = nnz_s;
+  sys->stats_.bilaplacian_nonzeros = nnz_b;
+  sys->stats_.mass_nonzeros = nnz_m;
+  sys->stats_.pattern_nonzeros = ids.nonZeros();
+  sys->stats_.products_seconds = SecondsSince(t_start);
+
+  const auto t_analysis = std::chrono::steady_clock::now();
+  SupernodalAnalyzeOptions analyze_options;
+  analyze_options.thorough = options.thorough_ordering;
+  ASSIGN_OR_RETURN(sys->symbolic_, SupernodalSymbolic::Analyze(ids, analyze_options));
+  sys->stats_.analysis_seconds = SecondsSince(t_analysis);
+  sys->stats_.factor_nonzeros = sys->symbolic_->factor_nonzeros();
+  sys->stats_.factor_flops = sys->symbolic_->flops();
+
+  const auto t_mass = std::chrono::steady_clock::now();
+  auto mass_factor = SupernodalFactor::Factorize(sys->symbolic_, sys->mass_matrix_);
+  if (!mass_factor.ok()) {
+    if (absl::IsFailedPrecondition(mass_factor.status())) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "ReducedSystem: U^T M U is not positive definite: the basis columns are linearly "
+          "dependent or zero (",
+          mass_factor.status().message(), ")"));
+    }
+    return mass_factor.status();
+  }
+  sys->mass_factor_ = std::make_unique<SupernodalFactor>(*std::move(mass_factor));
+  sys->stats_.mass_factor_seconds = SecondsSince(t_mass);
+  sys->lift_plan_ = LiftPlan::Build(U, op.type.dofs_per_face());
+  const int64_t pattern_bytes = 3 * (sys->stats_.pattern_nonzeros * 12 + (d + 1) * 4);
+  sys->stats_.memory_bytes = pattern_bytes + sys->lift_plan_.memory_bytes() + k * 8 +
+                             sys->symbolic_->memory_bytes() + sys->symbolic_->factor_nonzeros() * 8;
+  sys->basis_ = std::move(basis);
+  sys->stats_.total_seconds = SecondsSince(t_start);
+  return std::shared_ptr<const ReducedSystem>(std::move(sys));
+}
+
+}  // namespace fieldspace

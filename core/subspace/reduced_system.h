@@ -1,0 +1,107 @@
+#ifndef FIELDSPACE_CORE_SUBSPACE_REDUCED_SYSTEM_H_
+#define FIELDSPACE_CORE_SUBSPACE_REDUCED_SYSTEM_H_
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+
+#include "Eigen/Core"
+#include "Eigen/SparseCore"
+#include "absl/status/statusor.h"
+#include "core/basis/basis.h"
+#include "core/operators/field_operator.h"
+#include "core/operators/field_type.h"
+#include "core/subspace/lift_plan.h"
+#include "core/subspace/supernodal_cholesky.h"
+
+namespace fieldspace {
+
+struct ReducedSystemOptions {
+  // Worker threads for the precomputation (0: all available cores).
+  int32_t threads = 0;
+  // Memory for the per-thread dense accumulators of the reduced matrices. When d x d accumulators
+  // for all threads do not fit, the output columns are processed in bands (more passes over U).
+  int64_t accumulator_budget_bytes = int64_t{768} << 20;
+  // Try several fill-reducing orderings (AMD, METIS, ...) for the shared symbolic analysis and
+  // keep the cheapest: costs ~10x the analysis time once per basis, saves ~25% of every
+  // refactorization in interactive sessions.
+  bool thorough_ordering = true;
+  // Checked while the reduced matrices are computed; when it becomes true Build returns
+  // Cancelled.
+  const std::atomic<bool>* cancel = nullptr;
+  // Called from any thread with the fraction of the product pass done (about 100 calls).
+  std::function<void(double fraction)> progress;
+};
+
+struct ReducedSystemStats {
+  int64_t stiffness_nonzeros = 0;    // numerically nonzero entries of U^T S U (both triangles)
+  int64_t bilaplacian_nonzeros = 0;  // of U^T B U
+  int64_t mass_nonzeros = 0;         // of U^T M U
+  int64_t pattern_nonzeros = 0;      // of the shared pattern (union of the three)
+  int64_t factor_nonzeros = 0;       // of the Cholesky factor of a matrix on that pattern
+  double factor_flops = 0;           // of one numeric factorization on that pattern
+  double products_seconds = 0;       // computing the three reduced matrices
+  double analysis_seconds = 0;       // ordering + symbolic analysis
+  double mass_factor_seconds = 0;    // factorizing U^T M U
+  double total_seconds = 0;
+  int64_t memory_bytes = 0;  // held by the ReducedSystem itself (not counting the Basis)
+};
+
+// The per-basis precomputation of the subspace methods (paper section 5, DESIGN.md section 4):
+// the reduced matrices U^T S U, U^T B U (B = S M^-1 S) and U^T M U, the symbolic analysis shared
+// by every factorization of a weighted combination of them, and the factorization of U^T M U used
+// by projections. Immutable after Build(): share one instance between any number of threads and
+// sessions (all accessors are const, nothing is computed lazily).
+class ReducedSystem {
+ public:
+  // basis->U: k x d (k = op.dofs(), d >= 1), finite; op: the operator the basis was built for
+  // (same field type), S k x k symmetric PSD, mass k positive. B is never formed in the full
+  // space: U^T B U = (S U)^T M^-1 (S U). Products accumulate in double (U is stored in float; the
+  // reduced matrices are exact for the float-valued basis up to double rounding).
+  // InvalidArgument for mismatched or non-finite input; FailedPrecondition when U^T M U is not
+  // positive definite (linearly dependent or zero columns of U); Cancelled (options.cancel).
+  static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Build(
+      std::shared_ptr<const Basis> basis, const FieldOperator& op,
+      const ReducedSystemOptions& options = {});
+
+  const Basis& basis() const { return *basis_; }
+  const std::shared_ptr<const Basis>& shared_basis() const { return basis_; }
+  const FieldType& type() const { return basis_->type; }
+  int32_t dofs_per_face() const { return basis_->type.dofs_per_face(); }
+  int64_t dofs() const { return basis_->U.rows(); }  // k
+  int32_t num_faces() const { return static_cast<int32_t>(dofs() / dofs_per_face()); }
+  int32_t dimension() const { return static_cast<int32_t>(basis_->U.cols()); }  // d
+
+  // k: the diagonal of the full-space mass M (face areas, repeated per DOF).
+  const Eigen::VectorXd& mass() const { return mass_; }
+  // d x d, symmetric, both triangles stored, all three on the same sparsity pattern (so that
+  // weighted sums can be formed value by value: see pattern_symbolic()).
+  const Eigen::SparseMatrix<double>& stiffness() const { return stiffness_; }      // U^T S U, PSD
+  const Eigen::SparseMatrix<double>& bilaplacian() const { return bilaplacian_; }  // U^T B U, PSD
+  const Eigen::SparseMatrix<double>& mass_matrix() const { return mass_matrix_; }  // U^T M U, SPD
+  // Symbolic analysis of that pattern, for SupernodalFactor.
+  const std::shared_ptr<const SupernodalSymbolic>& pattern_symbolic() const { return symbolic_; }
+  // Cholesky factorization of U^T M U.
+  const SupernodalFactor& mass_factor() const { return *mass_factor_; }
+  // U laid out for fast lifting (see lift_plan.h); used by the Lift overloads taking a system.
+  const LiftPlan& lift_plan() const { return lift_plan_; }
+  const ReducedSystemStats& stats() const { return stats_; }
+
+ private:
+  ReducedSystem() = default;
+
+  std::shared_ptr<const Basis> basis_;
+  Eigen::VectorXd mass_;
+  Eigen::SparseMatrix<double> stiffness_;
+  Eigen::SparseMatrix<double> bilaplacian_;
+  Eigen::SparseMatrix<double> mass_matrix_;
+  std::shared_ptr<const SupernodalSymbolic> symbolic_;
+  std::unique_ptr<SupernodalFactor> mass_factor_;
+  LiftPlan lift_plan_;
+  ReducedSystemStats stats_;
+};
+
+}  // namespace fieldspace
+
+#endif  // FIELDSPACE_CORE_SUBSPACE_REDUCED_SYSTEM_H_

@@ -1,0 +1,154 @@
+#include "server/field_server.h"
+
+#include <thread>
+#include <utility>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "core/common/status_macros.h"
+#include "grpc/health/v1/health.pb.h"
+#include "grpcpp/ext/proto_server_reflection_plugin.h"
+#include "grpcpp/health_check_service_interface.h"
+#include "grpcpp/security/server_credentials.h"
+#include "grpcpp/server.h"
+#include "grpcpp/server_builder.h"
+#include "oneapi/tbb/global_control.h"
+#include "server/compute_pool.h"
+#include "server/field_service.h"
+#include "server/registry.h"
+#include "server/store.h"
+
+namespace fieldspace::server {
+namespace {
+
+constexpr char kServiceName[] = "fieldspace.v1.FieldSpace";
+
+// Splits HOST:PORT ([v6]:PORT allowed). Returns false if malformed.
+bool SplitHostPort(const std::string& listen, std::string* host, int* port) {
+  const size_t colon = listen.rfind(':');
+  if (colon == std::string::npos || colon == 0) return false;
+  *host = listen.substr(0, colon);
+  if (host->size() >= 2 && host->front() == '[' && host->back() == ']') {
+    *host = host->substr(1, host->size() - 2);
+  }
+  return absl::SimpleAtoi(listen.substr(colon + 1), port) && *port >= 0 && *port <= 65535;
+}
+
+}  // namespace
+
+bool IsLoopbackListenAddress(const std::string& listen) {
+  std::string host;
+  int port;
+  if (!SplitHostPort(listen, &host, &port)) return false;
+  if (host == "localhost" || host == "::1") return true;
+  std::vector<std::string> parts = absl::StrSplit(host, '.');
+  int first;
+  return parts.size() == 4 && absl::SimpleAtoi(parts[0], &first) && first == 127;
+}
+
+absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServerOptions& options) {
+  std::string host;
+  int requested_port;
+  if (!SplitHostPort(options.listen, &host, &requested_port)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--listen must be HOST:PORT, got '", options.listen, "'"));
+  }
+  if (!IsLoopbackListenAddress(options.listen) && options.auth_token.empty() && !options.insecure) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("refusing to listen on non-loopback address ", options.listen,
+                     " without --auth-token-file (or say --insecure explicitly)"));
+  }
+  if (options.store_dir.empty()) return absl::InvalidArgumentError("--store DIR is required");
+  if (options.threads < 0 || options.memory_budget_mb < 0 || options.max_message_mb < 1 ||
+      options.max_message_mb > 2047 || options.max_upload_mb < 1 || options.max_dimension < 1) {
+    return absl::InvalidArgumentError(
+        "bad limits: --threads >= 0, --memory-budget-mb >= 0, 1 <= --max-message-mb <= 2047, "
+        "--max-upload-mb >= 1");
+  }
+
+  std::unique_ptr<FieldServer> s(new FieldServer());
+  s->options_ = options;
+  const int threads = options.threads > 0
+                          ? options.threads
+                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  s->tbb_limit_ = std::make_shared<tbb::global_control>(
+      tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
+
+  StoreOptions store_options;
+  store_options.save_pause_ms = options.debug_save_pause_ms;
+  ASSIGN_OR_RETURN(s->store_, Store::Open(options.store_dir, store_options));
+  ComputePool::Options pool_options;
+  pool_options.interactive_threads = threads;
+  pool_options.build_threads = 1;
+  s->pool_ = std::make_unique<ComputePool>(pool_options);
+  RegistryOptions registry_options;
+  registry_options.memory_budget_bytes = options.memory_budget_mb << 20;
+  registry_options.build_threads = threads;
+  registry_options.max_dimension = options.max_dimension;
+  ASSIGN_OR_RETURN(s->registry_,
+                   Registry::Create(s->store_.get(), s->pool_.get(), registry_options));
+
+  ServiceOptions service_options;
+  service_options.auth_token = options.auth_token;
+  service_options.data_root = options.data_root;
+  service_options.max_upload_bytes = options.max_upload_mb << 20;
+  service_options.max_message_bytes = options.max_message_mb << 20;
+  s->service_ = std::make_unique<FieldService>(s->registry_.get(), s->pool_.get(), service_options);
+
+  // Link the health proto's descriptors into the generated pool so that reflection can describe
+  // grpc.health.v1.Health (the built-in health service itself does not register them).
+  (void)grpc::health::v1::HealthCheckRequest::descriptor();
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
+  builder.RegisterService(s->service_.get());
+  builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_mb << 20));
+  builder.SetMaxSendMessageSize(static_cast<int>(options.max_message_mb << 20));
+  s->server_ = builder.BuildAndStart();
+  if (s->server_ == nullptr || s->port_ == 0) {
+    s->pool_->Shutdown();
+    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen));
+  }
+  if (grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService()) {
+    health->SetServingStatus(true);
+    health->SetServingStatus(kServiceName, true);
+  }
+  const bool bracket = host.find(':') != std::string::npos;
+  s->address_ =
+      bracket ? absl::StrCat("[", host, "]:", s->port_) : absl::StrCat(host, ":", s->port_);
+  return s;
+}
+
+FieldServer::~FieldServer() { Shutdown(); }
+
+void FieldServer::Shutdown(std::chrono::milliseconds drain) {
+  std::lock_guard<std::mutex> lock(shutdown_mu_);
+  if (shut_down_) return;
+  shut_down_ = true;
+  if (server_ != nullptr) {
+    if (grpc::HealthCheckServiceInterface* health = server_->GetHealthCheckService()) {
+      // NOT_SERVING for every service, then frozen.
+      health->Shutdown();
+    }
+  }
+  if (service_ != nullptr) service_->BeginDrain();
+  const auto deadline = std::chrono::system_clock::now() + drain;
+  // Builds would not finish within any reasonable drain: stop them (clients see UNAVAILABLE or
+  // CANCELLED and can ask again after the restart).
+  if (registry_ != nullptr)
+    registry_->CancelAllBuilds(std::min(drain, std::chrono::milliseconds(2000)));
+  if (server_ != nullptr) {
+    server_->Shutdown(deadline);  // stops accepting; waits for in-flight RPCs until the deadline
+    server_->Wait();
+  }
+  if (pool_ != nullptr) pool_->Shutdown();
+}
+
+void FieldServer::Wait() {
+  if (server_ != nullptr) server_->Wait();
+}
+
+}  // namespace fieldspace::server

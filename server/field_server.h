@@ -1,0 +1,84 @@
+#ifndef FIELDSPACE_SERVER_FIELD_SERVER_H_
+#define FIELDSPACE_SERVER_FIELD_SERVER_H_
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "absl/status/statusor.h"
+
+namespace grpc {
+class Server;
+}  // namespace grpc
+
+namespace fieldspace::server {
+
+class ComputePool;
+class FieldService;
+class Registry;
+class Store;
+
+struct FieldServerOptions {
+  std::string listen = "127.0.0.1:0";  // HOST:PORT; port 0 picks a free port
+  std::string store_dir;               // required
+  std::string data_root;               // LoadMesh root; empty disables LoadMesh
+  int32_t threads = 0;                 // compute threads; 0: hardware concurrency
+  int64_t memory_budget_mb = 4096;
+  int64_t max_message_mb = 64;
+  int64_t max_upload_mb = 2048;
+  int32_t max_dimension = 8192;
+  std::string auth_token;  // required from clients when not empty
+  // Listening on a non-loopback address needs an auth token, or this explicit opt-out.
+  bool insecure = false;
+  int32_t debug_save_pause_ms = 0;  // testing only (see StoreOptions)
+};
+
+// The daemon: store + registry + compute pool + gRPC server with FieldSpace, server reflection and
+// grpc.health.v1.Health.
+class FieldServer {
+ public:
+  // Opens the store, binds, starts serving. InvalidArgument for bad options, FailedPrecondition
+  // for a non-loopback address without a token or --insecure, Unavailable if the address cannot
+  // be bound.
+  static absl::StatusOr<std::unique_ptr<FieldServer>> Start(const FieldServerOptions& options);
+
+  // Shutdown(default drain).
+  ~FieldServer();
+
+  int port() const { return port_; }
+  // HOST:PORT with the port actually bound.
+  const std::string& address() const { return address_; }
+  Registry* registry() const { return registry_.get(); }
+
+  // Graceful shutdown: health NOT_SERVING, new RPCs refused, open design sessions ended, running
+  // builds cancelled, in-flight RPCs drained for at most `drain` (then cancelled), compute pool
+  // joined. Idempotent; thread-safe.
+  void Shutdown(std::chrono::milliseconds drain = std::chrono::seconds(10));
+
+  // Blocks until Shutdown() has completed.
+  void Wait();
+
+ private:
+  FieldServer() = default;
+
+  FieldServerOptions options_;
+  int port_ = 0;
+  std::string address_;
+  std::unique_ptr<Store> store_;
+  std::unique_ptr<ComputePool> pool_;
+  std::unique_ptr<Registry> registry_;
+  std::unique_ptr<FieldService> service_;
+  std::unique_ptr<grpc::Server> server_;
+  std::shared_ptr<void> tbb_limit_;  // oneTBB global_control (type-erased: keeps TBB out of here)
+  std::mutex shutdown_mu_;
+  bool shut_down_ = false;
+};
+
+// Whether HOST of HOST:PORT is a loopback address (localhost, 127.0.0.0/8, ::1).
+bool IsLoopbackListenAddress(const std::string& listen);
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_FIELD_SERVER_H_

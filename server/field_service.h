@@ -1,0 +1,116 @@
+#ifndef FIELDSPACE_SERVER_FIELD_SERVICE_H_
+#define FIELDSPACE_SERVER_FIELD_SERVICE_H_
+
+// Includes generated code: keep this header out of widely included headers (only field_server.cc
+// and tests include it).
+
+#include <atomic>
+#include <cstdint>
+#include <mutex>
+#include <set>
+#include <string>
+
+#include "fieldspace/v1/fieldspace.grpc.pb.h"
+#include "server/compute_pool.h"
+#include "server/registry.h"
+
+namespace fieldspace::server {
+
+struct ServiceOptions {
+  std::string auth_token;  // required as "authorization: Bearer <token>" when not empty
+  std::string data_root;   // LoadMesh reads only below it; empty disables LoadMesh
+  int64_t max_upload_bytes = int64_t{2} << 30;
+  int64_t max_message_bytes = int64_t{64} << 20;  // responses larger than this are refused
+};
+
+// A long-lived stream that must be ended when the server drains (design sessions).
+class DrainableStream {
+ public:
+  virtual ~DrainableStream() = default;
+  virtual void Drain() = 0;
+  virtual void Ref() = 0;
+  virtual void Unref() = 0;
+};
+
+// fieldspace.v1.FieldSpace on the callback API. Stateless apart from the set of open streams: it
+// translates protos to core types, asks the registry for handles, runs heavy work on the compute
+// pool and translates results back.
+class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
+ public:
+  FieldService(Registry* registry, ComputePool* pool, ServiceOptions options);
+
+  // New RPCs fail with UNAVAILABLE; open design sessions end with UNAVAILABLE after the edit in
+  // progress (if any) has been answered.
+  void BeginDrain();
+
+  // For DrainableStream implementations.
+  void RegisterStream(DrainableStream* stream);
+  void UnregisterStream(DrainableStream* stream);
+
+  // Authentication and drain check for a new RPC.
+  absl::Status Admit(grpc::CallbackServerContext* context) const;
+
+  Registry* registry() const { return registry_; }
+  ComputePool* pool() const { return pool_; }
+  const ServiceOptions& options() const { return options_; }
+
+  grpc::ServerReadReactor<fieldspace::v1::UploadMeshRequest>* UploadMesh(
+      grpc::CallbackServerContext* context, fieldspace::v1::MeshInfo* response) override;
+  grpc::ServerUnaryReactor* LoadMesh(grpc::CallbackServerContext* context,
+                                     const fieldspace::v1::LoadMeshRequest* request,
+                                     fieldspace::v1::MeshInfo* response) override;
+  grpc::ServerUnaryReactor* GetMesh(grpc::CallbackServerContext* context,
+                                    const fieldspace::v1::GetMeshRequest* request,
+                                    fieldspace::v1::MeshInfo* response) override;
+  grpc::ServerUnaryReactor* ListMeshes(grpc::CallbackServerContext* context,
+                                       const fieldspace::v1::ListMeshesRequest* request,
+                                       fieldspace::v1::ListMeshesResponse* response) override;
+  grpc::ServerUnaryReactor* DeleteMesh(grpc::CallbackServerContext* context,
+                                       const fieldspace::v1::DeleteMeshRequest* request,
+                                       fieldspace::v1::DeleteMeshResponse* response) override;
+  grpc::ServerWriteReactor<fieldspace::v1::MeshGeometryChunk>* GetMeshGeometry(
+      grpc::CallbackServerContext* context,
+      const fieldspace::v1::GetMeshGeometryRequest* request) override;
+
+  grpc::ServerWriteReactor<fieldspace::v1::BuildBasisProgress>* BuildBasis(
+      grpc::CallbackServerContext* context,
+      const fieldspace::v1::BuildBasisRequest* request) override;
+  grpc::ServerUnaryReactor* CancelBuild(grpc::CallbackServerContext* context,
+                                        const fieldspace::v1::CancelBuildRequest* request,
+                                        fieldspace::v1::CancelBuildResponse* response) override;
+  grpc::ServerUnaryReactor* GetBasis(grpc::CallbackServerContext* context,
+                                     const fieldspace::v1::GetBasisRequest* request,
+                                     fieldspace::v1::BasisInfo* response) override;
+  grpc::ServerUnaryReactor* ListBases(grpc::CallbackServerContext* context,
+                                      const fieldspace::v1::ListBasesRequest* request,
+                                      fieldspace::v1::ListBasesResponse* response) override;
+  grpc::ServerUnaryReactor* DeleteBasis(grpc::CallbackServerContext* context,
+                                        const fieldspace::v1::DeleteBasisRequest* request,
+                                        fieldspace::v1::DeleteBasisResponse* response) override;
+
+  grpc::ServerUnaryReactor* Project(grpc::CallbackServerContext* context,
+                                    const fieldspace::v1::ProjectRequest* request,
+                                    fieldspace::v1::ProjectResponse* response) override;
+  grpc::ServerUnaryReactor* Solve(grpc::CallbackServerContext* context,
+                                  const fieldspace::v1::SolveRequest* request,
+                                  fieldspace::v1::SolveResponse* response) override;
+  grpc::ServerWriteReactor<fieldspace::v1::FieldChunk>* Lift(
+      grpc::CallbackServerContext* context, const fieldspace::v1::LiftRequest* request) override;
+  grpc::ServerUnaryReactor* Eigenfields(grpc::CallbackServerContext* context,
+                                        const fieldspace::v1::EigenfieldsRequest* request,
+                                        fieldspace::v1::EigenfieldsResponse* response) override;
+  grpc::ServerBidiReactor<fieldspace::v1::DesignRequest, fieldspace::v1::DesignUpdate>* Design(
+      grpc::CallbackServerContext* context) override;
+
+ private:
+  Registry* const registry_;
+  ComputePool* const pool_;
+  const ServiceOptions options_;
+  std::atomic<bool> draining_{false};
+  std::mutex streams_mu_;
+  std::set<DrainableStream*> streams_;
+};
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_FIELD_SERVICE_H_

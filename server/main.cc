@@ -1,0 +1,164 @@
+// fieldspaced: the fieldspace gRPC daemon.
+//
+//   fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]
+//               [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]
+//               [--max-dimension N] [--auth-token-file FILE] [--insecure] [--drain-seconds S]
+//               [--demo]
+//
+// Prints "listening on HOST:PORT" as the first line on stdout once serving (port 0 picks a free
+// port). SIGTERM / SIGINT drain and exit 0.
+
+#include <signal.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "server/demo.h"
+#include "server/field_server.h"
+
+namespace {
+
+constexpr char kUsage[] =
+    "usage: fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]\n"
+    "                   [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]\n"
+    "                   [--max-dimension N] [--auth-token-file FILE] [--insecure]\n"
+    "                   [--drain-seconds S] [--demo]\n"
+    "\n"
+    "  --listen HOST:PORT      address to serve on (default 127.0.0.1:50051; port 0 = any free\n"
+    "                          port). Non-loopback needs --auth-token-file or --insecure.\n"
+    "  --store DIR             where meshes and bases persist (required)\n"
+    "  --data-root DIR         LoadMesh reads mesh files below DIR only (default: disabled)\n"
+    "  --threads N             compute threads (default: all cores)\n"
+    "  --memory-budget-mb N    memory for loaded meshes and bases; idle ones are evicted (4096)\n"
+    "  --max-message-mb N      largest gRPC message either way (64)\n"
+    "  --max-upload-mb N       largest mesh upload (2048)\n"
+    "  --max-dimension N       largest basis dimension d (8192)\n"
+    "  --auth-token-file FILE  clients must send 'authorization: Bearer <token>'\n"
+    "  --insecure              allow a non-loopback address without a token\n"
+    "  --drain-seconds S       how long shutdown waits for in-flight RPCs (10)\n"
+    "  --demo                  store the demo mesh and build its vector basis in the background\n";
+
+int Fail(const std::string& message) {
+  std::cerr << "fieldspaced: " << message << "\n";
+  return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  using fieldspace::server::FieldServer;
+  fieldspace::server::FieldServerOptions options;
+  options.listen = "127.0.0.1:50051";
+  bool demo = false;
+  double drain_seconds = 10;
+  std::string token_file;
+
+  std::map<std::string, std::string*> string_flags = {{"--listen", &options.listen},
+                                                      {"--store", &options.store_dir},
+                                                      {"--data-root", &options.data_root},
+                                                      {"--auth-token-file", &token_file}};
+  std::map<std::string, int64_t*> int64_flags = {{"--memory-budget-mb", &options.memory_budget_mb},
+                                                 {"--max-message-mb", &options.max_message_mb},
+                                                 {"--max-upload-mb", &options.max_upload_mb}};
+  std::map<std::string, int32_t*> int32_flags = {
+      {"--threads", &options.threads},
+      {"--max-dimension", &options.max_dimension},
+      {"--debug-save-pause-ms", &options.debug_save_pause_ms}};
+  for (int i = 1; i < argc; ++i) {
+    std::string arg = argv[i];
+    std::string value;
+    bool has_value = false;
+    if (size_t eq = arg.find('='); arg.rfind("--", 0) == 0 && eq != std::string::npos) {
+      value = arg.substr(eq + 1);
+      arg = arg.substr(0, eq);
+      has_value = true;
+    }
+    auto take_value = [&]() -> bool {
+      if (has_value) return true;
+      if (i + 1 >= argc) return false;
+      value = argv[++i];
+      return true;
+    };
+    if (arg == "--help" || arg == "-h") {
+      std::cout << kUsage;
+      return 0;
+    } else if (arg == "--demo") {
+      demo = true;
+    } else if (arg == "--insecure") {
+      options.insecure = true;
+    } else if (auto s = string_flags.find(arg); s != string_flags.end()) {
+      if (!take_value()) return Fail(arg + " needs a value");
+      *s->second = value;
+    } else if (auto l = int64_flags.find(arg); l != int64_flags.end()) {
+      if (!take_value() || !absl::SimpleAtoi(value, l->second)) {
+        return Fail(arg + " needs an integer");
+      }
+    } else if (auto n = int32_flags.find(arg); n != int32_flags.end()) {
+      if (!take_value() || !absl::SimpleAtoi(value, n->second)) {
+        return Fail(arg + " needs an integer");
+      }
+    } else if (arg == "--drain-seconds") {
+      if (!take_value() || !absl::SimpleAtod(value, &drain_seconds) || drain_seconds < 0) {
+        return Fail("--drain-seconds needs a non-negative number");
+      }
+    } else {
+      std::cerr << kUsage;
+      return Fail("unknown argument '" + arg + "'");
+    }
+  }
+  if (options.store_dir.empty()) {
+    std::cerr << kUsage;
+    return Fail("--store DIR is required");
+  }
+  if (!token_file.empty()) {
+    std::ifstream in(token_file);
+    if (!in) return Fail("cannot read --auth-token-file " + token_file);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    options.auth_token = std::string(absl::StripAsciiWhitespace(ss.str()));
+    if (options.auth_token.empty()) return Fail("--auth-token-file " + token_file + " is empty");
+  }
+
+  // Signals are taken by one thread with sigwait: block them before any thread starts, so gRPC's
+  // and oneTBB's threads inherit the mask.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+  signal(SIGPIPE, SIG_IGN);
+
+  absl::StatusOr<std::unique_ptr<FieldServer>> server = FieldServer::Start(options);
+  if (!server.ok()) return Fail(std::string(server.status().message()));
+  std::cout << "listening on " << (*server)->address() << std::endl;
+
+  std::unique_ptr<fieldspace::server::DemoLoader> demo_loader;
+  if (demo) demo_loader = fieldspace::server::StartDemo((*server)->registry());
+
+  int sig = 0;
+  sigwait(&signals, &sig);
+  std::cerr << "fieldspaced: " << (sig == SIGTERM ? "SIGTERM" : "SIGINT") << ", draining\n";
+  // A second signal during the drain exits at once.
+  std::thread second([&signals] {
+    int again = 0;
+    sigwait(&signals, &again);
+    std::cerr << "fieldspaced: second signal, exiting without draining\n";
+    std::_Exit(1);
+  });
+  second.detach();
+  if (demo_loader != nullptr) demo_loader->Stop();
+  (*server)->Shutdown(std::chrono::milliseconds(static_cast<int64_t>(drain_seconds * 1000)));
+  demo_loader.reset();
+  server->reset();
+  std::cerr << "fieldspaced: stopped\n";
+  return 0;
+}

@@ -1,0 +1,656 @@
+#include "server/registry.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <thread>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "server/hash.h"
+
+namespace fieldspace::server {
+namespace {
+
+int64_t NowUnixMs() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+std::string MeshIdFor(const TriangleMesh& mesh) {
+  Hasher hasher;
+  hasher.UpdateString("fieldspace-mesh-v1");
+  hasher.UpdateValue<int64_t>(mesh.num_vertices());
+  hasher.UpdateValue<int64_t>(mesh.num_faces());
+  hasher.Update(mesh.vertices().data(), sizeof(double) * mesh.vertices().size());
+  hasher.Update(mesh.faces().data(), sizeof(int32_t) * mesh.faces().size());
+  return "m-" + Hex64(hasher.Digest());
+}
+
+MeshRecord RecordFor(const TriangleMesh& mesh) {
+  MeshRecord r;
+  r.id = MeshIdFor(mesh);
+  r.num_vertices = mesh.num_vertices();
+  r.num_faces = mesh.num_faces();
+  r.num_edges = mesh.num_edges();
+  r.num_components = mesh.num_components();
+  r.num_boundary_loops = static_cast<int32_t>(mesh.boundary_loops().size());
+  r.euler_characteristic = mesh.euler_characteristic();
+  r.genus = mesh.genus();
+  r.total_area = mesh.total_area();
+  r.dropped_unreferenced_vertices = mesh.dropped_unreferenced_vertices();
+  return r;
+}
+
+}  // namespace
+
+// --- BuildJob ----------------------------------------------------------------------------------
+
+BuildJob::Progress BuildJob::progress() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return progress_;
+}
+
+uint64_t BuildJob::Subscribe(std::function<void()> listener) {
+  bool finished;
+  uint64_t token;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    token = next_token_++;
+    finished = progress_.finished;
+    if (!finished) listeners_.emplace(token, listener);
+  }
+  if (finished) listener();
+  return token;
+}
+
+void BuildJob::Unsubscribe(uint64_t token) {
+  std::lock_guard<std::mutex> lock(mu_);
+  listeners_.erase(token);
+}
+
+void BuildJob::SetStage(BuildStage stage, double fraction) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (progress_.finished) return;
+    const bool stage_changed = stage != progress_.stage;
+    progress_.stage = stage;
+    progress_.fraction = std::clamp(fraction, 0.0, 1.0);
+    // Core reports progress often; watchers need a few updates per second at most.
+    const auto now = std::chrono::steady_clock::now();
+    if (!stage_changed && now - last_notify_ < std::chrono::milliseconds(50)) return;
+    last_notify_ = now;
+  }
+  Notify();
+}
+
+void BuildJob::Finish(absl::Status status, const BasisRecord& record) {
+  std::map<uint64_t, std::function<void()>> listeners;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    progress_.finished = true;
+    progress_.status = std::move(status);
+    progress_.record = record;
+    if (progress_.status.ok()) {
+      progress_.stage = BuildStage::kDone;
+      progress_.fraction = 1.0;
+    }
+    listeners.swap(listeners_);
+  }
+  for (auto& [token, listener] : listeners) listener();
+}
+
+void BuildJob::Notify() {
+  std::vector<std::function<void()>> listeners;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (const auto& [token, listener] : listeners_) listeners.push_back(listener);
+  }
+  for (auto& listener : listeners) listener();
+}
+
+// --- Registry ----------------------------------------------------------------------------------
+
+absl::StatusOr<std::unique_ptr<Registry>> Registry::Create(Store* store, ComputePool* pool,
+                                                           const RegistryOptions& options) {
+  if (store == nullptr || pool == nullptr) {
+    return absl::InvalidArgumentError("registry needs a store and a compute pool");
+  }
+  std::unique_ptr<Registry> registry(new Registry(store, pool, options));
+  StoreContents contents = store->Scan();
+  for (MeshRecord& r : contents.meshes) {
+    MeshEntry& e = registry->meshes_[r.id];
+    e.record = std::move(r);
+  }
+  for (BasisRecord& r : contents.bases) {
+    BasisEntry& e = registry->bases_[r.id];
+    e.record = std::move(r);
+  }
+  for (DamagedEntry& d : contents.damaged) {
+    if (d.is_basis) {
+      BasisEntry& e = registry->bases_[d.id];
+      e.record.id = d.id;
+      e.damaged = d.status;
+    } else {
+      MeshEntry& e = registry->meshes_[d.id];
+      e.record.id = d.id;
+      e.damaged = d.status;
+    }
+  }
+  return registry;
+}
+
+Registry::~Registry() { CancelAllBuilds(std::chrono::milliseconds(0)); }
+
+int64_t Registry::memory_in_use() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return memory_in_use_;
+}
+
+void Registry::EvictLocked() {
+  while (memory_in_use_ > options_.memory_budget_bytes) {
+    // Least recently used idle artifact: bases first among equals, as a loaded basis pins its
+    // mesh (so the mesh becomes idle only after its bases went).
+    uint64_t best = UINT64_MAX;
+    BasisEntry* best_basis = nullptr;
+    MeshEntry* best_mesh = nullptr;
+    for (auto& [id, e] : bases_) {
+      if (e.loaded != nullptr && e.loaded.use_count() == 1 && e.last_used < best) {
+        best = e.last_used;
+        best_basis = &e;
+      }
+    }
+    for (auto& [id, e] : meshes_) {
+      if (e.loaded != nullptr && e.loaded.use_count() == 1 && e.last_used < best) {
+        best = e.last_used;
+        best_basis = nullptr;
+        best_mesh = &e;
+      }
+    }
+    if (best_basis != nullptr) {
+      best_basis->loaded.reset();
+      memory_in_use_ -= best_basis->bytes;
+      best_basis->bytes = 0;
+    } else if (best_mesh != nullptr) {
+      best_mesh->loaded.reset();
+      memory_in_use_ -= best_mesh->bytes;
+      best_mesh->bytes = 0;
+    } else {
+      return;  // everything in memory is in use: the budget is soft
+    }
+  }
+}
+
+absl::StatusOr<MeshRecord> Registry::AddMesh(MeshArrays arrays, const std::string& name,
+                                             int32_t polygons_triangulated) {
+  ASSIGN_OR_RETURN(TriangleMesh mesh, TriangleMesh::Create(std::move(arrays)));
+  MeshRecord record = RecordFor(mesh);
+  record.name = name;
+  record.polygons_triangulated = polygons_triangulated;
+  record.created_unix_ms = NowUnixMs();
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = meshes_.find(record.id);
+    if (it != meshes_.end() && it->second.damaged.ok()) {
+      it->second.last_used = ++clock_;
+      return it->second.record;
+    }
+  }
+  // Not known (or its file is damaged, which this upload repairs): persist first, then publish,
+  // so that a listed mesh always survives a restart.
+  RETURN_IF_ERROR(store_->SaveMesh(record, mesh.vertices(), mesh.faces()));
+  auto shared = std::make_shared<const TriangleMesh>(std::move(mesh));
+  const int64_t bytes = MeshBytes(*shared);
+  std::lock_guard<std::mutex> lock(mu_);
+  auto [it, inserted] = meshes_.try_emplace(record.id);
+  MeshEntry& e = it->second;
+  if (!inserted && e.damaged.ok() && e.loaded != nullptr) return e.record;  // lost a race
+  if (e.loaded != nullptr) memory_in_use_ -= e.bytes;
+  e.record = record;
+  e.damaged = absl::OkStatus();
+  e.loaded = std::move(shared);
+  e.bytes = bytes;
+  e.last_used = ++clock_;
+  memory_in_use_ += bytes;
+  EvictLocked();
+  return record;
+}
+
+absl::StatusOr<MeshRecord> Registry::GetMeshRecord(const std::string& id) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = meshes_.find(id);
+  if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+  if (!it->second.damaged.ok()) return it->second.damaged;
+  return it->second.record;
+}
+
+std::vector<MeshRecord> Registry::ListMeshes() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<MeshRecord> out;
+  for (const auto& [id, e] : meshes_) {
+    if (e.damaged.ok()) out.push_back(e.record);
+  }
+  return out;
+}
+
+bool Registry::IsMeshLoaded(const std::string& id) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = meshes_.find(id);
+  return it != meshes_.end() && it->second.loaded != nullptr;
+}
+
+absl::StatusOr<std::vector<std::string>> Registry::DeleteMesh(const std::string& id, bool cascade) {
+  std::vector<std::string> basis_ids;
+  std::vector<std::shared_ptr<BuildJob>> jobs;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = meshes_.find(id);
+    if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+    for (const auto& [bid, e] : bases_) {
+      if (e.damaged.ok() && e.record.key.mesh_id == id) basis_ids.push_back(bid);
+    }
+    for (const auto& [bid, job] : builds_) {
+      if (job->pending_record().key.mesh_id == id) jobs.push_back(job);
+    }
+    if (!cascade && (!basis_ids.empty() || !jobs.empty())) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("mesh ", id, " has ", basis_ids.size(), " basis(es) and ", jobs.size(),
+                       " running build(s); delete them first or set cascade"));
+    }
+    for (const std::string& bid : basis_ids) {
+      BasisEntry& e = bases_[bid];
+      if (e.loaded != nullptr) memory_in_use_ -= e.bytes;
+      bases_.erase(bid);
+    }
+    if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+    meshes_.erase(it);
+  }
+  for (auto& job : jobs) job->Cancel();
+  // Files go after the index: a crash in between leaves files that the next start lists again,
+  // which is safe (nothing is lost that was not asked to be deleted).
+  for (const std::string& bid : basis_ids) RETURN_IF_ERROR(store_->DeleteBasis(bid));
+  RETURN_IF_ERROR(store_->DeleteMesh(id));
+  return basis_ids;
+}
+
+absl::StatusOr<std::shared_ptr<const TriangleMesh>> Registry::GetMesh(const std::string& id) {
+  std::shared_ptr<std::mutex> load_mu;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = meshes_.find(id);
+    if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+    if (!it->second.damaged.ok()) return it->second.damaged;
+    it->second.last_used = ++clock_;
+    if (it->second.loaded != nullptr) return it->second.loaded;
+    load_mu = it->second.load_mu;
+  }
+  // One loader per mesh; others wait here and then find it loaded.
+  std::lock_guard<std::mutex> load_lock(*load_mu);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = meshes_.find(id);
+    if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+    if (it->second.loaded != nullptr) return it->second.loaded;
+  }
+  absl::StatusOr<MeshArrays> arrays = store_->LoadMesh(id);
+  absl::StatusOr<TriangleMesh> mesh =
+      arrays.ok() ? TriangleMesh::Create(*std::move(arrays)) : arrays.status();
+  if (mesh.ok() && MeshIdFor(*mesh) != id) {
+    mesh = absl::DataLossError(absl::StrCat("stored mesh ", id, " does not match its id"));
+  } else if (!mesh.ok() && arrays.ok()) {
+    // Checksums passed but validation failed: the file was written by something else.
+    mesh = absl::DataLossError(
+        absl::StrCat("stored mesh ", id, " is invalid: ", mesh.status().message()));
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = meshes_.find(id);
+  if (!mesh.ok()) {
+    if (it != meshes_.end() && mesh.status().code() == absl::StatusCode::kDataLoss) {
+      it->second.damaged = mesh.status();
+    }
+    return mesh.status();
+  }
+  auto shared = std::make_shared<const TriangleMesh>(*std::move(mesh));
+  if (it != meshes_.end()) {
+    it->second.loaded = shared;
+    it->second.bytes = MeshBytes(*shared);
+    it->second.last_used = ++clock_;
+    memory_in_use_ += it->second.bytes;
+    EvictLocked();
+  }
+  return shared;
+}
+
+std::string Registry::BasisIdFor(const BasisKey& key) {
+  Hasher hasher;
+  hasher.UpdateString("fieldspace-basis-v1");
+  hasher.UpdateString(key.mesh_id);
+  hasher.UpdateValue<uint8_t>(static_cast<uint8_t>(key.field.kind));
+  hasher.UpdateValue<int32_t>(key.field.kind == FieldKind::kNField ? key.field.n : 0);
+  hasher.UpdateValue<int32_t>(key.dimension);
+  hasher.UpdateValue<double>(key.sigma);
+  hasher.UpdateValue<int32_t>(key.fields_per_region);
+  hasher.UpdateValue<uint64_t>(key.seed);
+  hasher.UpdateValue<uint64_t>(key.weights_hash);
+  return "b-" + Hex64(hasher.Digest());
+}
+
+absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request) {
+  BasisKey& key = request.key;
+  ASSIGN_OR_RETURN(MeshRecord mesh, GetMeshRecord(key.mesh_id));
+  if (key.field.kind != FieldKind::kVector && key.field.kind != FieldKind::kNField &&
+      key.field.kind != FieldKind::kTensor) {
+    return absl::InvalidArgumentError("field type must be vector, nfield or tensor");
+  }
+  if (key.field.kind != FieldKind::kNField) key.field.n = 1;
+  RETURN_IF_ERROR(key.field.Validate());
+  const int64_t dofs = int64_t{key.field.dofs_per_face()} * mesh.num_faces;
+  if (key.dimension < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("dimension must be at least 1, got ", key.dimension));
+  }
+  if (key.dimension > options_.max_dimension) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "dimension ", key.dimension, " exceeds this server's limit of ", options_.max_dimension));
+  }
+  if (key.dimension > dofs) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("dimension ", key.dimension, " exceeds the number of DOFs (", dofs, ")"));
+  }
+  if (!std::isfinite(key.sigma) || key.sigma <= 0 || key.sigma > 1e6) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("sigma must be finite and in (0, 1e6], got ", key.sigma));
+  }
+  if (key.fields_per_region == 0) key.fields_per_region = key.field.default_fields_per_region();
+  if (key.fields_per_region < 1 || key.fields_per_region > 64) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("fields_per_region must be in [1, 64], got ", key.fields_per_region));
+  }
+  key.weights_hash = 0;
+  if (request.face_weights.size() > 0) {
+    if (request.face_weights.size() != mesh.num_faces) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("face_weights has ", request.face_weights.size(), " values; the mesh has ",
+                       mesh.num_faces, " faces"));
+    }
+    for (Eigen::Index f = 0; f < request.face_weights.size(); ++f) {
+      const double w = request.face_weights[f];
+      if (!std::isfinite(w) || w <= 0) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("face_weights[", f, "] = ", w, " must be finite and > 0"));
+      }
+    }
+    key.weights_hash = Hash64(request.face_weights.data(),
+                              sizeof(double) * request.face_weights.size()) |
+                       1;  // never 0, which means uniform
+  }
+  BasisRecord pending;
+  pending.id = BasisIdFor(key);
+  pending.key = key;
+  pending.dofs = static_cast<int32_t>(dofs);
+
+  std::lock_guard<std::mutex> lock(mu_);
+  StartedBuild out;
+  if (auto it = bases_.find(pending.id); it != bases_.end() && it->second.damaged.ok()) {
+    out.existing = it->second.record;
+    return out;
+  }
+  if (auto it = builds_.find(pending.id); it != builds_.end()) {
+    out.job = it->second;
+    out.joined = true;
+    return out;
+  }
+  auto job = std::make_shared<BuildJob>(pending);
+  const bool submitted = pool_->Submit(
+      ComputePool::Lane::kBuild,
+      [this, job, request = std::move(request)]() mutable { RunBuild(job, std::move(request)); });
+  if (!submitted) return absl::UnavailableError("server is shutting down");
+  builds_[pending.id] = job;
+  out.job = std::move(job);
+  return out;
+}
+
+void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request) {
+  const auto start = std::chrono::steady_clock::now();
+  BasisRecord record = job->pending_record();
+  BuildContext context;
+  context.cancel = job->cancel_flag();
+  context.threads = options_.build_threads;
+  context.progress = [job](BuildStage stage, double fraction) { job->SetStage(stage, fraction); };
+
+  auto build = [&]() -> absl::StatusOr<std::shared_ptr<const ServedBasis>> {
+    if (job->cancel_flag()->load()) return absl::CancelledError("build cancelled");
+    job->SetStage(BuildStage::kOperator, 0);
+    ASSIGN_OR_RETURN(std::shared_ptr<const TriangleMesh> mesh, GetMesh(record.key.mesh_id));
+    ASSIGN_OR_RETURN(BuiltBasis built,
+                     BuildBasisForKey(*mesh, record.key, request.face_weights, context));
+    std::shared_ptr<const Basis> basis = std::move(built.basis);
+    if (job->cancel_flag()->load()) return absl::CancelledError("build cancelled");
+    job->SetStage(BuildStage::kPrecompute, 0);
+    ASSIGN_OR_RETURN(std::shared_ptr<const SubspaceModel> model,
+                     PrepareModel(*mesh, basis, built.op.get(), context));
+    built.op.reset();  // S is no longer needed: free it before saving
+    if (job->cancel_flag()->load()) return absl::CancelledError("build cancelled");
+    job->SetStage(BuildStage::kSaving, 0);
+    record.columns = basis->dimension();
+    record.num_regions = basis->num_regions();
+    record.dofs = static_cast<int32_t>(basis->U.rows());
+    record.radius = basis->radius;
+    record.nnz = basis->U.nonZeros();
+    record.created_unix_ms = NowUnixMs();
+    record.build_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    ASSIGN_OR_RETURN(std::string payload, SerializeBasis(*basis, record.key.mesh_id));
+    RETURN_IF_ERROR(store_->SaveBasis(record, {payload}));
+    auto loaded = std::make_shared<ServedBasis>();
+    loaded->record = record;
+    loaded->mesh = std::move(mesh);
+    loaded->basis = std::move(basis);
+    loaded->model = std::move(model);
+    loaded->memory_bytes = BasisBytes(*loaded->basis) + ModelBytes(*loaded->model);
+    return std::shared_ptr<const ServedBasis>(std::move(loaded));
+  };
+  absl::StatusOr<std::shared_ptr<const ServedBasis>> result;
+  try {
+    result = build();
+  } catch (const std::bad_alloc&) {
+    result = absl::ResourceExhaustedError("out of memory while building the basis");
+  } catch (const std::exception& e) {
+    result = absl::InternalError(absl::StrCat("basis build failed: ", e.what()));
+  }
+  if (!result.ok() && result.status().code() == absl::StatusCode::kCancelled &&
+      shutting_down_.load()) {
+    result = absl::UnavailableError(
+        "the server shut down before the build finished; request it again after the restart");
+  }
+  bool orphaned = false;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    builds_.erase(record.id);
+    if (result.ok()) {
+      if (meshes_.count(record.key.mesh_id) == 0) {
+        orphaned = true;  // the mesh was deleted while we were building
+        result = absl::CancelledError("the basis's mesh was deleted during the build");
+      } else {
+        BasisEntry& e = bases_[record.id];
+        if (e.loaded != nullptr) memory_in_use_ -= e.bytes;
+        e.record = record;
+        e.damaged = absl::OkStatus();
+        e.loaded = *result;
+        e.bytes = (*result)->memory_bytes;
+        e.last_used = ++clock_;
+        memory_in_use_ += e.bytes;
+        EvictLocked();
+      }
+    }
+  }
+  if (orphaned) (void)store_->DeleteBasis(record.id);
+  job->Finish(result.status(), record);
+}
+
+absl::Status Registry::CancelBuild(const std::string& basis_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = builds_.find(basis_id);
+  if (it == builds_.end()) {
+    if (bases_.count(basis_id) > 0) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("basis ", basis_id, " is already built; nothing to cancel"));
+    }
+    return absl::NotFoundError(absl::StrCat("no running build for basis '", basis_id, "'"));
+  }
+  it->second->Cancel();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<BasisStatus> Registry::GetBasisStatus(const std::string& id) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (auto it = bases_.find(id); it != bases_.end()) {
+    if (!it->second.damaged.ok()) return it->second.damaged;
+    BasisStatus s;
+    s.record = it->second.record;
+    s.ready = true;
+    s.loaded = it->second.loaded != nullptr;
+    s.memory_bytes = it->second.bytes;
+    return s;
+  }
+  if (auto it = builds_.find(id); it != builds_.end()) {
+    BasisStatus s;
+    s.record = it->second->pending_record();
+    s.progress = it->second->progress();
+    return s;
+  }
+  return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+}
+
+std::vector<BasisStatus> Registry::ListBases(const std::string& mesh_id_filter) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<BasisStatus> out;
+  for (const auto& [id, e] : bases_) {
+    if (!e.damaged.ok()) continue;
+    if (!mesh_id_filter.empty() && e.record.key.mesh_id != mesh_id_filter) continue;
+    BasisStatus s;
+    s.record = e.record;
+    s.ready = true;
+    s.loaded = e.loaded != nullptr;
+    s.memory_bytes = e.bytes;
+    out.push_back(std::move(s));
+  }
+  for (const auto& [id, job] : builds_) {
+    if (!mesh_id_filter.empty() && job->pending_record().key.mesh_id != mesh_id_filter) continue;
+    if (bases_.count(id) > 0) continue;
+    BasisStatus s;
+    s.record = job->pending_record();
+    s.progress = job->progress();
+    out.push_back(std::move(s));
+  }
+  return out;
+}
+
+absl::Status Registry::DeleteBasis(const std::string& id) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (builds_.count(id) > 0) {
+      return absl::FailedPreconditionError(
+          absl::StrCat("basis ", id, " is being built; cancel the build first (CancelBuild)"));
+    }
+    auto it = bases_.find(id);
+    if (it == bases_.end()) return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+    if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+    bases_.erase(it);
+  }
+  return store_->DeleteBasis(id);
+}
+
+absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std::string& id) {
+  std::shared_ptr<std::mutex> load_mu;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = bases_.find(id);
+    if (it == bases_.end()) {
+      if (builds_.count(id) > 0) {
+        return absl::FailedPreconditionError(absl::StrCat("basis ", id, " is still being built"));
+      }
+      return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+    }
+    if (!it->second.damaged.ok()) return it->second.damaged;
+    it->second.last_used = ++clock_;
+    if (it->second.loaded != nullptr) return it->second.loaded;
+    load_mu = it->second.load_mu;
+  }
+  std::lock_guard<std::mutex> load_lock(*load_mu);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = bases_.find(id);
+    if (it == bases_.end()) return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+    if (it->second.loaded != nullptr) return it->second.loaded;
+  }
+  absl::StatusOr<std::shared_ptr<const ServedBasis>> loaded = LoadBasis(id);
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = bases_.find(id);
+  if (!loaded.ok()) {
+    if (it != bases_.end() && loaded.status().code() == absl::StatusCode::kDataLoss) {
+      it->second.damaged = loaded.status();
+    }
+    return loaded.status();
+  }
+  if (it != bases_.end()) {
+    it->second.loaded = *loaded;
+    it->second.bytes = (*loaded)->memory_bytes;
+    it->second.last_used = ++clock_;
+    memory_in_use_ += it->second.bytes;
+    EvictLocked();
+  }
+  return loaded;
+}
+
+absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std::string& id) {
+  ASSIGN_OR_RETURN(Store::LoadedBasisFile file, store_->LoadBasis(id));
+  absl::StatusOr<DeserializedBasis> decoded = DeserializeBasis(file.payload);
+  if (!decoded.ok()) {
+    return absl::DataLossError(
+        absl::StrCat("stored basis ", id, " is unreadable: ", decoded.status().message()));
+  }
+  std::string().swap(file.payload);
+  if (decoded->mesh_id != file.record.key.mesh_id) {
+    return absl::DataLossError(absl::StrCat("stored basis ", id, " names mesh ", decoded->mesh_id,
+                                            ", its record ", file.record.key.mesh_id));
+  }
+  std::shared_ptr<const Basis> basis = std::move(decoded->basis);
+  ASSIGN_OR_RETURN(std::shared_ptr<const TriangleMesh> mesh, GetMesh(file.record.key.mesh_id));
+  const int64_t dofs = int64_t{file.record.key.field.dofs_per_face()} * mesh->num_faces();
+  if (basis->U.rows() != dofs || !(basis->type == file.record.key.field)) {
+    return absl::DataLossError(
+        absl::StrCat("stored basis ", id, " does not match its mesh or field type"));
+  }
+  BuildContext context;
+  context.threads = options_.build_threads;
+  ASSIGN_OR_RETURN(std::shared_ptr<const SubspaceModel> model,
+                   PrepareModel(*mesh, basis, nullptr, context));
+  auto loaded = std::make_shared<ServedBasis>();
+  loaded->record = file.record;
+  loaded->mesh = std::move(mesh);
+  loaded->basis = std::move(basis);
+  loaded->model = std::move(model);
+  loaded->memory_bytes = BasisBytes(*loaded->basis) + ModelBytes(*loaded->model);
+  return std::shared_ptr<const ServedBasis>(std::move(loaded));
+}
+
+void Registry::CancelAllBuilds(std::chrono::milliseconds timeout) {
+  shutting_down_.store(true);
+  std::vector<std::shared_ptr<BuildJob>> jobs;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (auto& [id, job] : builds_) jobs.push_back(job);
+  }
+  for (auto& job : jobs) job->Cancel();
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  for (auto& job : jobs) {
+    while (!job->progress().finished && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  }
+}
+
+}  // namespace fieldspace::server

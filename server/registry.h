@@ -1,0 +1,178 @@
+#ifndef FIELDSPACE_SERVER_REGISTRY_H_
+#define FIELDSPACE_SERVER_REGISTRY_H_
+
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "core/mesh/triangle_mesh.h"
+#include "server/compute_pool.h"
+#include "server/engine.h"
+#include "server/records.h"
+#include "server/store.h"
+
+namespace fieldspace::server {
+
+struct RegistryOptions {
+  // Soft limit on memory held by loaded meshes and bases; idle ones (no request or session holds
+  // them) are evicted least recently used first and reload from the store on demand.
+  int64_t memory_budget_bytes = int64_t{4} << 30;
+  int32_t build_threads = 0;     // passed to the basis construction; 0: all
+  int32_t max_dimension = 8192;  // larger d is ResourceExhausted (dense reduced matrices are d x d)
+};
+
+// One basis build, shared by every request that asked for the same basis id. Runs on the compute
+// pool's build lane; survives the disconnection of the clients that watch it.
+class BuildJob {
+ public:
+  struct Progress {
+    BuildStage stage = BuildStage::kQueued;
+    double fraction = 0;
+    bool finished = false;
+    absl::Status status;  // when finished
+    BasisRecord record;   // when finished OK
+  };
+
+  explicit BuildJob(BasisRecord pending_record) : pending_(std::move(pending_record)) {}
+
+  const std::string& basis_id() const { return pending_.id; }
+  // The record as known before the build (key and id only).
+  const BasisRecord& pending_record() const { return pending_; }
+  Progress progress() const;
+
+  // `listener` runs (on the build thread, without locks held) after every change, and once more
+  // when the job finishes. If the job has already finished, it runs once, right away.
+  uint64_t Subscribe(std::function<void()> listener);
+  void Unsubscribe(uint64_t token);
+
+  void Cancel() { cancel_.store(true); }
+  const std::atomic<bool>* cancel_flag() const { return &cancel_; }
+
+  // Called by the registry.
+  void SetStage(BuildStage stage, double fraction);
+  void Finish(absl::Status status, const BasisRecord& record);
+
+ private:
+  void Notify();
+
+  const BasisRecord pending_;
+  std::atomic<bool> cancel_{false};
+  mutable std::mutex mu_;
+  Progress progress_;
+  uint64_t next_token_ = 1;
+  std::map<uint64_t, std::function<void()>> listeners_;
+  std::chrono::steady_clock::time_point last_notify_{};
+};
+
+// A request for a basis: the key (mesh id, field type, d, sigma, m, seed) plus adaptivity weights.
+struct BuildRequest {
+  BasisKey key;                  // key.weights_hash is computed by the registry
+  Eigen::VectorXd face_weights;  // #F or empty
+};
+
+struct BasisStatus {
+  BasisRecord record;  // for a running build: key and id only
+  bool ready = false;
+  bool loaded = false;
+  int64_t memory_bytes = 0;
+  BuildJob::Progress progress;  // running builds
+};
+
+// All server state: meshes, bases, running builds. The RPC layer is stateless and asks the
+// registry for handles (shared_ptr<const T>) that it holds only for one request or session.
+// Thread-safe.
+class Registry {
+ public:
+  // Reads the store's index (headers only; payloads load lazily).
+  static absl::StatusOr<std::unique_ptr<Registry>> Create(Store* store, ComputePool* pool,
+                                                          const RegistryOptions& options);
+  ~Registry();
+
+  // --- Meshes. Ids: "m-" + XXH64 of the canonical vertex (float64) and face (int32) arrays.
+  // Validates (TriangleMesh::Create), stores (if new) and returns the record; adding a mesh that
+  // exists returns the existing record (uploads are idempotent).
+  absl::StatusOr<MeshRecord> AddMesh(MeshArrays arrays, const std::string& name,
+                                     int32_t polygons_triangulated);
+  absl::StatusOr<MeshRecord> GetMeshRecord(const std::string& id) const;
+  std::vector<MeshRecord> ListMeshes() const;
+  bool IsMeshLoaded(const std::string& id) const;
+  // FailedPrecondition if the mesh has bases or builds and !cascade. Returns deleted basis ids.
+  absl::StatusOr<std::vector<std::string>> DeleteMesh(const std::string& id, bool cascade);
+  // Loads lazily. NotFound, DataLoss.
+  absl::StatusOr<std::shared_ptr<const TriangleMesh>> GetMesh(const std::string& id);
+
+  // --- Bases. Ids: "b-" + XXH64 of the BasisKey.
+  static std::string BasisIdFor(const BasisKey& key);
+  struct StartedBuild {
+    std::shared_ptr<BuildJob> job;        // null if the basis already exists
+    std::optional<BasisRecord> existing;  // set if it does
+    bool joined = false;                  // attached to a running build
+  };
+  // Validates the request (InvalidArgument, NotFound for the mesh, ResourceExhausted for limits),
+  // then returns the stored basis, joins the running build or starts one.
+  absl::StatusOr<StartedBuild> StartBuild(BuildRequest request);
+  absl::Status CancelBuild(const std::string& basis_id);
+  absl::StatusOr<BasisStatus> GetBasisStatus(const std::string& id) const;
+  std::vector<BasisStatus> ListBases(const std::string& mesh_id_filter) const;
+  // FailedPrecondition while it is being built.
+  absl::Status DeleteBasis(const std::string& id);
+  // Loads lazily (NotFound, DataLoss; FailedPrecondition while building).
+  absl::StatusOr<std::shared_ptr<const ServedBasis>> GetBasis(const std::string& id);
+
+  // Cancels all running builds and waits (up to `timeout`) for them to finish (shutdown).
+  void CancelAllBuilds(std::chrono::milliseconds timeout);
+
+  int64_t memory_in_use() const;
+
+ private:
+  struct MeshEntry {
+    MeshRecord record;
+    absl::Status damaged;  // DataLoss: the file exists but is unusable
+    std::shared_ptr<const TriangleMesh> loaded;
+    std::shared_ptr<std::mutex> load_mu = std::make_shared<std::mutex>();
+    int64_t bytes = 0;
+    uint64_t last_used = 0;
+  };
+  struct BasisEntry {
+    BasisRecord record;
+    absl::Status damaged;
+    std::shared_ptr<const ServedBasis> loaded;
+    std::shared_ptr<std::mutex> load_mu = std::make_shared<std::mutex>();
+    int64_t bytes = 0;
+    uint64_t last_used = 0;
+  };
+
+  Registry(Store* store, ComputePool* pool, const RegistryOptions& options)
+      : store_(store), pool_(pool), options_(options) {}
+
+  void RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request);
+  absl::StatusOr<std::shared_ptr<const ServedBasis>> LoadBasis(const std::string& id);
+  // Drops idle loaded artifacts until memory_in_use_ <= budget. Requires mu_.
+  void EvictLocked();
+
+  Store* const store_;
+  ComputePool* const pool_;
+  const RegistryOptions options_;
+
+  mutable std::mutex mu_;
+  std::map<std::string, MeshEntry> meshes_;
+  std::map<std::string, BasisEntry> bases_;
+  std::map<std::string, std::shared_ptr<BuildJob>> builds_;
+  std::atomic<bool> shutting_down_{false};
+  int64_t memory_in_use_ = 0;
+  uint64_t clock_ = 0;  // LRU clock
+};
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_REGISTRY_H_

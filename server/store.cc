@@ -1,0 +1,555 @@
+#include "server/store.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <sys/uio.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <bit>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <thread>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "server/hash.h"
+
+namespace fieldspace::server {
+namespace {
+
+static_assert(std::endian::native == std::endian::little,
+              "the store format and content ids are defined on little-endian hosts");
+
+namespace fs = std::filesystem;
+
+constexpr char kMeshMagic[8] = {'F', 'S', 'M', 'E', 'S', 'H', '\0', '\1'};
+constexpr char kBasisMagic[8] = {'F', 'S', 'B', 'A', 'S', 'I', 'S', '\1'};
+constexpr uint32_t kFormatVersion = 1;
+constexpr size_t kHeaderBytes = 40;
+constexpr uint32_t kMaxMetaBytes = 1 << 20;
+constexpr char kMeshExt[] = ".fsmesh";
+constexpr char kBasisExt[] = ".fsbasis";
+constexpr char kTempMarker[] = ".tmp-";
+
+absl::Status ErrnoStatus(int err, absl::string_view what) {
+  std::string message = absl::StrCat(what, ": ", std::strerror(err));
+  switch (err) {
+    case ENOENT:
+      return absl::NotFoundError(message);
+    case ENOSPC:
+    case EDQUOT:
+    case ENOMEM:
+    case EMFILE:
+    case ENFILE:
+      return absl::ResourceExhaustedError(message);
+    case EACCES:
+    case EPERM:
+    case EROFS:
+      return absl::PermissionDeniedError(message);
+    default:
+      return absl::InternalError(message);
+  }
+}
+
+// Little-endian metadata encoding: fixed-width values and length-prefixed strings.
+class MetaWriter {
+ public:
+  template <typename T>
+  void Put(T value) {
+    out_.append(reinterpret_cast<const char*>(&value), sizeof(T));
+  }
+  void PutString(std::string_view s) {
+    Put<uint32_t>(static_cast<uint32_t>(s.size()));
+    out_.append(s);
+  }
+  std::string& bytes() { return out_; }
+
+ private:
+  std::string out_;
+};
+
+class MetaReader {
+ public:
+  explicit MetaReader(std::string_view in) : in_(in) {}
+  template <typename T>
+  T Get() {
+    T value{};
+    if (in_.size() < sizeof(T)) {
+      ok_ = false;
+      return value;
+    }
+    std::memcpy(&value, in_.data(), sizeof(T));
+    in_.remove_prefix(sizeof(T));
+    return value;
+  }
+  std::string GetString() {
+    const uint32_t n = Get<uint32_t>();
+    if (!ok_ || in_.size() < n) {
+      ok_ = false;
+      return {};
+    }
+    std::string s(in_.substr(0, n));
+    in_.remove_prefix(n);
+    return s;
+  }
+  // True if every read fit and nothing is left over.
+  bool Done() const { return ok_ && in_.empty(); }
+
+ private:
+  std::string_view in_;
+  bool ok_ = true;
+};
+
+std::string EncodeMeshRecord(const MeshRecord& r) {
+  MetaWriter w;
+  w.PutString(r.id);
+  w.PutString(r.name);
+  w.Put<int32_t>(r.num_vertices);
+  w.Put<int32_t>(r.num_faces);
+  w.Put<int32_t>(r.num_edges);
+  w.Put<int32_t>(r.num_components);
+  w.Put<int32_t>(r.num_boundary_loops);
+  w.Put<int32_t>(r.euler_characteristic);
+  w.Put<int32_t>(r.genus);
+  w.Put<double>(r.total_area);
+  w.Put<int32_t>(r.dropped_unreferenced_vertices);
+  w.Put<int32_t>(r.polygons_triangulated);
+  w.Put<int64_t>(r.created_unix_ms);
+  return std::move(w.bytes());
+}
+
+bool DecodeMeshRecord(std::string_view bytes, MeshRecord* r) {
+  MetaReader in(bytes);
+  r->id = in.GetString();
+  r->name = in.GetString();
+  r->num_vertices = in.Get<int32_t>();
+  r->num_faces = in.Get<int32_t>();
+  r->num_edges = in.Get<int32_t>();
+  r->num_components = in.Get<int32_t>();
+  r->num_boundary_loops = in.Get<int32_t>();
+  r->euler_characteristic = in.Get<int32_t>();
+  r->genus = in.Get<int32_t>();
+  r->total_area = in.Get<double>();
+  r->dropped_unreferenced_vertices = in.Get<int32_t>();
+  r->polygons_triangulated = in.Get<int32_t>();
+  r->created_unix_ms = in.Get<int64_t>();
+  return in.Done() && r->num_vertices >= 0 && r->num_faces >= 0;
+}
+
+std::string EncodeBasisRecord(const BasisRecord& r) {
+  MetaWriter w;
+  w.PutString(r.id);
+  w.PutString(r.key.mesh_id);
+  w.Put<uint8_t>(static_cast<uint8_t>(r.key.field.kind));
+  w.Put<int32_t>(r.key.field.n);
+  w.Put<int32_t>(r.key.dimension);
+  w.Put<double>(r.key.sigma);
+  w.Put<int32_t>(r.key.fields_per_region);
+  w.Put<uint64_t>(r.key.seed);
+  w.Put<uint64_t>(r.key.weights_hash);
+  w.Put<int32_t>(r.columns);
+  w.Put<int32_t>(r.num_regions);
+  w.Put<int32_t>(r.dofs);
+  w.Put<double>(r.radius);
+  w.Put<int64_t>(r.nnz);
+  w.Put<double>(r.build_seconds);
+  w.Put<int64_t>(r.created_unix_ms);
+  return std::move(w.bytes());
+}
+
+bool DecodeBasisRecord(std::string_view bytes, BasisRecord* r) {
+  MetaReader in(bytes);
+  r->id = in.GetString();
+  r->key.mesh_id = in.GetString();
+  const uint8_t kind = in.Get<uint8_t>();
+  r->key.field.kind = static_cast<FieldKind>(kind);
+  r->key.field.n = in.Get<int32_t>();
+  r->key.dimension = in.Get<int32_t>();
+  r->key.sigma = in.Get<double>();
+  r->key.fields_per_region = in.Get<int32_t>();
+  r->key.seed = in.Get<uint64_t>();
+  r->key.weights_hash = in.Get<uint64_t>();
+  r->columns = in.Get<int32_t>();
+  r->num_regions = in.Get<int32_t>();
+  r->dofs = in.Get<int32_t>();
+  r->radius = in.Get<double>();
+  r->nnz = in.Get<int64_t>();
+  r->build_seconds = in.Get<double>();
+  r->created_unix_ms = in.Get<int64_t>();
+  return in.Done() && kind <= static_cast<uint8_t>(FieldKind::kTensor);
+}
+
+struct Header {
+  uint32_t meta_len = 0;
+  uint64_t payload_len = 0;
+  uint64_t payload_hash = 0;
+};
+
+std::string EncodeHeader(const char (&magic)[8], std::string_view meta, uint64_t payload_len,
+                         uint64_t payload_hash) {
+  std::string h(kHeaderBytes, '\0');
+  std::memcpy(h.data(), magic, 8);
+  const uint32_t version = kFormatVersion;
+  const auto meta_len = static_cast<uint32_t>(meta.size());
+  std::memcpy(h.data() + 8, &version, 4);
+  std::memcpy(h.data() + 12, &meta_len, 4);
+  std::memcpy(h.data() + 16, &payload_len, 8);
+  std::memcpy(h.data() + 24, &payload_hash, 8);
+  Hasher hasher;
+  hasher.Update(h.data(), 32);
+  hasher.Update(meta);
+  const uint64_t header_hash = hasher.Digest();
+  std::memcpy(h.data() + 32, &header_hash, 8);
+  return h;
+}
+
+// An open file descriptor, closed on scope exit.
+class Fd {
+ public:
+  explicit Fd(int fd) : fd_(fd) {}
+  Fd(const Fd&) = delete;
+  Fd& operator=(const Fd&) = delete;
+  ~Fd() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  int get() const { return fd_; }
+  // Closes now and reports the result (close can report deferred write errors).
+  int Close() {
+    const int rc = ::close(fd_);
+    fd_ = -1;
+    return rc;
+  }
+
+ private:
+  int fd_;
+};
+
+absl::Status ReadExact(int fd, void* data, size_t size, uint64_t offset, const std::string& path) {
+  auto* p = static_cast<char*>(data);
+  while (size > 0) {
+    const ssize_t n = ::pread(fd, p, size, static_cast<off_t>(offset));
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return ErrnoStatus(errno, absl::StrCat("reading ", path));
+    }
+    if (n == 0) return absl::DataLossError(absl::StrCat(path, ": unexpected end of file"));
+    p += n;
+    size -= static_cast<size_t>(n);
+    offset += static_cast<uint64_t>(n);
+  }
+  return absl::OkStatus();
+}
+
+absl::Status WriteAll(int fd, const char* data, size_t size, const std::string& path) {
+  while (size > 0) {
+    const ssize_t n = ::write(fd, data, size);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      return ErrnoStatus(errno, absl::StrCat("writing ", path));
+    }
+    data += n;
+    size -= static_cast<size_t>(n);
+  }
+  return absl::OkStatus();
+}
+
+absl::Status FsyncDir(const std::string& dir) {
+  Fd fd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
+  if (fd.get() < 0) return ErrnoStatus(errno, absl::StrCat("opening directory ", dir));
+  if (::fsync(fd.get()) != 0) return ErrnoStatus(errno, absl::StrCat("fsync of ", dir));
+  return absl::OkStatus();
+}
+
+// Writes header + meta + payload pieces to `path` atomically (temp file, fsync, rename, fsync of
+// the directory). `pause_ms` > 0 sleeps halfway through the payload (crash tests).
+absl::Status WriteAtomically(const std::string& path, const std::string& header,
+                             const std::string& meta, const std::vector<std::string_view>& payload,
+                             int32_t pause_ms) {
+  static std::atomic<uint64_t> counter{0};
+  const fs::path final_path(path);
+  const std::string dir = final_path.parent_path().string();
+  const std::string tmp = absl::StrCat(dir, "/.", final_path.filename().string(), kTempMarker,
+                                       ::getpid(), "-", counter.fetch_add(1));
+  Fd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
+  if (fd.get() < 0) return ErrnoStatus(errno, absl::StrCat("creating ", tmp));
+  auto fail = [&](absl::Status status) {
+    ::unlink(tmp.c_str());
+    return status;
+  };
+  absl::Status st = WriteAll(fd.get(), header.data(), header.size(), tmp);
+  if (st.ok()) st = WriteAll(fd.get(), meta.data(), meta.size(), tmp);
+  uint64_t total = 0;
+  for (std::string_view piece : payload) total += piece.size();
+  uint64_t written = 0;
+  bool paused = false;
+  for (std::string_view piece : payload) {
+    if (!st.ok()) break;
+    // Written in pieces of at most 64 MiB, so that the test pause lands inside the payload.
+    while (st.ok() && !piece.empty()) {
+      const size_t n = std::min<size_t>(piece.size(), size_t{64} << 20);
+      size_t step = n;
+      if (pause_ms > 0 && !paused && written + n > total / 2) {
+        step = std::max<size_t>(1, static_cast<size_t>(total / 2 - written));
+      }
+      st = WriteAll(fd.get(), piece.data(), step, tmp);
+      piece.remove_prefix(step);
+      written += step;
+      if (pause_ms > 0 && !paused && written >= total / 2) {
+        paused = true;
+        std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms));
+      }
+    }
+  }
+  if (!st.ok()) return fail(st);
+  if (::fsync(fd.get()) != 0) return fail(ErrnoStatus(errno, absl::StrCat("fsync of ", tmp)));
+  if (fd.Close() != 0) return fail(ErrnoStatus(errno, absl::StrCat("closing ", tmp)));
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    return fail(ErrnoStatus(errno, absl::StrCat("renaming ", tmp, " to ", path)));
+  }
+  return FsyncDir(dir);
+}
+
+// Opens `path`, checks magic, version, header checksum and total size; returns meta bytes.
+struct OpenedFile {
+  std::unique_ptr<Fd> fd;
+  Header header;
+  std::string meta;
+};
+
+absl::StatusOr<OpenedFile> OpenContainer(const std::string& path, const char (&magic)[8]) {
+  OpenedFile f;
+  f.fd = std::make_unique<Fd>(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  if (f.fd->get() < 0) return ErrnoStatus(errno, absl::StrCat("opening ", path));
+  struct stat st;
+  if (::fstat(f.fd->get(), &st) != 0) return ErrnoStatus(errno, absl::StrCat("stat of ", path));
+  const auto file_size = static_cast<uint64_t>(st.st_size);
+  if (file_size < kHeaderBytes) {
+    return absl::DataLossError(
+        absl::StrCat(path, ": truncated (", file_size, " bytes, shorter than the header)"));
+  }
+  char h[kHeaderBytes];
+  RETURN_IF_ERROR(ReadExact(f.fd->get(), h, kHeaderBytes, 0, path));
+  if (std::memcmp(h, magic, 8) != 0) {
+    return absl::DataLossError(absl::StrCat(path, ": not a fieldspace store file (bad magic)"));
+  }
+  uint32_t version;
+  std::memcpy(&version, h + 8, 4);
+  if (version != kFormatVersion) {
+    return absl::DataLossError(absl::StrCat(path, ": unsupported store format version ", version));
+  }
+  std::memcpy(&f.header.meta_len, h + 12, 4);
+  std::memcpy(&f.header.payload_len, h + 16, 8);
+  std::memcpy(&f.header.payload_hash, h + 24, 8);
+  uint64_t header_hash;
+  std::memcpy(&header_hash, h + 32, 8);
+  if (f.header.meta_len > kMaxMetaBytes || f.header.meta_len > file_size - kHeaderBytes) {
+    return absl::DataLossError(absl::StrCat(path, ": corrupt header (metadata length)"));
+  }
+  f.meta.resize(f.header.meta_len);
+  RETURN_IF_ERROR(ReadExact(f.fd->get(), f.meta.data(), f.meta.size(), kHeaderBytes, path));
+  Hasher hasher;
+  hasher.Update(h, 32);
+  hasher.Update(f.meta);
+  if (hasher.Digest() != header_hash) {
+    return absl::DataLossError(absl::StrCat(path, ": header checksum mismatch"));
+  }
+  const uint64_t expected = kHeaderBytes + f.header.meta_len + f.header.payload_len;
+  if (file_size != expected) {
+    return absl::DataLossError(absl::StrCat(path, ": size ", file_size, " bytes, header says ",
+                                            expected, " (truncated or appended to)"));
+  }
+  return f;
+}
+
+// Reads the payload into `dst` pieces (in order), verifying its checksum.
+absl::Status ReadPayload(const OpenedFile& f, const std::vector<std::pair<char*, size_t>>& dst,
+                         const std::string& path) {
+  uint64_t offset = kHeaderBytes + f.header.meta_len;
+  Hasher hasher;
+  for (const auto& [data, size] : dst) {
+    // Read in slices so the hash of a slice runs while it is still in cache.
+    size_t done = 0;
+    while (done < size) {
+      const size_t n = std::min<size_t>(size - done, size_t{8} << 20);
+      RETURN_IF_ERROR(ReadExact(f.fd->get(), data + done, n, offset, path));
+      hasher.Update(data + done, n);
+      offset += n;
+      done += n;
+    }
+  }
+  if (hasher.Digest() != f.header.payload_hash) {
+    return absl::DataLossError(absl::StrCat(path, ": payload checksum mismatch"));
+  }
+  return absl::OkStatus();
+}
+
+bool ValidId(std::string_view id, char prefix) {
+  if (id.size() != 18 || id[0] != prefix || id[1] != '-') return false;
+  for (char c : id.substr(2)) {
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir,
+                                                   const StoreOptions& options) {
+  if (dir.empty()) return absl::InvalidArgumentError("store directory must not be empty");
+  std::error_code ec;
+  for (const char* sub : {"meshes", "bases"}) {
+    fs::create_directories(fs::path(dir) / sub, ec);
+    if (ec) {
+      return absl::PermissionDeniedError(absl::StrCat(
+          "cannot create store directory ", (fs::path(dir) / sub).string(), ": ", ec.message()));
+    }
+  }
+  // Temporary files are what a crash in the middle of a save leaves behind: never complete.
+  for (const char* sub : {"meshes", "bases"}) {
+    for (const auto& entry : fs::directory_iterator(fs::path(dir) / sub, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (absl::StartsWith(name, ".") && absl::StrContains(name, kTempMarker)) {
+        fs::remove(entry.path(), ec);
+      }
+    }
+  }
+  return std::unique_ptr<Store>(new Store(fs::absolute(dir).lexically_normal().string(), options));
+}
+
+std::string Store::MeshPath(const std::string& id) const {
+  return absl::StrCat(dir_, "/meshes/", id, kMeshExt);
+}
+
+std::string Store::BasisPath(const std::string& id) const {
+  return absl::StrCat(dir_, "/bases/", id, kBasisExt);
+}
+
+StoreContents Store::Scan() const {
+  StoreContents out;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(fs::path(dir_) / "meshes", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (!absl::EndsWith(name, kMeshExt) || absl::StartsWith(name, ".")) continue;
+    const std::string id = name.substr(0, name.size() - std::strlen(kMeshExt));
+    absl::StatusOr<OpenedFile> f = OpenContainer(entry.path().string(), kMeshMagic);
+    MeshRecord record;
+    absl::Status status = f.status();
+    if (status.ok() && (!DecodeMeshRecord(f->meta, &record) || record.id != id)) {
+      status = absl::DataLossError(absl::StrCat(entry.path().string(), ": corrupt metadata"));
+    }
+    if (status.ok()) {
+      out.meshes.push_back(std::move(record));
+    } else {
+      out.damaged.push_back({id, false, status});
+    }
+  }
+  for (const auto& entry : fs::directory_iterator(fs::path(dir_) / "bases", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (!absl::EndsWith(name, kBasisExt) || absl::StartsWith(name, ".")) continue;
+    const std::string id = name.substr(0, name.size() - std::strlen(kBasisExt));
+    absl::StatusOr<OpenedFile> f = OpenContainer(entry.path().string(), kBasisMagic);
+    BasisRecord record;
+    absl::Status status = f.status();
+    if (status.ok() && (!DecodeBasisRecord(f->meta, &record) || record.id != id)) {
+      status = absl::DataLossError(absl::StrCat(entry.path().string(), ": corrupt metadata"));
+    }
+    if (status.ok()) {
+      out.bases.push_back(std::move(record));
+    } else {
+      out.damaged.push_back({id, true, status});
+    }
+  }
+  return out;
+}
+
+absl::Status Store::SaveMesh(const MeshRecord& record, const VertexMatrix& V,
+                             const FaceMatrix& F) const {
+  if (!ValidId(record.id, 'm')) return absl::InvalidArgumentError("bad mesh id " + record.id);
+  if (V.rows() != record.num_vertices || F.rows() != record.num_faces) {
+    return absl::InvalidArgumentError("mesh record does not match its arrays");
+  }
+  const std::string_view v_bytes(reinterpret_cast<const char*>(V.data()),
+                                 sizeof(double) * static_cast<size_t>(V.size()));
+  const std::string_view f_bytes(reinterpret_cast<const char*>(F.data()),
+                                 sizeof(int32_t) * static_cast<size_t>(F.size()));
+  Hasher hasher;
+  hasher.Update(v_bytes);
+  hasher.Update(f_bytes);
+  const std::string meta = EncodeMeshRecord(record);
+  const std::string header =
+      EncodeHeader(kMeshMagic, meta, v_bytes.size() + f_bytes.size(), hasher.Digest());
+  return WriteAtomically(MeshPath(record.id), header, meta, {v_bytes, f_bytes}, 0);
+}
+
+absl::StatusOr<MeshArrays> Store::LoadMesh(const std::string& id) const {
+  if (!ValidId(id, 'm')) return absl::NotFoundError("no mesh " + id);
+  const std::string path = MeshPath(id);
+  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kMeshMagic));
+  MeshRecord record;
+  if (!DecodeMeshRecord(f.meta, &record) || record.id != id) {
+    return absl::DataLossError(path + ": corrupt metadata");
+  }
+  const uint64_t expected = uint64_t{24} * static_cast<uint64_t>(record.num_vertices) +
+                            uint64_t{12} * static_cast<uint64_t>(record.num_faces);
+  if (f.header.payload_len != expected) {
+    return absl::DataLossError(path + ": payload size does not match the vertex/face counts");
+  }
+  MeshArrays arrays;
+  arrays.vertices.resize(record.num_vertices, 3);
+  arrays.faces.resize(record.num_faces, 3);
+  RETURN_IF_ERROR(ReadPayload(
+      f,
+      {{reinterpret_cast<char*>(arrays.vertices.data()), sizeof(double) * arrays.vertices.size()},
+       {reinterpret_cast<char*>(arrays.faces.data()), sizeof(int32_t) * arrays.faces.size()}},
+      path));
+  return arrays;
+}
+
+absl::Status Store::SaveBasis(const BasisRecord& record,
+                              const std::vector<std::string_view>& payload) const {
+  if (!ValidId(record.id, 'b')) return absl::InvalidArgumentError("bad basis id " + record.id);
+  Hasher hasher;
+  uint64_t total = 0;
+  for (std::string_view piece : payload) {
+    hasher.Update(piece);
+    total += piece.size();
+  }
+  const std::string meta = EncodeBasisRecord(record);
+  const std::string header = EncodeHeader(kBasisMagic, meta, total, hasher.Digest());
+  return WriteAtomically(BasisPath(record.id), header, meta, payload, options_.save_pause_ms);
+}
+
+absl::StatusOr<Store::LoadedBasisFile> Store::LoadBasis(const std::string& id) const {
+  if (!ValidId(id, 'b')) return absl::NotFoundError("no basis " + id);
+  const std::string path = BasisPath(id);
+  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kBasisMagic));
+  LoadedBasisFile out;
+  if (!DecodeBasisRecord(f.meta, &out.record) || out.record.id != id) {
+    return absl::DataLossError(path + ": corrupt metadata");
+  }
+  out.payload.resize(f.header.payload_len);
+  RETURN_IF_ERROR(ReadPayload(f, {{out.payload.data(), out.payload.size()}}, path));
+  return out;
+}
+
+absl::Status Store::DeleteMesh(const std::string& id) const {
+  if (!ValidId(id, 'm')) return absl::OkStatus();
+  if (::unlink(MeshPath(id).c_str()) != 0 && errno != ENOENT) {
+    return ErrnoStatus(errno, "deleting " + MeshPath(id));
+  }
+  return FsyncDir(dir_ + "/meshes");
+}
+
+absl::Status Store::DeleteBasis(const std::string& id) const {
+  if (!ValidId(id, 'b')) return absl::OkStatus();
+  if (::unlink(BasisPath(id).c_str()) != 0 && errno != ENOENT) {
+    return ErrnoStatus(errno, "deleting " + BasisPath(id));
+  }
+  return FsyncDir(dir_ + "/bases");
+}
+
+}  // namespace fieldspace::server

@@ -1,0 +1,89 @@
+#ifndef FIELDSPACE_SERVER_STORE_H_
+#define FIELDSPACE_SERVER_STORE_H_
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "core/mesh/triangle_mesh.h"
+#include "server/records.h"
+
+namespace fieldspace::server {
+
+struct StoreOptions {
+  // Testing only: pause this long in the middle of writing a basis payload (before the fsync and
+  // the rename), so that a crash test can kill the process during a save.
+  int32_t save_pause_ms = 0;
+};
+
+// A store file that exists but cannot be used (bad header, checksum mismatch, truncated).
+struct DamagedEntry {
+  std::string id;  // from the file name
+  bool is_basis = false;
+  absl::Status status;  // DataLoss with the reason
+};
+
+struct StoreContents {
+  std::vector<MeshRecord> meshes;
+  std::vector<BasisRecord> bases;
+  std::vector<DamagedEntry> damaged;
+};
+
+// The on-disk store (DESIGN.md section 6): DIR/meshes/<id>.fsmesh and DIR/bases/<id>.fsbasis.
+//
+// Every file is one container: a 40-byte header (magic, format version, metadata and payload
+// lengths, XXH64 of the payload, XXH64 of header + metadata), the metadata (the record), the
+// payload. Files are written to a temporary name, fsynced, renamed into place and the directory is
+// fsynced, so after a crash a file is either complete or absent. Checksums catch everything else
+// (bit rot, truncation, foreign files): such files give DataLoss and are never loaded.
+//
+// Thread-safe: distinct files never share state; writes of the same id are idempotent (the content
+// is a function of the id) and the rename is atomic.
+class Store {
+ public:
+  // Creates DIR (and its subfolders) if needed and removes temporary files left by a crash.
+  static absl::StatusOr<std::unique_ptr<Store>> Open(const std::string& dir,
+                                                     const StoreOptions& options = {});
+
+  const std::string& dir() const { return dir_; }
+
+  // Reads every file's header and metadata (not the payloads): O(number of files).
+  StoreContents Scan() const;
+
+  // Mesh payload: the canonical arrays (V #V x 3 float64, F #F x 3 int32), which must match
+  // record.num_vertices / num_faces.
+  absl::Status SaveMesh(const MeshRecord& record, const VertexMatrix& V, const FaceMatrix& F) const;
+  // NotFound if absent, DataLoss if damaged.
+  absl::StatusOr<MeshArrays> LoadMesh(const std::string& id) const;
+
+  // Basis payload: opaque serialized bytes (see registry.cc), possibly in several pieces that are
+  // concatenated.
+  absl::Status SaveBasis(const BasisRecord& record,
+                         const std::vector<std::string_view>& payload) const;
+  struct LoadedBasisFile {
+    BasisRecord record;
+    std::string payload;
+  };
+  absl::StatusOr<LoadedBasisFile> LoadBasis(const std::string& id) const;
+
+  // OK if the file did not exist.
+  absl::Status DeleteMesh(const std::string& id) const;
+  absl::Status DeleteBasis(const std::string& id) const;
+
+  std::string MeshPath(const std::string& id) const;
+  std::string BasisPath(const std::string& id) const;
+
+ private:
+  Store(std::string dir, const StoreOptions& options) : dir_(std::move(dir)), options_(options) {}
+
+  std::string dir_;
+  StoreOptions options_;
+};
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_STORE_H_

@@ -1,0 +1,153 @@
+#include "core/basis/basis_io.h"
+
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+
+#include "gtest/gtest.h"
+#include "tests/core/basis/basis_test_util.h"
+
+namespace fieldspace {
+namespace {
+
+using testing::Icosphere;
+using testing::Operator;
+
+class BasisIoTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const TriangleMesh mesh = Icosphere(2);
+    const FieldOperator op = Operator(mesh, FieldType::NField(3));
+    BasisOptions options;
+    options.params.dimension = 31;
+    options.params.sigma = 12.5;
+    options.params.seed = 99;
+    options.params.fields_per_region = 3;
+    options.params.face_weights = Eigen::VectorXd::LinSpaced(mesh.num_faces(), 1.0, 2.0);
+    auto basis = BuildBasis(mesh, op, options);
+    ASSERT_TRUE(basis.ok()) << basis.status();
+    basis_ = *std::move(basis);
+    dir_ = std::filesystem::temp_directory_path() /
+           ("fieldspace_basis_io_test_" + std::to_string(::getpid()));
+    std::filesystem::create_directories(dir_);
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  static void ExpectSame(const Basis& a, const Basis& b) {
+    EXPECT_TRUE(a.type == b.type);
+    EXPECT_EQ(a.params.dimension, b.params.dimension);
+    EXPECT_EQ(a.params.sigma, b.params.sigma);
+    EXPECT_EQ(a.params.seed, b.params.seed);
+    EXPECT_EQ(a.params.fields_per_region, b.params.fields_per_region);
+    EXPECT_EQ(a.params.face_weights, b.params.face_weights);
+    EXPECT_EQ(a.radius, b.radius);
+    EXPECT_EQ(a.coverage_radius, b.coverage_radius);
+    EXPECT_EQ(a.sample_faces, b.sample_faces);
+    EXPECT_EQ(a.local_eigenvalues, b.local_eigenvalues);
+    EXPECT_EQ(a.timings.total_seconds, b.timings.total_seconds);
+    EXPECT_EQ(a.stats.lobpcg_iterations, b.stats.lobpcg_iterations);
+    ASSERT_EQ(a.U.rows(), b.U.rows());
+    ASSERT_EQ(a.U.cols(), b.U.cols());
+    ASSERT_EQ(a.U.nonZeros(), b.U.nonZeros());
+    EXPECT_TRUE(std::equal(a.U.outerIndexPtr(), a.U.outerIndexPtr() + a.U.rows() + 1,
+                           b.U.outerIndexPtr()));
+    EXPECT_TRUE(
+        std::equal(a.U.innerIndexPtr(), a.U.innerIndexPtr() + a.U.nonZeros(), b.U.innerIndexPtr()));
+    EXPECT_TRUE(std::equal(a.U.valuePtr(), a.U.valuePtr() + a.U.nonZeros(), b.U.valuePtr()));
+  }
+
+  std::string ReadFile(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  }
+  void WriteFile(const std::string& path, const std::string& bytes) {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  }
+
+  Basis basis_;
+  std::filesystem::path dir_;
+};
+
+TEST_F(BasisIoTest, RoundTripInMemoryAndOnDisk) {
+  auto bytes = EncodeBasis(basis_, "mesh:abc123");
+  ASSERT_TRUE(bytes.ok()) << bytes.status();
+  auto decoded = DecodeBasis(*bytes);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  EXPECT_EQ(decoded->mesh_id, "mesh:abc123");
+  ExpectSame(basis_, decoded->basis);
+
+  const std::string path = (dir_ / "b.fsb").string();
+  ASSERT_TRUE(SaveBasisFile(path, basis_, "mesh:abc123").ok());
+  EXPECT_EQ(ReadFile(path), *bytes);  // same bytes through both paths
+  auto loaded = LoadBasisFile(path);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  ExpectSame(basis_, loaded->basis);
+  auto info = ReadBasisFileInfo(path);
+  ASSERT_TRUE(info.ok());
+  EXPECT_EQ(info->mesh_id, "mesh:abc123");
+  EXPECT_EQ(info->params.dimension, 31);
+  EXPECT_EQ(info->nnz, basis_.U.nonZeros());
+  EXPECT_EQ(info->num_weights, basis_.params.face_weights.size());
+  EXPECT_EQ(info->file_bytes, static_cast<int64_t>(bytes->size()));
+  // Overwriting keeps working; no temporary files are left behind.
+  ASSERT_TRUE(SaveBasisFile(path, basis_, "other").ok());
+  EXPECT_EQ(LoadBasisFile(path)->mesh_id, "other");
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir_), {}), 1);
+}
+
+TEST_F(BasisIoTest, EveryFlippedByteIsDetected) {
+  auto bytes = EncodeBasis(basis_, "id");
+  ASSERT_TRUE(bytes.ok());
+  const std::string original = *bytes;
+  // Every byte of the preamble and header and the first/last bytes of every section, plus a
+  // stride through the payload.
+  for (size_t i = 0; i < original.size(); i += (i < 512 || i + 512 > original.size()) ? 1 : 37) {
+    std::string damaged = original;
+    damaged[i] = static_cast<char>(damaged[i] ^ 0x5A);
+    auto r = DecodeBasis(damaged);
+    ASSERT_FALSE(r.ok()) << "byte " << i;
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kDataLoss) << "byte " << i << r.status();
+  }
+  const std::string path = (dir_ / "flip.fsb").string();
+  std::string damaged = original;
+  damaged[original.size() / 2] ^= 1;
+  WriteFile(path, damaged);
+  EXPECT_EQ(LoadBasisFile(path).status().code(), absl::StatusCode::kDataLoss);
+}
+
+TEST_F(BasisIoTest, TruncatedAndExtendedFilesAreDetected) {
+  auto bytes = EncodeBasis(basis_, "id");
+  ASSERT_TRUE(bytes.ok());
+  for (size_t len : {size_t{0}, size_t{5}, size_t{31}, size_t{32}, size_t{100}, bytes->size() / 2,
+                     bytes->size() - 1}) {
+    auto r = DecodeBasis(std::string_view(*bytes).substr(0, len));
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kDataLoss) << len;
+  }
+  EXPECT_EQ(DecodeBasis(*bytes + "x").status().code(), absl::StatusCode::kDataLoss);
+  const std::string path = (dir_ / "trunc.fsb").string();
+  WriteFile(path, bytes->substr(0, bytes->size() - 10));
+  auto r = LoadBasisFile(path);
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_NE(r.status().message().find("truncated"), std::string::npos) << r.status();
+  // A foreign file.
+  WriteFile(path, std::string(1000, 'z'));
+  EXPECT_EQ(LoadBasisFile(path).status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_EQ(ReadBasisFileInfo(path).status().code(), absl::StatusCode::kDataLoss);
+}
+
+TEST_F(BasisIoTest, FileSystemErrors) {
+  EXPECT_EQ(LoadBasisFile((dir_ / "missing.fsb").string()).status().code(),
+            absl::StatusCode::kNotFound);
+  EXPECT_EQ(SaveBasisFile((dir_ / "no_such_dir" / "b.fsb").string(), basis_, "id").code(),
+            absl::StatusCode::kNotFound);
+  Basis empty;
+  EXPECT_EQ(EncodeBasis(empty, "id").status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace fieldspace

@@ -1,0 +1,315 @@
+// Tests of the pieces of the basis construction: dual graph, sample allocation, farthest point
+// sampling, region growth, the local sparse Cholesky and the local eigensolver.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <set>
+#include <vector>
+
+#include "Eigen/Cholesky"
+#include "Eigen/Eigenvalues"
+#include "Eigen/SparseCore"
+#include "core/basis/crc32c.h"
+#include "core/basis/dual_graph.h"
+#include "core/basis/local_cholesky.h"
+#include "core/basis/local_eigensolver.h"
+#include "core/basis/regions.h"
+#include "core/basis/sampling.h"
+#include "gtest/gtest.h"
+#include "tests/core/basis/basis_test_util.h"
+#include "tests/testing/test_meshes.h"
+
+namespace fieldspace {
+namespace {
+
+using basis_internal::LocalCholesky;
+using basis_internal::LocalEigenOptions;
+using basis_internal::LocalOperator;
+using basis_internal::LowerCsc;
+using testing::DualDistances;
+using testing::Icosphere;
+using testing::LoadMesh;
+using testing::TwoSpheres;
+
+TEST(DualGraphTest, ArcsAndLengths) {
+  const TriangleMesh mesh = Icosphere(2);
+  auto g = BuildDualGraph(mesh, {});
+  ASSERT_TRUE(g.ok()) << g.status();
+  ASSERT_EQ(g->num_nodes, mesh.num_faces());
+  EXPECT_EQ(g->offsets.back(), 3 * mesh.num_faces());  // closed: 3 neighbors each
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    for (int32_t a = g->offsets[f]; a < g->offsets[f + 1]; ++a) {
+      const int32_t h = g->targets[a];
+      EXPECT_NEAR(g->lengths[a],
+                  (mesh.face_barycenters().row(f) - mesh.face_barycenters().row(h)).norm(), 1e-15);
+    }
+  }
+  Eigen::VectorXd w = Eigen::VectorXd::Constant(mesh.num_faces(), 2.0);
+  w[0] = 4.0;
+  auto gw = BuildDualGraph(mesh, w);
+  ASSERT_TRUE(gw.ok());
+  for (int32_t a = gw->offsets[0]; a < gw->offsets[1]; ++a) {
+    EXPECT_NEAR(gw->lengths[a], 3.0 * g->lengths[a], 1e-15);  // mean of 4 and 2
+  }
+  EXPECT_NEAR(gw->lengths[gw->offsets[5]], 2.0 * g->lengths[g->offsets[5]], 1e-15);
+}
+
+TEST(DualGraphTest, BoundaryFacesHaveFewerArcs) {
+  FS_REQUIRE_SHARED_MESH(path, "camelhead_23k.off");
+  const TriangleMesh mesh = LoadMesh(path);
+  auto g = BuildDualGraph(mesh, {});
+  ASSERT_TRUE(g.ok());
+  int64_t interior_edges = 0;
+  for (int32_t e = 0; e < mesh.num_edges(); ++e) interior_edges += mesh.edge_faces()(e, 1) != kNoFace;
+  EXPECT_EQ(g->offsets.back(), 2 * interior_edges);
+}
+
+TEST(DualGraphTest, RejectsBadWeights) {
+  const TriangleMesh mesh = Icosphere(1);
+  EXPECT_EQ(BuildDualGraph(mesh, Eigen::VectorXd::Ones(3)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  Eigen::VectorXd w = Eigen::VectorXd::Ones(mesh.num_faces());
+  w[3] = -1;
+  EXPECT_EQ(BuildDualGraph(mesh, w).status().code(), absl::StatusCode::kInvalidArgument);
+  w[3] = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(BuildDualGraph(mesh, w).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(SamplingTest, AllocationProportionalToArea) {
+  const TriangleMesh mesh = TwoSpheres(2, 3.0);  // areas 1 : 9
+  auto a = AllocateSamplesPerComponent(mesh, 100);
+  ASSERT_TRUE(a.ok());
+  EXPECT_EQ(*a, (std::vector<int32_t>{10, 90}));
+  a = AllocateSamplesPerComponent(mesh, 7);  // quotas 0.7, 6.3: at least one each
+  ASSERT_TRUE(a.ok());
+  EXPECT_EQ(*a, (std::vector<int32_t>{1, 6}));
+  a = AllocateSamplesPerComponent(mesh, 2);
+  ASSERT_TRUE(a.ok());
+  EXPECT_EQ(*a, (std::vector<int32_t>{1, 1}));
+  EXPECT_EQ(AllocateSamplesPerComponent(mesh, 1).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(AllocateSamplesPerComponent(mesh, mesh.num_faces() + 1).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  // All faces: each component is capped at its face count.
+  a = AllocateSamplesPerComponent(mesh, mesh.num_faces());
+  ASSERT_TRUE(a.ok());
+  EXPECT_EQ((*a)[0], mesh.num_faces() / 2);
+}
+
+// Farthest point sampling, checked against brute force: every new sample is at the maximal
+// distance from the previous ones, and the coverage radius is the final maximal distance.
+TEST(SamplingTest, EachSampleIsTheFarthestFace) {
+  const TriangleMesh mesh = Icosphere(3);
+  auto g = BuildDualGraph(mesh, {});
+  ASSERT_TRUE(g.ok());
+  auto s = FarthestPointSampling(mesh, *g, {25}, /*seed=*/3, nullptr);
+  ASSERT_TRUE(s.ok()) << s.status();
+  ASSERT_EQ(s->samples.size(), 25u);
+  std::vector<double> nearest(mesh.num_faces(), std::numeric_limits<double>::infinity());
+  for (size_t i = 0; i < s->samples.size(); ++i) {
+    if (i > 0) {
+      const double best = *std::max_element(nearest.begin(), nearest.end());
+      EXPECT_EQ(nearest[s->samples[i]], best) << "sample " << i;
+    }
+    const std::vector<double> d = DualDistances(mesh, s->samples[i]);
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) nearest[f] = std::min(nearest[f], d[f]);
+  }
+  EXPECT_EQ(s->coverage_radius, *std::max_element(nearest.begin(), nearest.end()));
+  auto s2 = FarthestPointSampling(mesh, *g, {25}, /*seed=*/3, nullptr);
+  EXPECT_EQ(s->samples, s2->samples);
+}
+
+TEST(SamplingTest, CancelledThroughPoll) {
+  const TriangleMesh mesh = Icosphere(4);
+  auto g = BuildDualGraph(mesh, {});
+  auto s = FarthestPointSampling(mesh, *g, {50}, 0, [] { return true; });
+  EXPECT_EQ(s.status().code(), absl::StatusCode::kCancelled);
+}
+
+TEST(RegionsTest, RegionsAreDualDisks) {
+  const TriangleMesh mesh = Icosphere(3);
+  auto g = BuildDualGraph(mesh, {});
+  const std::vector<int32_t> samples = {0, 100, 700};
+  RegionOptions options;
+  options.radius = 0.5;
+  auto regions = GrowRegions(*g, samples, options, nullptr);
+  ASSERT_TRUE(regions.ok());
+  for (size_t i = 0; i < samples.size(); ++i) {
+    const std::vector<double> d = DualDistances(mesh, samples[i]);
+    std::vector<int32_t> expected;
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      if (d[f] <= 0.5) expected.push_back(f);
+    }
+    EXPECT_EQ((*regions)[i], expected);
+  }
+  // Tiny radius: only the sample, unless a minimum size is asked for.
+  options.radius = 1e-9;
+  options.min_faces = 4;
+  regions = GrowRegions(*g, samples, options, nullptr);
+  ASSERT_TRUE(regions.ok());
+  EXPECT_EQ((*regions)[0].size(), 4u);
+  EXPECT_EQ(GrowRegions(*g, samples, options, [] { return true; }).status().code(),
+            absl::StatusCode::kCancelled);
+}
+
+// A 2D grid Laplacian plus a diagonal: SPD, sparse, with fill.
+LowerCsc GridMatrix(int nx, int ny, double shift, Eigen::MatrixXd* dense) {
+  const int n = nx * ny;
+  dense->setZero(n, n);
+  for (int y = 0; y < ny; ++y) {
+    for (int x = 0; x < nx; ++x) {
+      const int i = y * nx + x;
+      (*dense)(i, i) = 4.0 + shift + 0.01 * (i % 7);
+      if (x + 1 < nx) (*dense)(i, i + 1) = (*dense)(i + 1, i) = -1.0;
+      if (y + 1 < ny) (*dense)(i, i + nx) = (*dense)(i + nx, i) = -1.0;
+    }
+  }
+  LowerCsc A;
+  A.n = n;
+  A.outer.push_back(0);
+  for (int j = 0; j < n; ++j) {
+    // Unsorted rows on purpose: the diagonal last.
+    for (int i = n - 1; i > j; --i) {
+      if ((*dense)(i, j) != 0.0) {
+        A.inner.push_back(i);
+        A.values.push_back((*dense)(i, j));
+      }
+    }
+    A.inner.push_back(j);
+    A.values.push_back((*dense)(j, j));
+    A.outer.push_back(static_cast<int32_t>(A.inner.size()));
+  }
+  return A;
+}
+
+TEST(LocalCholeskyTest, SolvesLikeDense) {
+  Eigen::MatrixXd dense;
+  const LowerCsc A = GridMatrix(37, 29, 0.05, &dense);
+  LocalCholesky chol;
+  ASSERT_TRUE(chol.Factorize(A, nullptr).ok());
+  EXPECT_GT(chol.flops(), 0);
+  const Eigen::MatrixXd B = Eigen::MatrixXd::Random(A.n, 3);
+  Eigen::MatrixXd X = B;
+  chol.SolveInPlace(X.data(), 3);
+  const Eigen::MatrixXd ref = dense.llt().solve(B);
+  EXPECT_LT((X - ref).norm() / ref.norm(), 1e-12);
+  // Reuse for another matrix of another size.
+  Eigen::MatrixXd dense2;
+  const LowerCsc A2 = GridMatrix(10, 50, 1.0, &dense2);
+  ASSERT_TRUE(chol.Factorize(A2, nullptr).ok());
+  Eigen::VectorXd b = Eigen::VectorXd::Random(A2.n);
+  Eigen::VectorXd x = b;
+  chol.SolveInPlace(x.data(), 1);
+  EXPECT_LT((dense2 * x - b).norm() / b.norm(), 1e-12);
+}
+
+TEST(LocalCholeskyTest, RejectsIndefinite) {
+  Eigen::MatrixXd dense;
+  LowerCsc A = GridMatrix(8, 8, -5.0, &dense);  // diagonal ~ -1: indefinite
+  LocalCholesky chol;
+  EXPECT_EQ(chol.Factorize(A, nullptr).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(GridMatrix(8, 8, 0.1, &dense).n, 64);
+  EXPECT_EQ(chol.Factorize(GridMatrix(30, 30, 0.1, &dense), [] { return true; }).code(),
+            absl::StatusCode::kCancelled);
+}
+
+// S = 1D Dirichlet Laplacian (tridiagonal 2, -1): eigenvalues 2 - 2 cos(k pi / (n + 1)).
+class PathOperator : public LocalOperator {
+ public:
+  explicit PathOperator(int n, double tau) : n_(n), tau_(tau) {
+    Eigen::MatrixXd dense;
+    dense_ = Eigen::MatrixXd::Zero(n, n);
+    for (int i = 0; i < n; ++i) {
+      dense_(i, i) = 2.0;
+      if (i + 1 < n) dense_(i, i + 1) = dense_(i + 1, i) = -1.0;
+    }
+  }
+  int32_t size() const override { return n_; }
+  void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override { *Y = dense_ * X; }
+  absl::Status PrepareShiftInverse(const std::function<bool()>&) override {
+    llt_.compute(dense_ + tau_ * Eigen::MatrixXd::Identity(n_, n_));
+    prepared_ = true;
+    return absl::OkStatus();
+  }
+  void ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override {
+    *Y = llt_.solve(X);
+  }
+  double shift() const override { return tau_; }
+  bool prepared() const { return prepared_; }
+
+ private:
+  int n_;
+  double tau_;
+  Eigen::MatrixXd dense_;
+  Eigen::LLT<Eigen::MatrixXd> llt_;
+  bool prepared_ = false;
+};
+
+TEST(LocalEigensolverTest, LowestEigenpairsOfPathLaplacian) {
+  for (int n : {50, 400}) {
+    PathOperator op(n, 1e-4);
+    LocalEigenOptions options;
+    options.count = 3;
+    options.tolerance = 1e-8;
+    auto r = basis_internal::SolveLocalEigenproblem(op, options, nullptr);
+    ASSERT_TRUE(r.ok()) << r.status();
+    EXPECT_EQ(r->dense, n <= options.dense_max_size);
+    EXPECT_EQ(op.prepared(), !r->dense);
+    for (int k = 0; k < 3; ++k) {
+      const double exact = 2.0 - 2.0 * std::cos((k + 1) * M_PI / (n + 1));
+      EXPECT_NEAR(r->values[k], exact, 1e-10 * exact + 1e-14) << "n " << n << " k " << k;
+      // Eigenvector: sin(j (k + 1) pi / (n + 1)), up to sign.
+      Eigen::VectorXd v(n);
+      for (int j = 0; j < n; ++j) v[j] = std::sin((j + 1) * (k + 1) * M_PI / (n + 1));
+      v.normalize();
+      EXPECT_NEAR(std::abs(v.dot(r->vectors.col(k))), 1.0, 1e-8);
+    }
+  }
+  PathOperator op(10, 1.0);
+  LocalEigenOptions options;
+  options.count = 11;
+  EXPECT_EQ(basis_internal::SolveLocalEigenproblem(op, options, nullptr).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  PathOperator big(500, 1e-3);
+  options.count = 2;
+  EXPECT_EQ(basis_internal::SolveLocalEigenproblem(big, options, [] { return true; })
+                .status()
+                .code(),
+            absl::StatusCode::kCancelled);
+}
+
+TEST(LocalEigensolverTest, FallsBackToLanczosWhenLobpcgDoesNotConverge) {
+  PathOperator op(400, 1e-4);
+  LocalEigenOptions options;
+  options.count = 2;
+  options.max_iterations = 1;  // cannot converge in one iteration
+  options.tolerance = 1e-9;
+  auto r = basis_internal::SolveLocalEigenproblem(op, options, nullptr);
+  ASSERT_TRUE(r.ok()) << r.status();
+  EXPECT_TRUE(r->lanczos_fallback);
+  for (int k = 0; k < 2; ++k) {
+    const double exact = 2.0 - 2.0 * std::cos((k + 1) * M_PI / 401);
+    EXPECT_NEAR(r->values[k], exact, 1e-9 * exact);
+  }
+}
+
+TEST(Crc32cTest, KnownValuesAndIncremental) {
+  const char* s = "123456789";
+  EXPECT_EQ(Crc32c(s, 9), 0xE3069283u);  // the standard check value
+  EXPECT_EQ(Crc32c("", 0), 0u);
+  std::vector<uint8_t> zeros(32, 0);
+  EXPECT_EQ(Crc32c(zeros.data(), 32), 0x8A9136AAu);  // RFC 3720 B.4
+  std::vector<uint8_t> data(1000);
+  for (size_t i = 0; i < data.size(); ++i) data[i] = static_cast<uint8_t>(i * 31 + 7);
+  const uint32_t whole = Crc32c(data.data(), data.size());
+  EXPECT_EQ(Crc32cExtend(Crc32c(data.data(), 333), data.data() + 333, 667), whole);
+  EXPECT_EQ(crc32c_internal::Crc32cExtendPortable(0, data.data(), data.size()), whole);
+  for (size_t i = 0; i < data.size(); i += 97) {
+    data[i] ^= 0x10;
+    EXPECT_NE(Crc32c(data.data(), data.size()), whole);
+    data[i] ^= 0x10;
+  }
+}
+
+}  // namespace
+}  // namespace fieldspace

@@ -1,0 +1,441 @@
+#include "core/basis/basis.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <set>
+#include <vector>
+
+#include "Eigen/Eigenvalues"
+#include "gtest/gtest.h"
+#include "tests/core/basis/basis_test_util.h"
+#include "tests/testing/test_meshes.h"
+
+namespace fieldspace {
+namespace {
+
+using testing::ColumnMajor;
+using testing::DenseColumn;
+using testing::DenseRestricted;
+using testing::DualDistances;
+using testing::Icosphere;
+using testing::LoadMesh;
+using testing::Operator;
+using testing::RegionFaces;
+using testing::TwoSpheres;
+
+Basis Build(const TriangleMesh& mesh, const FieldOperator& op, int32_t d, double sigma = 40.0,
+            int32_t threads = 0, uint64_t seed = 0) {
+  BasisOptions options;
+  options.params.dimension = d;
+  options.params.sigma = sigma;
+  options.params.seed = seed;
+  options.threads = threads;
+  auto basis = BuildBasis(mesh, op, options);
+  EXPECT_TRUE(basis.ok()) << basis.status();
+  return *std::move(basis);
+}
+
+int32_t FieldsPerRegion(const Basis& b) {
+  return b.params.fields_per_region.value_or(b.type.default_fields_per_region());
+}
+
+// The invariants every basis satisfies: exact size, support inside the regions (independent
+// Dijkstra), M-orthonormal fields per region, every face covered.
+void CheckStructure(const TriangleMesh& mesh, const FieldOperator& op, const Basis& basis,
+                    int32_t regions_to_check) {
+  const int32_t d = basis.params.dimension;
+  const int32_t m = FieldsPerRegion(basis);
+  const int32_t dpf = op.type.dofs_per_face();
+  ASSERT_EQ(basis.U.rows(), op.dofs());
+  ASSERT_EQ(basis.U.cols(), d);
+  ASSERT_EQ(basis.num_regions(), (d + m - 1) / m);
+  ASSERT_EQ(static_cast<int32_t>(basis.local_eigenvalues.size()), d);
+  const double expected_r = std::sqrt(basis.params.sigma * mesh.total_area() / (d * M_PI));
+  EXPECT_NEAR(basis.radius, expected_r, 1e-12 * expected_r);
+  // Distinct samples.
+  std::set<int32_t> distinct(basis.sample_faces.begin(), basis.sample_faces.end());
+  EXPECT_EQ(static_cast<int32_t>(distinct.size()), basis.num_regions());
+  // Every row has entries (all faces covered) when r exceeds the covering radius.
+  ASSERT_LT(basis.coverage_radius, basis.radius);
+  EXPECT_EQ(basis.uncovered_faces, 0);
+  for (Eigen::Index r = 0; r < basis.U.rows(); ++r) {
+    ASSERT_GT(basis.U.outerIndexPtr()[r + 1], basis.U.outerIndexPtr()[r]) << "row " << r;
+  }
+  const Eigen::SparseMatrix<double> Uc = ColumnMajor(basis);
+  const int32_t step = std::max(1, basis.num_regions() / regions_to_check);
+  for (int32_t region = 0; region < basis.num_regions(); region += step) {
+    const std::vector<int32_t> faces = RegionFaces(mesh, basis, region);
+    std::vector<char> inside(mesh.num_faces(), 0);
+    for (int32_t f : faces) inside[f] = 1;
+    const int32_t first = region * m;
+    const int32_t count = std::min(m, d - first);
+    Eigen::MatrixXd block(op.dofs(), count);
+    for (int32_t c = 0; c < count; ++c) block.col(c) = DenseColumn(Uc, first + c);
+    // Support: zero outside the region, and the region's faces are all used.
+    for (int64_t i = 0; i < op.dofs(); ++i) {
+      if (!inside[i / dpf]) {
+        ASSERT_EQ(block.row(i).norm(), 0.0) << "region " << region << " leaks into face " << i / dpf;
+      }
+    }
+    // M-orthonormal: U_D^T M U_D = I.
+    const Eigen::MatrixXd gram = block.transpose() * op.mass.asDiagonal() * block;
+    EXPECT_LT((gram - Eigen::MatrixXd::Identity(count, count)).cwiseAbs().maxCoeff(), 1e-5)
+        << "region " << region << "\n" << gram;
+  }
+}
+
+TEST(BasisTest, VectorBasisOnRealMeshHasPaperStructure) {
+  FS_REQUIRE_SHARED_MESH(path, "bimba_18k.obj");
+  const TriangleMesh mesh = LoadMesh(path);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const Basis basis = Build(mesh, op, 200);
+  CheckStructure(mesh, op, basis, 25);
+  // About 0.6 sigma nonzeros per row with dual-graph distances (DESIGN.md section 3).
+  const double per_row = static_cast<double>(basis.U.nonZeros()) / basis.U.rows();
+  EXPECT_GT(per_row, 15.0);
+  EXPECT_LT(per_row, 45.0);
+  EXPECT_EQ(basis.stats.lanczos_fallbacks, 0);
+  // Each column's eigenvalue is its Rayleigh quotient: U_j^T S U_j (U_j has unit M-norm).
+  const Eigen::SparseMatrix<double> Uc = ColumnMajor(basis);
+  for (int32_t j = 0; j < basis.dimension(); j += 17) {
+    const Eigen::VectorXd u = DenseColumn(Uc, j);
+    const double rq = u.dot(op.stiffness * u);
+    EXPECT_NEAR(rq, basis.local_eigenvalues[j], 1e-4 * basis.local_eigenvalues[j]) << j;
+  }
+}
+
+// The local eigenproblem (eq. 7) against an independent dense solve of S_bar built from the
+// operator: same eigenvalues, same eigenspace.
+void CheckLocalEigenproblems(const TriangleMesh& mesh, const FieldOperator& op,
+                             const Basis& basis, int32_t regions_to_check) {
+  const int32_t m = FieldsPerRegion(basis);
+  const int32_t dpf = op.type.dofs_per_face();
+  const Eigen::SparseMatrix<double> Uc = ColumnMajor(basis);
+  const int32_t step = std::max(1, basis.num_regions() / regions_to_check);
+  for (int32_t region = 0; region < basis.num_regions(); region += step) {
+    const std::vector<int32_t> faces = RegionFaces(mesh, basis, region);
+    const Eigen::MatrixXd S = DenseRestricted(op, faces);
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(S);
+    ASSERT_EQ(es.info(), Eigen::Success);
+    const int32_t first = region * m;
+    const int32_t count = std::min(m, basis.dimension() - first);
+    // phi = V^-1 U_D restricted to the region.
+    Eigen::MatrixXd phi(faces.size() * dpf, count);
+    for (int32_t c = 0; c < count; ++c) {
+      const Eigen::VectorXd u = DenseColumn(Uc, first + c);
+      for (size_t i = 0; i < faces.size(); ++i) {
+        for (int32_t q = 0; q < dpf; ++q) {
+          const int64_t g = static_cast<int64_t>(dpf) * faces[i] + q;
+          phi(dpf * i + q, c) = u[g] * std::sqrt(op.mass[g]);
+        }
+      }
+    }
+    for (int32_t c = 0; c < count; ++c) {
+      const double lambda = es.eigenvalues()[c];
+      EXPECT_NEAR(basis.local_eigenvalues[first + c], lambda, 1e-6 * lambda + 1e-9)
+          << "region " << region << " field " << c;
+      // Residual of the stored (float) field, relative to the operator's scale.
+      const double res = (S * phi.col(c) - lambda * phi.col(c)).norm();
+      EXPECT_LT(res, 1e-4 * es.eigenvalues().maxCoeff()) << "region " << region;
+    }
+    // The span agrees with the dense eigenvectors (when the m-th eigenvalue is separated).
+    if (count == m && es.eigenvalues()[m] > 1.05 * es.eigenvalues()[m - 1]) {
+      const Eigen::MatrixXd ref = es.eigenvectors().leftCols(m);
+      const Eigen::MatrixXd proj = ref.transpose() * phi;  // m x m, orthogonal if spans agree
+      const Eigen::VectorXd sv = Eigen::JacobiSVD<Eigen::MatrixXd>(proj).singularValues();
+      EXPECT_GT(sv.minCoeff(), 1.0 - 1e-4) << "region " << region;
+    }
+  }
+}
+
+TEST(BasisTest, LocalEigenproblemsMatchDenseSolveVector) {
+  const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const Basis basis = Build(mesh, op, 120, 20.0);
+  CheckStructure(mesh, op, basis, 20);
+  CheckLocalEigenproblems(mesh, op, basis, 4);
+}
+
+TEST(BasisTest, LocalEigenproblemsMatchDenseSolveNField) {
+  const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
+  const FieldOperator op = Operator(mesh, FieldType::NField(4));
+  const Basis basis = Build(mesh, op, 120, 20.0);
+  CheckStructure(mesh, op, basis, 20);
+  CheckLocalEigenproblems(mesh, op, basis, 4);
+}
+
+TEST(BasisTest, LocalEigenproblemsMatchDenseSolveTensor) {
+  const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
+  const FieldOperator op = Operator(mesh, FieldType::Tensor());
+  const Basis basis = Build(mesh, op, 120, 20.0);  // 40 regions x 3 fields
+  CheckStructure(mesh, op, basis, 20);
+  CheckLocalEigenproblems(mesh, op, basis, 4);
+}
+
+TEST(BasisTest, FactoredAndGenericVectorPathsAgree) {
+  const TriangleMesh mesh = Icosphere(4);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 60;
+  auto fast = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(fast.ok()) << fast.status();
+  EXPECT_TRUE(fast->stats.hodge_factor_used);
+  options.use_factored_vector_operator = false;
+  auto generic = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(generic.ok()) << generic.status();
+  EXPECT_FALSE(generic->stats.hodge_factor_used);
+  ASSERT_EQ(fast->sample_faces, generic->sample_faces);
+  for (int32_t j = 0; j < 60; ++j) {
+    EXPECT_NEAR(fast->local_eigenvalues[j], generic->local_eigenvalues[j],
+                1e-7 * generic->local_eigenvalues[j]);
+  }
+  // Same spans per region (the two lowest eigenvalues can be nearly equal, so compare spans).
+  const Eigen::SparseMatrix<double> Uf = ColumnMajor(*fast), Ug = ColumnMajor(*generic);
+  for (int32_t r = 0; r < fast->num_regions(); ++r) {
+    Eigen::MatrixXd a(op.dofs(), 2), b(op.dofs(), 2);
+    for (int c = 0; c < 2; ++c) {
+      a.col(c) = DenseColumn(Uf, 2 * r + c);
+      b.col(c) = DenseColumn(Ug, 2 * r + c);
+    }
+    const Eigen::MatrixXd proj = a.transpose() * op.mass.asDiagonal() * b;
+    const Eigen::VectorXd sv = Eigen::JacobiSVD<Eigen::MatrixXd>(proj).singularValues();
+    EXPECT_GT(sv.minCoeff(), 1.0 - 1e-5) << "region " << r;
+  }
+}
+
+TEST(BasisTest, DeterministicAndIndependentOfThreadCount) {
+  const TriangleMesh mesh = Icosphere(4);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const Basis a = Build(mesh, op, 80, 40.0, /*threads=*/1, /*seed=*/7);
+  const Basis b = Build(mesh, op, 80, 40.0, /*threads=*/1, /*seed=*/7);
+  const Basis c = Build(mesh, op, 80, 40.0, /*threads=*/2, /*seed=*/7);
+  ASSERT_EQ(a.sample_faces, b.sample_faces);
+  ASSERT_EQ(a.sample_faces, c.sample_faces);
+  ASSERT_EQ(a.U.nonZeros(), c.U.nonZeros());
+  // Same seed, same threads: bitwise. Other thread count: equal up to rounding and column sign.
+  EXPECT_TRUE(std::equal(a.U.valuePtr(), a.U.valuePtr() + a.U.nonZeros(), b.U.valuePtr()));
+  const Eigen::SparseMatrix<double> Ua = ColumnMajor(a), Uc = ColumnMajor(c);
+  for (int32_t j = 0; j < 80; ++j) {
+    const Eigen::VectorXd u = DenseColumn(Ua, j), v = DenseColumn(Uc, j);
+    const double diff = std::min((u - v).cwiseAbs().maxCoeff(), (u + v).cwiseAbs().maxCoeff());
+    EXPECT_LT(diff, 1e-6 * u.cwiseAbs().maxCoeff()) << "column " << j;
+  }
+  const Basis other = Build(mesh, op, 80, 40.0, 1, /*seed=*/8);
+  EXPECT_NE(a.sample_faces, other.sample_faces);
+}
+
+TEST(BasisTest, AdaptivityWeightsConcentrateSamples) {
+  const TriangleMesh mesh = Icosphere(4);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  // Weight 4 on the cap z > 0.6 (20% of the sphere's area).
+  Eigen::VectorXd w = Eigen::VectorXd::Ones(mesh.num_faces());
+  double cap_area = 0;
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    if (mesh.face_barycenters()(f, 2) > 0.6) {
+      w[f] = 4.0;
+      cap_area += mesh.face_areas()[f];
+    }
+  }
+  const double cap_fraction = cap_area / mesh.total_area();
+  auto fraction_in_cap = [&](const Basis& b) {
+    int32_t in = 0;
+    for (int32_t s : b.sample_faces) in += w[s] > 1.0;
+    return static_cast<double>(in) / b.num_regions();
+  };
+  BasisOptions options;
+  options.params.dimension = 100;
+  auto uniform = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(uniform.ok()) << uniform.status();
+  options.params.face_weights = w;
+  auto adaptive = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(adaptive.ok()) << adaptive.status();
+  EXPECT_NEAR(fraction_in_cap(*uniform), cap_fraction, 0.1);
+  // Weighted area 16 x 0.2 vs 0.8: about 80% of the samples should fall in the cap.
+  EXPECT_GT(fraction_in_cap(*adaptive), 0.6);
+  // Regions use the weighted distance: a cap region is smaller than a uniform one.
+  int32_t cap_region = -1;
+  for (int32_t r = 0; r < adaptive->num_regions(); ++r) {
+    if (mesh.face_barycenters()(adaptive->sample_faces[r], 2) > 0.8) cap_region = r;
+  }
+  ASSERT_GE(cap_region, 0);
+  const std::vector<int32_t> faces = RegionFaces(mesh, *adaptive, cap_region, w);
+  std::vector<char> inside(mesh.num_faces(), 0);
+  for (int32_t f : faces) inside[f] = 1;
+  const Eigen::SparseMatrix<double> Ua = ColumnMajor(*adaptive);
+  for (int c = 0; c < 2; ++c) {
+    const Eigen::VectorXd u = DenseColumn(Ua, 2 * cap_region + c);
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      if (!inside[f]) {
+        ASSERT_EQ(u.segment(2 * f, 2).norm(), 0.0);
+      }
+    }
+  }
+  EXPECT_LT(faces.size(), 0.3 * RegionFaces(mesh, *uniform, 0).size());
+}
+
+TEST(BasisTest, MultiComponentMeshSamplesEveryComponentByArea) {
+  const TriangleMesh mesh = TwoSpheres(3, 2.0);  // areas 1 : 4
+  ASSERT_EQ(mesh.num_components(), 2);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const Basis basis = Build(mesh, op, 100);  // 50 regions: 10 + 40
+  CheckStructure(mesh, op, basis, 50);
+  int32_t in_first = 0;
+  for (int32_t s : basis.sample_faces) in_first += mesh.face_component()[s] == 0;
+  EXPECT_EQ(in_first, 10);
+  // Component 0's samples come first.
+  for (int32_t r = 0; r < 10; ++r) EXPECT_EQ(mesh.face_component()[basis.sample_faces[r]], 0);
+}
+
+TEST(BasisTest, TinyDimensionStillGivesEveryComponentASample) {
+  const TriangleMesh mesh = TwoSpheres(2, 3.0);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 3;  // 2 regions: one per component, the second with one field
+  auto basis = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(basis.ok()) << basis.status();
+  ASSERT_EQ(basis->num_regions(), 2);
+  EXPECT_NE(mesh.face_component()[basis->sample_faces[0]],
+            mesh.face_component()[basis->sample_faces[1]]);
+  EXPECT_EQ(basis->dimension(), 3);
+  options.params.dimension = 2;  // 1 region for 2 components
+  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(BasisTest, MeshesWithBoundary) {
+  for (const char* name : {"camelhead_23k.off", "blade_16k.off"}) {
+    FS_REQUIRE_SHARED_MESH(path, name);
+    const TriangleMesh mesh = LoadMesh(path);
+    const FieldOperator op = Operator(mesh, FieldType::Vector());
+    const Basis basis = Build(mesh, op, 150);
+    SCOPED_TRACE(name);
+    CheckStructure(mesh, op, basis, 15);
+  }
+}
+
+TEST(BasisTest, OddDimensionDropsTheLastRegionsSecondField) {
+  const TriangleMesh mesh = Icosphere(3);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const Basis basis = Build(mesh, op, 41);
+  EXPECT_EQ(basis.num_regions(), 21);
+  EXPECT_EQ(basis.dimension(), 41);
+  CheckStructure(mesh, op, basis, 21);
+  // The last region's single field is its lowest one: a Rayleigh quotient no larger than the
+  // other regions' second fields typically are, and equal to its own local eigenvalue.
+  const Eigen::VectorXd u = DenseColumn(ColumnMajor(basis), 40);
+  EXPECT_NEAR(u.dot(op.stiffness * u), basis.local_eigenvalues[40], 1e-4 * basis.local_eigenvalues[40]);
+}
+
+TEST(BasisTest, CustomFieldsPerRegion) {
+  const TriangleMesh mesh = Icosphere(3);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 40;
+  options.params.sigma = 16.0;  // small regions keep the dense checks fast
+  options.params.fields_per_region = 4;
+  auto basis = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(basis.ok()) << basis.status();
+  EXPECT_EQ(basis->num_regions(), 10);
+  CheckStructure(mesh, op, *basis, 10);
+  CheckLocalEigenproblems(mesh, op, *basis, 3);
+}
+
+TEST(BasisTest, ProgressAndCancellation) {
+  const TriangleMesh mesh = Icosphere(4);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 100;
+  std::vector<std::pair<BasisPhase, double>> calls;
+  options.progress = [&](BasisPhase phase, double fraction) { calls.push_back({phase, fraction}); };
+  auto basis = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(basis.ok());
+  ASSERT_FALSE(calls.empty());
+  bool saw_eigensolve = false;
+  for (auto [phase, fraction] : calls) {
+    EXPECT_GE(fraction, 0.0);
+    EXPECT_LE(fraction, 1.0);
+    saw_eigensolve |= phase == BasisPhase::kEigensolve;
+  }
+  EXPECT_TRUE(saw_eigensolve);
+  EXPECT_EQ(calls.back().first, BasisPhase::kAssembly);
+  EXPECT_EQ(calls.back().second, 1.0);
+
+  // Cancelled before starting, and from inside the eigensolve phase.
+  std::atomic<bool> cancel{true};
+  options.cancel = &cancel;
+  options.progress = nullptr;
+  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kCancelled);
+  cancel = false;
+  options.progress = [&](BasisPhase phase, double) {
+    if (phase == BasisPhase::kEigensolve) cancel = true;
+  };
+  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kCancelled);
+}
+
+TEST(BasisTest, InvalidParameters) {
+  const TriangleMesh mesh = Icosphere(2);  // 320 faces, 640 DOFs
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  auto code = [&](auto mutate) {
+    BasisOptions options;
+    options.params.dimension = 20;
+    mutate(options);
+    return BuildBasis(mesh, op, options).status().code();
+  };
+  using absl::StatusCode;
+  EXPECT_EQ(code([](BasisOptions&) {}), StatusCode::kOk);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = 0; }), StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = -3; }), StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = 641; }), StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = 0; }), StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = -1; }), StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = std::nan(""); }),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = INFINITY; }),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.fields_per_region = 0; }),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.face_weights = Eigen::VectorXd::Ones(319); }),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) {
+              o.params.face_weights = Eigen::VectorXd::Ones(320);
+              o.params.face_weights[5] = 0.0;
+            }),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) {
+              o.params.face_weights = Eigen::VectorXd::Ones(320);
+              o.params.face_weights[7] = -2.0;
+            }),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) {
+              o.params.face_weights = Eigen::VectorXd::Ones(320);
+              o.params.face_weights[9] = std::nan("");
+            }),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.threads = -1; }), StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.eigen_tolerance = 0; }), StatusCode::kInvalidArgument);
+  // Memory limits: the sigma * k estimate, and the exact count.
+  EXPECT_EQ(code([](BasisOptions& o) { o.max_basis_bytes = 1000; }),
+            StatusCode::kResourceExhausted);
+  // An operator for another mesh.
+  const TriangleMesh other = Icosphere(1);
+  const FieldOperator other_op = Operator(other, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 10;
+  EXPECT_EQ(BuildBasis(mesh, other_op, options).status().code(), StatusCode::kInvalidArgument);
+}
+
+TEST(BasisTest, DimensionEqualToDofCountIsAllowed) {
+  const TriangleMesh mesh = Icosphere(1);  // 80 faces, 160 DOFs
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 160;  // 80 regions: every face a sample
+  options.params.sigma = 2.0;
+  auto basis = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(basis.ok()) << basis.status();
+  EXPECT_EQ(basis->num_regions(), 80);
+  EXPECT_GT(basis->stats.dense_regions, 0);
+}
+
+}  // namespace
+}  // namespace fieldspace

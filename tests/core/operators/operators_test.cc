@@ -1,0 +1,362 @@
+// Invariants of the assembled operators on real meshes and shapes built in code: symmetry,
+// positive semi-definiteness, kernel dimension = 2 * genus, the analytic spectrum of the sphere,
+// the tensor = scalar + 2-field decoupling, and independence of the per-face frame choice.
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "Eigen/Dense"
+#include "Eigen/SparseCore"
+#include "core/linalg/eigensolver.h"
+#include "core/linalg/sparse_checks.h"
+#include "core/operators/conversions.h"
+#include "core/operators/field_operator.h"
+#include "core/operators/nfield_laplacian.h"
+#include "core/operators/tensor_laplacian.h"
+#include "core/operators/vector_laplacian.h"
+#include "gtest/gtest.h"
+#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/test_meshes.h"
+
+namespace fieldspace {
+namespace {
+
+using SpMat = Eigen::SparseMatrix<double>;
+using ::fieldspace::testing::LoadMesh;
+using ::fieldspace::testing::MaxAbs;
+using ::fieldspace::testing::MaxAbsDiff;
+using ::fieldspace::testing::MustCreate;
+using ::fieldspace::testing::PlanarStrip;
+
+EigenResult Lowest(const SpMat& S, const Eigen::VectorXd& mass, int count, bool vectors = false) {
+  EigenOptions options;
+  options.count = count;
+  options.compute_vectors = vectors;
+  auto result = LowestEigenpairs(S, mass, options);
+  EXPECT_TRUE(result.ok()) << result.status();
+  return result.ok() ? *result : EigenResult{};
+}
+
+FieldOperator MustBuild(const TriangleMesh& mesh, FieldType type) {
+  auto op = BuildFieldOperator(mesh, type);
+  EXPECT_TRUE(op.ok()) << op.status();
+  return *std::move(op);
+}
+
+// max_i S_ii / M_ii: the scale of the largest eigenvalues.
+double Scale(const FieldOperator& op) {
+  double m = 0;
+  for (int i = 0; i < op.dofs(); ++i) m = std::max(m, op.stiffness.coeff(i, i) / op.mass[i]);
+  return m;
+}
+
+TEST(OperatorPropertiesTest, SymmetricPsdPositiveMassOnRealMeshes) {
+  for (const char* name :
+       {"sphere_1k.obj", "chipped_torus_1k.obj", "rocker_arm_1k.off", "blade_16k.off"}) {
+    FS_REQUIRE_SHARED_MESH(path, name);
+    auto mesh = LoadMesh(path);
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    for (FieldType type : {FieldType::Vector(), FieldType::NField(3), FieldType::Tensor()}) {
+      SCOPED_TRACE(std::string(name) + " " + type.ToString());
+      const FieldOperator op = MustBuild(*mesh, type);
+      // Bitwise symmetric (the assembly mirrors blocks exactly).
+      EXPECT_TRUE(CheckSymmetric(op.stiffness, 0.0, "S").ok());
+      EXPECT_TRUE(op.stiffness.isCompressed());
+      EXPECT_GT(op.mass.minCoeff(), 0.0);
+      // PSD: the smallest eigenvalue of S x = lambda M x is >= -1e-10 relative to the largest.
+      // (The shift-invert solver also fails outright if an eigenvalue is below its shift.)
+      const EigenResult r = Lowest(op.stiffness, op.mass, 3);
+      ASSERT_EQ(r.values.size(), 3);
+      EXPECT_GE(r.values[0], -1e-10 * Scale(op));
+    }
+  }
+}
+
+TEST(OperatorPropertiesTest, DensePsdCheckOnSmallShapes) {
+  // Independent of the sparse eigensolver: all eigenvalues of M^-1/2 S M^-1/2 by dense LAPACK-free
+  // Eigen on small meshes, with and without boundary.
+  std::vector<TriangleMesh> meshes;
+  meshes.push_back(MustCreate(MakeIcosphere(2)));
+  meshes.push_back(MustCreate(MakeTorus(1.0, 0.3, 16, 8)));
+  meshes.push_back(MustCreate(PlanarStrip(12, 6)));
+  for (const TriangleMesh& mesh : meshes) {
+    for (FieldType type : {FieldType::Vector(), FieldType::NField(5), FieldType::Tensor()}) {
+      const FieldOperator op = MustBuild(mesh, type);
+      const Eigen::VectorXd d = op.mass.cwiseSqrt().cwiseInverse();
+      const Eigen::MatrixXd A = d.asDiagonal() * Eigen::MatrixXd(op.stiffness) * d.asDiagonal();
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(A, Eigen::EigenvaluesOnly);
+      EXPECT_GE(es.eigenvalues()[0], -1e-12 * es.eigenvalues().maxCoeff()) << type.ToString();
+    }
+  }
+}
+
+// Number of eigenvalues below `relative` times the first one above that threshold: the kernel.
+struct KernelReport {
+  int dimension;
+  double largest_kernel;
+  double smallest_nonzero;
+};
+KernelReport Kernel(const FieldOperator& op, int count) {
+  const EigenResult r = Lowest(op.stiffness, op.mass, count);
+  const double top = r.values[count - 1];
+  KernelReport k{0, 0.0, top};
+  for (int i = 0; i < count; ++i) {
+    if (r.values[i] < 1e-8 * top) {
+      ++k.dimension;
+      k.largest_kernel = std::max(k.largest_kernel, std::abs(r.values[i]));
+    } else {
+      k.smallest_nonzero = std::min(k.smallest_nonzero, r.values[i]);
+    }
+  }
+  return k;
+}
+
+TEST(VectorHodgeTest, KernelDimensionIsTwiceTheGenus) {
+  struct Case {
+    const char* name;
+    int genus;
+  };
+  for (const Case& c : {Case{"sphere_1k.obj", 0}, Case{"bimba_1k.off", 0}, Case{"torus_5k.obj", 1},
+                        Case{"kitten_29k.obj", 1}, Case{"fertility_9k.off", 4}}) {
+    FS_REQUIRE_SHARED_MESH(path, c.name);
+    auto mesh = LoadMesh(path);
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    ASSERT_EQ(mesh->genus(), c.genus);
+    const FieldOperator op = MustBuild(*mesh, FieldType::Vector());
+    const KernelReport k = Kernel(op, 2 * c.genus + 4);
+    EXPECT_EQ(k.dimension, 2 * c.genus) << c.name;
+    // A clear gap: harmonic eigenvalues are rounding noise next to the first nonzero one.
+    EXPECT_LT(k.largest_kernel, 1e-9 * k.smallest_nonzero) << c.name;
+    std::printf("%s: kernel %d, largest kernel eigenvalue %.3g, smallest nonzero %.6g\n", c.name,
+                k.dimension, k.largest_kernel, k.smallest_nonzero);
+  }
+}
+
+TEST(VectorHodgeTest, UnitSphereSpectrumConvergesToLTimesLPlusOne) {
+  // l(l+1) with multiplicity 2(2l+1): 2 (x6), 6 (x10), 12 (x14).
+  std::vector<double> exact;
+  for (int l = 1; l <= 3; ++l) exact.insert(exact.end(), 2 * (2 * l + 1), l * (l + 1.0));
+  double previous_error = 1e300;
+  for (int level = 3; level <= 5; ++level) {
+    const TriangleMesh mesh = MustCreate(MakeIcosphere(level, 1.0));
+    const FieldOperator op = MustBuild(mesh, FieldType::Vector());
+    const EigenResult r = Lowest(op.stiffness, op.mass, static_cast<int>(exact.size()));
+    double error = 0;
+    for (size_t i = 0; i < exact.size(); ++i) {
+      error = std::max(error, std::abs(r.values[i] - exact[i]) / exact[i]);
+    }
+    std::printf(
+        "icosphere level %d (%d faces): max relative eigenvalue error %.3g (%d pairs "
+        "recovered by the multiplicity check)\n",
+        level, mesh.num_faces(), error, r.recovered);
+    EXPECT_LT(error, previous_error) << "level " << level;
+    EXPECT_LT(error, level == 3 ? 0.05 : level == 4 ? 0.015 : 0.004) << "level " << level;
+    previous_error = error;
+  }
+}
+
+TEST(NFieldTest, ConstantFieldOnPlanarStripIsInTheKernel) {
+  const TriangleMesh mesh = MustCreate(PlanarStrip(20, 5));
+  for (int n : {1, 2, 4}) {
+    auto S = BuildNFieldStiffness(mesh, n);
+    ASSERT_TRUE(S.ok()) << S.status();
+    fieldspace::AmbientVectors v(mesh.num_faces(), 3);
+    v.rowwise() = Eigen::RowVector3d(0.8, -0.35, 0.0);
+    auto x = NFieldDofsFromAmbient(mesh, n, v);
+    ASSERT_TRUE(x.ok()) << x.status();
+    const double scale = MaxAbs(*S) * x->norm();
+    EXPECT_LT((*S * *x).norm(), 1e-12 * scale) << "n = " << n;
+    // A field that turns is not in the kernel.
+    for (int f = 0; f < mesh.num_faces(); ++f) {
+      const double a = 0.3 * mesh.face_barycenters()(f, 0);
+      v.row(f) << std::cos(a), std::sin(a), 0.0;
+    }
+    x = NFieldDofsFromAmbient(mesh, n, v);
+    ASSERT_TRUE(x.ok());
+    EXPECT_GT(x->dot(*S * *x), 1e-3 * x->squaredNorm()) << "n = " << n;
+  }
+}
+
+TEST(NFieldTest, FourFieldOnSphereHasNoKernel) {
+  // A sphere admits no continuous 4-direction field: the lowest eigenvalue stays clearly positive
+  // (and converges under refinement), unlike on the plane.
+  double previous = 0;
+  for (int level = 3; level <= 4; ++level) {
+    const TriangleMesh mesh = MustCreate(MakeIcosphere(level, 1.0));
+    const FieldOperator op = MustBuild(mesh, FieldType::NField(4));
+    const EigenResult r = Lowest(op.stiffness, op.mass, 4);
+    std::printf("4-field on icosphere level %d: lowest eigenvalues %.6g %.6g %.6g\n", level,
+                r.values[0], r.values[1], r.values[2]);
+    EXPECT_GT(r.values[0], 1.0);
+    if (level > 3) {
+      EXPECT_NEAR(r.values[0], previous, 0.1 * previous);
+    }
+    previous = r.values[0];
+  }
+}
+
+TEST(TensorTest, SpectrumIsUnionOfScalarAndTwoFieldSpectra) {
+  FS_REQUIRE_SHARED_MESH(path, "bimba_1k.off");
+  auto mesh = LoadMesh(path);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  const FieldOperator tensor = MustBuild(*mesh, FieldType::Tensor());
+  const FieldOperator two = MustBuild(*mesh, FieldType::NField(2));
+  // Scalar face Laplacian with the same weights w_e = 3 |e|^2 / (A_i + A_j), built here.
+  std::vector<Eigen::Triplet<double>> t;
+  for (int e = 0; e < mesh->num_edges(); ++e) {
+    const int i = mesh->edge_faces()(e, 0), j = mesh->edge_faces()(e, 1);
+    if (j == kNoFace) continue;
+    const double len2 =
+        (mesh->vertices().row(mesh->edges()(e, 1)) - mesh->vertices().row(mesh->edges()(e, 0)))
+            .squaredNorm();
+    const double w = 3 * len2 / (mesh->face_areas()[i] + mesh->face_areas()[j]);
+    t.emplace_back(i, i, w);
+    t.emplace_back(j, j, w);
+    t.emplace_back(i, j, -w);
+    t.emplace_back(j, i, -w);
+  }
+  SpMat scalar(mesh->num_faces(), mesh->num_faces());
+  scalar.setFromTriplets(t.begin(), t.end());
+
+  const int count = 24;
+  const EigenResult rt = Lowest(tensor.stiffness, tensor.mass, count);
+  const EigenResult rs = Lowest(scalar, mesh->face_areas(), count);
+  const EigenResult r2 = Lowest(two.stiffness, two.mass, count);
+  std::vector<double> merged(rs.values.data(), rs.values.data() + count);
+  merged.insert(merged.end(), r2.values.data(), r2.values.data() + count);
+  std::sort(merged.begin(), merged.end());
+  const double tol = 1e-8 * rt.values[count - 1];
+  for (int i = 0; i < count; ++i) EXPECT_NEAR(rt.values[i], merged[i], tol) << i;
+
+  // Entrywise: in per-face coordinates (t, d1, d2) = ((a11 + a22)/sqrt2, (a11 - a22)/sqrt2,
+  // sqrt2 a12) the tensor stiffness is exactly blockdiag(scalar, 2-field).
+  const int nf = mesh->num_faces();
+  std::vector<Eigen::Triplet<double>> q;
+  const double h = std::sqrt(0.5);
+  for (int f = 0; f < nf; ++f) {
+    // a = Q (t, d1, d2): a11 = h (t + d1), a22 = h (t - d1), a3 = d2.
+    q.emplace_back(3 * f, 3 * f, h);
+    q.emplace_back(3 * f, 3 * f + 1, h);
+    q.emplace_back(3 * f + 1, 3 * f, h);
+    q.emplace_back(3 * f + 1, 3 * f + 1, -h);
+    q.emplace_back(3 * f + 2, 3 * f + 2, 1.0);
+  }
+  SpMat Q(3 * nf, 3 * nf);
+  Q.setFromTriplets(q.begin(), q.end());
+  const SpMat rotated = SpMat(Q.transpose()) * tensor.stiffness * Q;
+  std::vector<Eigen::Triplet<double>> e;
+  for (int j = 0; j < scalar.outerSize(); ++j) {
+    for (SpMat::InnerIterator it(scalar, j); it; ++it) {
+      e.emplace_back(3 * it.row(), 3 * it.col(), it.value());
+    }
+  }
+  for (int j = 0; j < two.stiffness.outerSize(); ++j) {
+    for (SpMat::InnerIterator it(two.stiffness, j); it; ++it) {
+      e.emplace_back(3 * (it.row() / 2) + 1 + it.row() % 2, 3 * (it.col() / 2) + 1 + it.col() % 2,
+                     it.value());
+    }
+  }
+  SpMat expected(3 * nf, 3 * nf);
+  expected.setFromTriplets(e.begin(), e.end());
+  EXPECT_LT(MaxAbsDiff(rotated, expected), 1e-12 * MaxAbs(expected));
+}
+
+// Per-face change of DOF coordinates when the frame of face f is rotated by phi_f: vectors
+// rotate by R(-phi), n-field representation vectors by R(-n phi), tensors by the Mandel-Voigt
+// form of A -> R(-phi) A R(-phi)^T (built from the basis tensors, not from eq. 18).
+SpMat FrameChange(const TriangleMesh& a, const TriangleMesh& b, FieldType type) {
+  std::vector<Eigen::Triplet<double>> t;
+  const int p = type.dofs_per_face();
+  for (int f = 0; f < a.num_faces(); ++f) {
+    const Eigen::Vector3d xb = b.frame_x().row(f);
+    const double phi = std::atan2(xb.dot(Eigen::Vector3d(a.frame_y().row(f))),
+                                  xb.dot(Eigen::Vector3d(a.frame_x().row(f))));
+    Eigen::MatrixXd block;
+    if (type.kind == FieldKind::kTensor) {
+      Eigen::Matrix2d R;
+      R << std::cos(phi), std::sin(phi), -std::sin(phi), std::cos(phi);  // R(-phi)
+      block.resize(3, 3);
+      for (int k = 0; k < 3; ++k) {
+        Eigen::Matrix2d A = Eigen::Matrix2d::Zero();
+        if (k == 0) A(0, 0) = 1;
+        if (k == 1) A(1, 1) = 1;
+        if (k == 2) A(0, 1) = A(1, 0) = std::sqrt(0.5);
+        const Eigen::Matrix2d B = R * A * R.transpose();
+        block.col(k) << B(0, 0), B(1, 1), std::sqrt(2.0) * B(0, 1);
+      }
+    } else {
+      const double angle = -(type.kind == FieldKind::kNField ? type.n : 1) * phi;
+      block.resize(2, 2);
+      block << std::cos(angle), -std::sin(angle), std::sin(angle), std::cos(angle);
+    }
+    for (int r = 0; r < p; ++r) {
+      for (int c = 0; c < p; ++c) t.emplace_back(p * f + r, p * f + c, block(r, c));
+    }
+  }
+  SpMat Q(p * a.num_faces(), p * a.num_faces());
+  Q.setFromTriplets(t.begin(), t.end());
+  return Q;
+}
+
+TEST(FrameIndependenceTest, CyclicVertexOrderOnlyRotatesTheDofs) {
+  FS_REQUIRE_SHARED_MESH(path, "bimba_1k.off");
+  auto read = ReadMeshFile(path);
+  ASSERT_TRUE(read.ok()) << read.status();
+  MeshArrays permuted = read->arrays;
+  for (int f = 0; f < permuted.faces.rows(); ++f) {
+    const Eigen::RowVector3i c = permuted.faces.row(f);
+    const int r = f % 3;
+    permuted.faces.row(f) << c[r], c[(r + 1) % 3], c[(r + 2) % 3];
+  }
+  const TriangleMesh a = MustCreate(read->arrays);
+  const TriangleMesh b = MustCreate(permuted);
+  for (FieldType type :
+       {FieldType::Vector(), FieldType::NField(1), FieldType::NField(4), FieldType::Tensor()}) {
+    const FieldOperator oa = MustBuild(a, type);
+    const FieldOperator ob = MustBuild(b, type);
+    // DOFs in frame b are Q times DOFs in frame a, energies agree: S_b = Q S_a Q^T.
+    const SpMat Q = FrameChange(a, b, type);
+    const SpMat expected = Q * oa.stiffness * SpMat(Q.transpose());
+    EXPECT_LT(MaxAbsDiff(ob.stiffness, expected), 1e-11 * MaxAbs(expected)) << type.ToString();
+    EXPECT_LT((oa.mass - ob.mass).cwiseAbs().maxCoeff(), 1e-15 * oa.mass.maxCoeff());
+    const EigenResult ra = Lowest(oa.stiffness, oa.mass, 8);
+    const EigenResult rb = Lowest(ob.stiffness, ob.mass, 8);
+    for (int i = 0; i < 8; ++i) {
+      EXPECT_NEAR(ra.values[i], rb.values[i], 1e-8 * ra.values[7]) << type.ToString();
+    }
+  }
+}
+
+TEST(FieldTypeTest, ValidateAndToString) {
+  EXPECT_TRUE(FieldType::Vector().Validate().ok());
+  EXPECT_TRUE(FieldType::Tensor().Validate().ok());
+  EXPECT_TRUE(FieldType::NField(1).Validate().ok());
+  EXPECT_TRUE(FieldType::NField(64).Validate().ok());
+  EXPECT_EQ(FieldType::NField(0).Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(FieldType::NField(65).Validate().code(), absl::StatusCode::kInvalidArgument);
+  FieldType bogus;
+  bogus.kind = static_cast<FieldKind>(7);
+  EXPECT_EQ(bogus.Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(FieldType::Vector().ToString(), "vector");
+  EXPECT_EQ(FieldType::NField(4).ToString(), "nfield4");
+  EXPECT_EQ(FieldType::Tensor().ToString(), "tensor");
+  EXPECT_EQ(FieldType::Tensor().dofs_per_face(), 3);
+}
+
+TEST(FieldTypeTest, Parse) {
+  EXPECT_EQ(*ParseFieldType("vector"), FieldType::Vector());
+  EXPECT_EQ(*ParseFieldType("tensor"), FieldType::Tensor());
+  EXPECT_EQ(*ParseFieldType("nfield", 4), FieldType::NField(4));
+  EXPECT_EQ(*ParseFieldType("nfield6"), FieldType::NField(6));
+  EXPECT_EQ(*ParseFieldType("nfield6", 6), FieldType::NField(6));
+  for (auto bad :
+       {ParseFieldType("nfield"), ParseFieldType("nfield", 0), ParseFieldType("nfield", 65),
+        ParseFieldType("nfield4", 3), ParseFieldType("nfieldx"), ParseFieldType("vector", 1),
+        ParseFieldType("tensor", 2), ParseFieldType("scalar"), ParseFieldType("")}) {
+    EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  }
+}
+
+}  // namespace
+}  // namespace fieldspace

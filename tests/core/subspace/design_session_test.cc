@@ -1,0 +1,278 @@
+#include "core/subspace/design_session.h"
+
+#include <cmath>
+#include <limits>
+#include <map>
+#include <random>
+#include <thread>
+#include <vector>
+
+#include "Eigen/Dense"
+#include "core/subspace/projection.h"
+#include "gtest/gtest.h"
+#include "tests/core/subspace/subspace_test_util.h"
+
+namespace fieldspace {
+namespace {
+
+using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::RelativeDifference;
+using ::fieldspace::testing::TorusMesh;
+
+class DesignSessionTest : public ::testing::TestWithParam<FieldType> {
+ protected:
+  void SetUp() override {
+    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(2));
+    op_ = MakeOperator(*mesh_, GetParam());
+    basis_ = RandomBasis(GetParam(), op_.dofs(), 150, 30, 17);
+    auto sys = ReducedSystem::Build(basis_, op_);
+    ASSERT_TRUE(sys.ok()) << sys.status();
+    sys_ = *sys;
+  }
+  FieldConstraint RandomConstraint(std::mt19937_64& rng) const {
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    FieldConstraint c;
+    c.face = static_cast<int32_t>(rng() % mesh_->num_faces());
+    c.value.resize(GetParam().dofs_per_face());
+    for (int i = 0; i < c.value.size(); ++i) c.value[i] = u(rng);
+    c.weight = 0.2 + 2.0 * std::abs(u(rng));
+    return c;
+  }
+  // The session's solution equals a fresh factorization of its current problem.
+  void ExpectMatchesFreshSolve(const DesignSession& session) const {
+    auto fresh = SolveReducedModelProblem(*sys_, session.problem());
+    ASSERT_TRUE(fresh.ok()) << fresh.status();
+    const double scale = std::max(fresh->coefficients.norm(), 1e-300);
+    EXPECT_LT((session.coefficients() - fresh->coefficients).norm() / scale, 1e-6)
+        << session.num_constraints() << " constraints";
+    // Hard constraints hold in the lifted field.
+    for (const HardConstraint& c : session.problem().hard) {
+      auto v = session.LiftFaces(std::vector<int32_t>{c.face});
+      ASSERT_TRUE(v.ok());
+      EXPECT_LT((*v - c.value).norm(), 1e-9 * (1 + c.value.norm()));
+    }
+  }
+
+  std::unique_ptr<TriangleMesh> mesh_;
+  FieldOperator op_;
+  std::shared_ptr<Basis> basis_;
+  std::shared_ptr<const ReducedSystem> sys_;
+};
+
+TEST_P(DesignSessionTest, RandomEditSequencesMatchFreshFactorizations) {
+  auto session = DesignSession::Create(sys_, {1.0, 0.05, 4.0});
+  ASSERT_TRUE(session.ok()) << session.status();
+  DesignSession& s = **session;
+  EXPECT_EQ(s.coefficients().norm(), 0.0);  // no constraints: the zero field
+  std::mt19937_64 rng(GetParam().dofs_per_face() * 101 + GetParam().n);
+  std::map<int64_t, ConstraintKind> live;
+  int64_t next_id = 100;
+  int hard_failures = 0;
+  for (int step = 0; step < 60; ++step) {
+    const uint64_t action = rng() % 10;
+    if (live.empty() || action < 4) {
+      const ConstraintKind kind = rng() % 3 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft;
+      const absl::Status st = s.AddConstraint(next_id, kind, RandomConstraint(rng));
+      if (st.ok()) {
+        live[next_id] = kind;
+      } else {
+        // Only a hard constraint landing on an already hard-constrained face may fail.
+        EXPECT_EQ(st.code(), absl::StatusCode::kFailedPrecondition) << st;
+        EXPECT_EQ(kind, ConstraintKind::kHard);
+        ++hard_failures;
+      }
+      ++next_id;
+    } else if (action < 6) {
+      auto it = std::next(live.begin(), static_cast<int64_t>(rng() % live.size()));
+      FieldConstraint c = RandomConstraint(rng);
+      if (rng() % 2 == 0) {  // same face, new value and weight: no solve with A
+        auto current = s.GetConstraint(it->first);
+        ASSERT_TRUE(current.ok());
+        c.face = current->constraint.face;
+      }
+      const absl::Status st = s.MoveConstraint(it->first, c);
+      if (!st.ok()) {
+        EXPECT_EQ(st.code(), absl::StatusCode::kFailedPrecondition) << st;
+      }
+    } else if (action < 8) {
+      auto it = std::next(live.begin(), static_cast<int64_t>(rng() % live.size()));
+      ASSERT_TRUE(s.RemoveConstraint(it->first).ok());
+      live.erase(it);
+    } else if (action == 8) {
+      std::uniform_real_distribution<double> u(0.0, 1.0);
+      ASSERT_TRUE(s.SetWeights({0.1 + u(rng), rng() % 2 ? 0.0 : u(rng), 0.5 + 5 * u(rng)}).ok());
+    } else {
+      EnergyWeights w = s.weights();
+      w.constraint *= 3.0;  // mu_C only: no refactorization of A
+      ASSERT_TRUE(s.SetWeights(w).ok());
+    }
+    EXPECT_EQ(s.num_constraints(), static_cast<int32_t>(live.size()));
+    int32_t hard = 0;
+    for (const auto& [id, kind] : live) hard += kind == ConstraintKind::kHard;
+    EXPECT_EQ(s.num_hard_constraints(), hard);
+    ExpectMatchesFreshSolve(s);
+  }
+  EXPECT_GT(live.size(), 0u);
+}
+
+TEST_P(DesignSessionTest, MovingWithinAFaceAndAcrossFaces) {
+  auto session = DesignSession::Create(sys_, {0.5, 0.1, 2.0});
+  ASSERT_TRUE(session.ok());
+  DesignSession& s = **session;
+  std::mt19937_64 rng(5);
+  FieldConstraint a = RandomConstraint(rng), b = RandomConstraint(rng);
+  b.face = (a.face + 1) % mesh_->num_faces();
+  ASSERT_TRUE(s.AddConstraint(1, ConstraintKind::kHard, a).ok());
+  ASSERT_TRUE(s.AddConstraint(2, ConstraintKind::kSoft, b).ok());
+  a.value *= -2.0;  // same face
+  ASSERT_TRUE(s.MoveConstraint(1, a).ok());
+  ExpectMatchesFreshSolve(s);
+  b.weight = 7.5;  // same face, new weight
+  ASSERT_TRUE(s.MoveConstraint(2, b).ok());
+  ExpectMatchesFreshSolve(s);
+  a.face = (a.face + 40) % mesh_->num_faces();  // another face
+  ASSERT_TRUE(s.MoveConstraint(1, a).ok());
+  ExpectMatchesFreshSolve(s);
+  s.ClearConstraints();
+  EXPECT_EQ(s.num_constraints(), 0);
+  EXPECT_EQ(s.coefficients().norm(), 0.0);
+}
+
+TEST_P(DesignSessionTest, ErrorsLeaveTheSessionUnchanged) {
+  auto session = DesignSession::Create(sys_, {1.0, 0.0, 1.0});
+  ASSERT_TRUE(session.ok());
+  DesignSession& s = **session;
+  std::mt19937_64 rng(8);
+  const FieldConstraint c = RandomConstraint(rng);
+  ASSERT_TRUE(s.AddConstraint(7, ConstraintKind::kHard, c).ok());
+  FieldConstraint other = RandomConstraint(rng);
+  other.face = (c.face + 3) % mesh_->num_faces();
+  ASSERT_TRUE(s.AddConstraint(8, ConstraintKind::kSoft, other).ok());
+  const Eigen::VectorXd before = s.coefficients();
+  const auto unchanged = [&] {
+    EXPECT_EQ(s.num_constraints(), 2);
+    EXPECT_EQ(s.coefficients(), before);
+  };
+  // Duplicate id.
+  EXPECT_EQ(s.AddConstraint(7, ConstraintKind::kSoft, other).code(),
+            absl::StatusCode::kAlreadyExists);
+  unchanged();
+  // Unknown ids.
+  EXPECT_EQ(s.GetConstraint(99).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(s.MoveConstraint(99, c).code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(s.RemoveConstraint(99).code(), absl::StatusCode::kNotFound);
+  unchanged();
+  // Bad face ids, sizes, values, weights.
+  FieldConstraint bad = c;
+  bad.face = mesh_->num_faces();
+  EXPECT_EQ(s.AddConstraint(9, ConstraintKind::kSoft, bad).code(),
+            absl::StatusCode::kInvalidArgument);
+  bad.face = -1;
+  EXPECT_EQ(s.MoveConstraint(8, bad).code(), absl::StatusCode::kInvalidArgument);
+  bad = c;
+  bad.value = Eigen::VectorXd::Zero(GetParam().dofs_per_face() + 1);
+  EXPECT_EQ(s.AddConstraint(9, ConstraintKind::kHard, bad).code(),
+            absl::StatusCode::kInvalidArgument);
+  bad = c;
+  bad.value[0] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(s.AddConstraint(9, ConstraintKind::kSoft, bad).code(),
+            absl::StatusCode::kInvalidArgument);
+  bad = other;
+  bad.weight = 0;
+  EXPECT_EQ(s.AddConstraint(9, ConstraintKind::kSoft, bad).code(),
+            absl::StatusCode::kInvalidArgument);
+  bad.weight = -1;
+  EXPECT_EQ(s.MoveConstraint(8, bad).code(), absl::StatusCode::kInvalidArgument);
+  unchanged();
+  // Non-positive or non-finite energy weights.
+  EXPECT_EQ(s.SetWeights({-1.0, 0.0, 1.0}).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(s.SetWeights({1.0, 0.0, 0.0}).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(s.SetWeights({0.0, 0.0, 1.0}).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(s.SetWeights({1.0, std::numeric_limits<double>::infinity(), 1.0}).code(),
+            absl::StatusCode::kInvalidArgument);
+  unchanged();
+  // A second hard constraint on the same face: dependent.
+  FieldConstraint same = c;
+  same.value *= 0.5;
+  EXPECT_EQ(s.AddConstraint(9, ConstraintKind::kHard, same).code(),
+            absl::StatusCode::kFailedPrecondition);
+  unchanged();
+  EXPECT_FALSE(s.HasConstraint(9));
+  // Moving the soft constraint is fine; moving a second hard one onto the first's face is not.
+  ASSERT_TRUE(s.AddConstraint(10, ConstraintKind::kHard, other).ok());
+  const Eigen::VectorXd with_three = s.coefficients();
+  EXPECT_EQ(s.MoveConstraint(10, same).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(s.coefficients(), with_three);
+  ExpectMatchesFreshSolve(s);
+  // Creation errors.
+  EXPECT_EQ(DesignSession::Create(nullptr, {}).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(DesignSession::Create(sys_, {1.0, -1.0, 1.0}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+TEST_P(DesignSessionTest, ConcurrentSessionsShareTheSystem) {
+  // Four sessions on four threads replay the same edits; results equal the sequential ones.
+  const auto run = [&](std::vector<Eigen::VectorXd>* out) {
+    auto session = DesignSession::Create(sys_, {1.0, 0.2, 3.0});
+    ASSERT_TRUE(session.ok());
+    std::mt19937_64 rng(77);
+    for (int64_t id = 0; id < 12; ++id) {
+      FieldConstraint c = RandomConstraint(rng);
+      c.face = static_cast<int32_t>((id * 23) % mesh_->num_faces());
+      ASSERT_TRUE(
+          (*session)
+              ->AddConstraint(id, id % 4 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft, c)
+              .ok());
+      out->push_back((*session)->coefficients());
+    }
+  };
+  std::vector<Eigen::VectorXd> reference;
+  run(&reference);
+  std::vector<std::vector<Eigen::VectorXd>> results(4);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) threads.emplace_back([&, t] { run(&results[t]); });
+  for (std::thread& t : threads) t.join();
+  for (const auto& r : results) {
+    ASSERT_EQ(r.size(), reference.size());
+    for (size_t i = 0; i < r.size(); ++i) EXPECT_LT(RelativeDifference(r[i], reference[i]), 1e-12);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(FieldTypes, DesignSessionTest,
+                         ::testing::Values(FieldType::Vector(), FieldType::NField(4),
+                                           FieldType::Tensor()),
+                         [](const ::testing::TestParamInfo<FieldType>& info) {
+                           return info.param.ToString();
+                         });
+
+TEST(DesignSessionTorusTest, SingularEnergyWithConstraints) {
+  // U = I on a torus and mu_B only: the energy has the harmonic fields in its kernel, so the
+  // factorization is regularized; with constraints the session still matches the fresh solve.
+  const TriangleMesh mesh = TorusMesh(12, 6);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto sys = ReducedSystem::Build(
+      ::fieldspace::testing::IdentityBasis(FieldType::Vector(), op.dofs()), op);
+  ASSERT_TRUE(sys.ok());
+  auto session = DesignSession::Create(*sys, {0.0, 1.0, 1.0});
+  ASSERT_TRUE(session.ok()) << session.status();
+  std::mt19937_64 rng(3);
+  for (int64_t id = 0; id < 6; ++id) {
+    FieldConstraint c;
+    c.face = static_cast<int32_t>((id * 37 + 5) % mesh.num_faces());
+    c.value = Eigen::Vector2d(std::cos(id), std::sin(id));
+    ASSERT_TRUE((*session)
+                    ->AddConstraint(id, id < 3 ? ConstraintKind::kHard : ConstraintKind::kSoft, c)
+                    .ok());
+  }
+  auto fresh = SolveReducedModelProblem(**sys, (*session)->problem());
+  ASSERT_TRUE(fresh.ok());
+  EXPECT_LT(RelativeDifference((*session)->coefficients(), fresh->coefficients), 1e-6);
+  auto full = SolveModelProblem(op, (*session)->problem());
+  ASSERT_TRUE(full.ok()) << full.status();
+  EXPECT_LT(RelativeDifference((*session)->coefficients(), *full), 1e-6);
+}
+
+}  // namespace
+}  // namespace fieldspace

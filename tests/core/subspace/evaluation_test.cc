@@ -1,0 +1,125 @@
+#include "core/subspace/evaluation.h"
+
+#include <cmath>
+
+#include "Eigen/Dense"
+#include "core/operators/reference_solvers.h"
+#include "gtest/gtest.h"
+#include "tests/core/subspace/subspace_test_util.h"
+
+namespace fieldspace {
+namespace {
+
+using ::fieldspace::testing::DenseU;
+using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::IdentityBasis;
+using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::RandomBasis;
+
+TEST(EvaluationTest, TestFieldsAreConstrainedBiharmonicMinimizers) {
+  const TriangleMesh mesh = IcosphereMesh(2);
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(2), FieldType::Tensor()}) {
+    const FieldOperator op = MakeOperator(mesh, type);
+    TestFieldOptions options;
+    options.count = 3;
+    options.min_constraints = 5;
+    options.max_constraints = 12;
+    options.seed = 42;
+    auto set = GenerateTestFields(op, options);
+    ASSERT_TRUE(set.ok()) << set.status();
+    ASSERT_EQ(set->fields.cols(), 3);
+    const Eigen::SparseMatrix<double> B = BiharmonicMatrix(op);
+    const int p = type.dofs_per_face();
+    for (int f = 0; f < 3; ++f) {
+      const auto& constraints = set->constraints[f];
+      ASSERT_GE(constraints.size(), 5u);
+      ASSERT_LE(constraints.size(), 12u);
+      const Eigen::VectorXd X = set->fields.col(f);
+      Eigen::VectorXd BX = B * X;
+      for (const HardConstraint& c : constraints) {
+        EXPECT_NEAR(c.value.norm(), 1.0, 1e-12);  // random unit values
+        EXPECT_LT((X.segment(static_cast<int64_t>(c.face) * p, p) - c.value).norm(), 1e-12);
+        BX.segment(static_cast<int64_t>(c.face) * p, p).setZero();
+      }
+      // Stationarity: the gradient B X vanishes on every unconstrained DOF.
+      EXPECT_LT(BX.norm(), 1e-8 * (B * X).norm()) << type.ToString();
+    }
+    // Deterministic for a seed, different for another.
+    auto again = GenerateTestFields(op, options);
+    ASSERT_TRUE(again.ok());
+    EXPECT_EQ(again->fields, set->fields);
+    options.seed = 43;
+    auto other = GenerateTestFields(op, options);
+    ASSERT_TRUE(other.ok());
+    EXPECT_GT((other->fields - set->fields).norm(), 0.1);
+  }
+}
+
+TEST(EvaluationTest, SmoothingWeightsFollowTheOperatorScale) {
+  const TriangleMesh mesh = IcosphereMesh(2);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto lambdas = SmoothingWeights(op, 5);
+  ASSERT_TRUE(lambdas.ok());
+  const Eigen::VectorXd ones = Eigen::VectorXd::Ones(op.dofs());
+  const double ratio = ones.dot(op.mass.asDiagonal() * ones) / ones.dot(op.stiffness * ones);
+  ASSERT_EQ(lambdas->size(), 5u);
+  for (int j = 0; j < 5; ++j)
+    EXPECT_NEAR((*lambdas)[j], 25.0 * (j + 1) * ratio, 1e-12 * (j + 1) * ratio);
+  EXPECT_EQ(SmoothingWeights(op, 0).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
+  const TriangleMesh mesh = IcosphereMesh(2);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const Eigen::MatrixXd fields = Eigen::MatrixXd::Random(op.dofs(), 2);
+  const std::vector<double> lambdas = {0.01, 0.3};
+  // U = I: the subspace is the full space, no error.
+  auto identity = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
+  ASSERT_TRUE(identity.ok());
+  auto zero = SmoothingErrors(op, **identity, fields, lambdas);
+  ASSERT_TRUE(zero.ok()) << zero.status();
+  EXPECT_LT(zero->maxCoeff(), 1e-9);
+  // A random subspace against a dense computation of the same two solves.
+  auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 100, 30, 6);
+  auto sys = ReducedSystem::Build(basis, op);
+  ASSERT_TRUE(sys.ok());
+  auto errors = SmoothingErrors(op, **sys, fields, lambdas);
+  ASSERT_TRUE(errors.ok());
+  const Eigen::MatrixXd U = DenseU(*basis);
+  const Eigen::MatrixXd S = Eigen::MatrixXd(op.stiffness);
+  const Eigen::MatrixXd M = op.mass.asDiagonal();
+  for (int j = 0; j < 2; ++j) {
+    const Eigen::MatrixXd X = (M + lambdas[j] * S).ldlt().solve(M * fields);
+    const Eigen::MatrixXd x =
+        (U.transpose() * (M + lambdas[j] * S) * U).ldlt().solve(U.transpose() * M * fields);
+    for (int f = 0; f < 2; ++f) {
+      const Eigen::VectorXd r = X.col(f) - U * x.col(f);
+      const double expected = std::sqrt(r.dot(M * r) / X.col(f).dot(M * X.col(f)));
+      EXPECT_NEAR((*errors)(f, j), expected, 1e-9);
+      EXPECT_GT(expected, 1e-3);
+    }
+  }
+  const ErrorSummary summary = Summarize(*errors);
+  EXPECT_NEAR(summary.mean, errors->mean(), 1e-15);
+  EXPECT_EQ(summary.max, errors->maxCoeff());
+  EXPECT_EQ(SmoothingErrors(op, **sys, fields, std::vector<double>{-1.0}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+TEST(EvaluationTest, InvalidTestFieldOptions) {
+  const TriangleMesh mesh = IcosphereMesh(1);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  TestFieldOptions options;
+  options.count = 0;
+  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.count = 1;
+  options.min_constraints = 10;
+  options.max_constraints = 5;
+  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.min_constraints = 10;
+  options.max_constraints = 81;  // more than #F = 80
+  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace fieldspace

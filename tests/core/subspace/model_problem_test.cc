@@ -1,0 +1,198 @@
+#include "core/subspace/model_problem.h"
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include "Eigen/Dense"
+#include "core/operators/reference_solvers.h"
+#include "core/subspace/projection.h"
+#include "gtest/gtest.h"
+#include "tests/core/subspace/subspace_test_util.h"
+
+namespace fieldspace {
+namespace {
+
+using ::fieldspace::testing::DenseU;
+using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::IdentityBasis;
+using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::RelativeDifference;
+using ::fieldspace::testing::TorusMesh;
+
+// Random constraints on distinct faces.
+ModelProblem RandomProblem(int32_t num_faces, int32_t p, int soft, int hard, uint64_t seed,
+                           double mu_s, double mu_b, double mu_c) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  ModelProblem problem;
+  problem.mu_s = mu_s;
+  problem.mu_b = mu_b;
+  problem.mu_c = mu_c;
+  std::vector<char> used(num_faces, 0);
+  auto face = [&] {
+    int32_t f;
+    do {
+      f = static_cast<int32_t>(rng() % num_faces);
+    } while (used[f]);
+    used[f] = 1;
+    return f;
+  };
+  for (int i = 0; i < soft; ++i) {
+    Eigen::VectorXd v(p);
+    for (int c = 0; c < p; ++c) v[c] = u(rng);
+    problem.soft.push_back({face(), v, 0.5 + std::abs(u(rng))});
+  }
+  for (int i = 0; i < hard; ++i) {
+    Eigen::VectorXd v(p);
+    for (int c = 0; c < p; ++c) v[c] = u(rng);
+    problem.hard.push_back({face(), v});
+  }
+  return problem;
+}
+
+// The reduced minimizer computed densely and independently: the KKT system
+// [A G^T; G 0] [x; l] = [b; c] with A = U^T (mu_s S + mu_b B + mu_c C^T W C) U.
+Eigen::VectorXd DenseReducedSolution(const FieldOperator& op, const Basis& basis,
+                                     const ModelProblem& problem) {
+  const Eigen::MatrixXd U = DenseU(basis);
+  const Eigen::MatrixXd S = Eigen::MatrixXd(op.stiffness);
+  const Eigen::MatrixXd B = S * op.mass.cwiseInverse().asDiagonal() * S;
+  const int p = op.type.dofs_per_face();
+  const int64_t d = U.cols();
+  Eigen::MatrixXd A = U.transpose() * (problem.mu_s * S + problem.mu_b * B) * U;
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(d);
+  for (const SoftConstraint& c : problem.soft) {
+    const Eigen::MatrixXd Uf = U.middleRows(static_cast<int64_t>(c.face) * p, p);
+    A += problem.mu_c * c.weight * Uf.transpose() * Uf;
+    b += problem.mu_c * c.weight * Uf.transpose() * c.value;
+  }
+  const int64_t h = static_cast<int64_t>(problem.hard.size()) * p;
+  Eigen::MatrixXd K = Eigen::MatrixXd::Zero(d + h, d + h);
+  Eigen::VectorXd rhs = Eigen::VectorXd::Zero(d + h);
+  K.topLeftCorner(d, d) = A;
+  rhs.head(d) = b;
+  for (size_t i = 0; i < problem.hard.size(); ++i) {
+    const Eigen::MatrixXd Uf = U.middleRows(static_cast<int64_t>(problem.hard[i].face) * p, p);
+    K.block(d + i * p, 0, p, d) = Uf;
+    K.block(0, d + i * p, d, p) = Uf.transpose();
+    rhs.segment(d + i * p, p) = problem.hard[i].value;
+  }
+  return K.fullPivLu().solve(rhs).head(d);
+}
+
+TEST(ModelProblemTest, IdentityBasisReproducesTheFullSpaceSolve) {
+  const TriangleMesh mesh = IcosphereMesh(2);
+  for (const FieldType& type : {FieldType::Vector(), FieldType::Tensor()}) {
+    const FieldOperator op = MakeOperator(mesh, type);
+    auto sys = ReducedSystem::Build(IdentityBasis(type, op.dofs()), op);
+    ASSERT_TRUE(sys.ok()) << sys.status();
+    const int p = type.dofs_per_face();
+    const std::vector<ModelProblem> problems = {
+        RandomProblem(mesh.num_faces(), p, 6, 0, 1, 1.0, 0.0, 10.0),
+        RandomProblem(mesh.num_faces(), p, 0, 7, 2, 0.0, 1.0, 1.0),
+        RandomProblem(mesh.num_faces(), p, 5, 4, 3, 0.5, 0.02, 3.0)};
+    for (const ModelProblem& problem : problems) {
+      auto full = SolveModelProblem(op, problem);
+      ASSERT_TRUE(full.ok()) << full.status();
+      auto reduced = SolveReducedModelProblem(**sys, problem);
+      ASSERT_TRUE(reduced.ok()) << reduced.status();
+      EXPECT_LT(RelativeDifference(reduced->coefficients, *full), 1e-8) << type.ToString();
+    }
+  }
+}
+
+TEST(ModelProblemTest, SingularEnergyOnTorusIsRegularizedAndRefinedToTheExactSolution) {
+  // Genus 1: S has a 2-dimensional kernel (harmonic fields). With U = I and only mu_s, the
+  // energy matrix is singular; the soft constraints make the problem well posed.
+  const TriangleMesh mesh = TorusMesh(16, 8);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto sys = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
+  ASSERT_TRUE(sys.ok());
+  const ModelProblem problem = RandomProblem(mesh.num_faces(), 2, 5, 1, 9, 1.0, 0.0, 2.0);
+  auto full = SolveModelProblem(op, problem);
+  ASSERT_TRUE(full.ok()) << full.status();
+  auto reduced = SolveReducedModelProblem(**sys, problem);
+  ASSERT_TRUE(reduced.ok()) << reduced.status();
+  EXPECT_LT(RelativeDifference(reduced->coefficients, *full), 1e-6);
+  EXPECT_LE(reduced->backward_error, 1e-12);
+}
+
+TEST(ModelProblemTest, RandomBasisMatchesDenseKkt) {
+  const TriangleMesh mesh = IcosphereMesh(2);
+  int seed = 0;
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(3), FieldType::Tensor()}) {
+    const FieldOperator op = MakeOperator(mesh, type);
+    auto basis = RandomBasis(type, op.dofs(), 90, 30, 5 + seed);
+    auto sys = ReducedSystem::Build(basis, op);
+    ASSERT_TRUE(sys.ok());
+    const int p = type.dofs_per_face();
+    for (const ModelProblem& problem :
+         {RandomProblem(mesh.num_faces(), p, 8, 0, ++seed, 1.0, 0.1, 5.0),
+          RandomProblem(mesh.num_faces(), p, 3, 5, ++seed, 0.3, 0.0, 1.0),
+          RandomProblem(mesh.num_faces(), p, 0, 6, ++seed, 0.0, 2.0, 1.0)}) {
+      auto reduced = SolveReducedModelProblem(**sys, problem);
+      ASSERT_TRUE(reduced.ok()) << reduced.status();
+      const Eigen::VectorXd expected = DenseReducedSolution(op, *basis, problem);
+      EXPECT_LT(RelativeDifference(reduced->coefficients, expected), 1e-8) << type.ToString();
+      // Hard constraints hold exactly in the lifted field.
+      for (const HardConstraint& c : problem.hard) {
+        auto values = LiftFaces(*basis, reduced->coefficients, std::vector<int32_t>{c.face});
+        ASSERT_TRUE(values.ok());
+        EXPECT_LT((*values - c.value).norm(), 1e-9);
+      }
+    }
+  }
+}
+
+TEST(ModelProblemTest, InvalidProblems) {
+  const TriangleMesh mesh = IcosphereMesh(1);  // 80 faces
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op.dofs(), 20, 10, 1), op);
+  ASSERT_TRUE(sys.ok());
+  const ModelProblem good = RandomProblem(mesh.num_faces(), 2, 2, 1, 4, 1.0, 0.0, 1.0);
+  ASSERT_TRUE(SolveReducedModelProblem(**sys, good).ok());
+  const auto code = [&](const ModelProblem& p) {
+    return SolveReducedModelProblem(**sys, p).status().code();
+  };
+  ModelProblem p = good;
+  p.mu_s = -1;
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  p = good;
+  p.mu_b = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  p = good;
+  p.mu_s = 0;
+  p.mu_b = 0;
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  p = good;
+  p.mu_c = -2;
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  p = good;
+  p.soft[0].face = 80;
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  p = good;
+  p.hard[0].face = -3;
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  p = good;
+  p.soft[1].value = Eigen::VectorXd::Zero(3);
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  p = good;
+  p.hard[0].value[1] = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  p = good;
+  p.soft[0].weight = 0;
+  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  // The same face hard-constrained twice: dependent rows.
+  p = good;
+  p.hard.push_back(p.hard[0]);
+  EXPECT_EQ(code(p), absl::StatusCode::kFailedPrecondition);
+  // More hard DOFs (2 x 11 = 22) than the dimension (20).
+  p = RandomProblem(mesh.num_faces(), 2, 0, 11, 5, 1.0, 0.0, 1.0);
+  EXPECT_EQ(code(p), absl::StatusCode::kFailedPrecondition);
+}
+
+}  // namespace
+}  // namespace fieldspace

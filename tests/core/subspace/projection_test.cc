@@ -1,0 +1,173 @@
+#include "core/subspace/projection.h"
+
+#include <limits>
+#include <vector>
+
+#include "Eigen/Dense"
+#include "core/subspace/lift_plan.h"
+#include "gtest/gtest.h"
+#include "tests/core/subspace/subspace_test_util.h"
+
+namespace fieldspace {
+namespace {
+
+using ::fieldspace::testing::DenseU;
+using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::RandomBasis;
+
+class ProjectionTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(2));
+    op_ = MakeOperator(*mesh_, FieldType::Vector());
+    basis_ = RandomBasis(FieldType::Vector(), op_.dofs(), 80, 25, 21);
+    auto sys = ReducedSystem::Build(basis_, op_);
+    ASSERT_TRUE(sys.ok()) << sys.status();
+    sys_ = *sys;
+  }
+  std::unique_ptr<TriangleMesh> mesh_;
+  FieldOperator op_;
+  std::shared_ptr<Basis> basis_;
+  std::shared_ptr<const ReducedSystem> sys_;
+};
+
+TEST_F(ProjectionTest, FieldsInTheSpanAreRecoveredExactly) {
+  const Eigen::VectorXd x0 = Eigen::VectorXd::Random(80);
+  auto X = Lift(*basis_, x0);
+  ASSERT_TRUE(X.ok());
+  EXPECT_LT(((*X) - DenseU(*basis_) * x0).norm() / X->norm(), 1e-14);
+  auto p = Project(*sys_, *X);
+  ASSERT_TRUE(p.ok()) << p.status();
+  EXPECT_LT((p->coefficients - x0).norm() / x0.norm(), 1e-9);
+  EXPECT_LT(p->relative_error, 1e-9);
+  // lift(project(U x)) == U x.
+  auto X2 = Lift(*basis_, p->coefficients);
+  ASSERT_TRUE(X2.ok());
+  EXPECT_LT((*X2 - *X).norm() / X->norm(), 1e-9);
+}
+
+TEST_F(ProjectionTest, ProjectionIsTheMassOrthogonalProjection) {
+  const Eigen::VectorXd X = Eigen::VectorXd::Random(op_.dofs());
+  auto p = Project(*sys_, X);
+  ASSERT_TRUE(p.ok());
+  const Eigen::MatrixXd U = DenseU(*basis_);
+  const Eigen::VectorXd residual = X - U * p->coefficients;
+  // Residual M-orthogonal to span(U) (normal equations of eq. 13).
+  const Eigen::VectorXd normal = U.transpose() * op_.mass.asDiagonal() * residual;
+  const Eigen::VectorXd scale = U.transpose() * op_.mass.asDiagonal() * X;
+  EXPECT_LT(normal.norm() / scale.norm(), 1e-10);
+  // The reported error is ||X - U x||_M / ||X||_M.
+  const double expected =
+      std::sqrt(residual.dot(op_.mass.asDiagonal() * residual) / X.dot(op_.mass.asDiagonal() * X));
+  EXPECT_NEAR(p->relative_error, expected, 1e-12);
+  EXPECT_GT(p->relative_error, 0.1);  // a random field is far from an 80-dim subspace
+  // Idempotent: projecting the projection changes nothing.
+  auto lifted = Lift(*basis_, p->coefficients);
+  ASSERT_TRUE(lifted.ok());
+  auto again = Project(*sys_, *lifted);
+  ASSERT_TRUE(again.ok());
+  EXPECT_LT((again->coefficients - p->coefficients).norm() / p->coefficients.norm(), 1e-9);
+  EXPECT_LT(again->relative_error, 1e-9);
+}
+
+TEST_F(ProjectionTest, BatchMatchesSingle) {
+  const Eigen::MatrixXd X = Eigen::MatrixXd::Random(op_.dofs(), 3);
+  auto batch = ProjectMany(*sys_, X);
+  ASSERT_TRUE(batch.ok());
+  for (int c = 0; c < 3; ++c) {
+    auto single = Project(*sys_, X.col(c));
+    ASSERT_TRUE(single.ok());
+    EXPECT_LT((single->coefficients - batch->coefficients.col(c)).norm(), 1e-12);
+    EXPECT_NEAR(single->relative_error, batch->relative_errors[c], 1e-14);
+  }
+  auto zero = Project(*sys_, Eigen::VectorXd::Zero(op_.dofs()));
+  ASSERT_TRUE(zero.ok());
+  EXPECT_EQ(zero->relative_error, 0.0);
+  EXPECT_EQ(zero->coefficients.norm(), 0.0);
+}
+
+TEST_F(ProjectionTest, LiftFacesMatchesLiftAll) {
+  const Eigen::VectorXd x = Eigen::VectorXd::Random(80);
+  auto all = Lift(*basis_, x);
+  ASSERT_TRUE(all.ok());
+  const std::vector<int32_t> faces = {7, 0, 319, 7, 100};
+  auto some = LiftFaces(*basis_, x, faces);
+  ASSERT_TRUE(some.ok());
+  ASSERT_EQ(some->size(), 10);
+  for (size_t t = 0; t < faces.size(); ++t) {
+    EXPECT_EQ((*some)[2 * t], (*all)[2 * faces[t]]);
+    EXPECT_EQ((*some)[2 * t + 1], (*all)[2 * faces[t] + 1]);
+  }
+  std::vector<double> buffer(op_.dofs());
+  ASSERT_TRUE(LiftInto(*basis_, x, absl::MakeSpan(buffer)).ok());
+  EXPECT_EQ(Eigen::Map<Eigen::VectorXd>(buffer.data(), buffer.size()), *all);
+  // The system's lift plan gives bit-identical values (same summation order; the entries a row
+  // lacks are exact zeros).
+  auto planned = Lift(*sys_, x);
+  ASSERT_TRUE(planned.ok());
+  EXPECT_EQ(*planned, *all);
+  auto planned_some = LiftFaces(*sys_, x, faces);
+  ASSERT_TRUE(planned_some.ok());
+  EXPECT_EQ(*planned_some, *some);
+}
+
+TEST(LiftPlanTest, TensorRowsWithDifferentSupportsAndWideIndices) {
+  // 3 DOFs per face whose rows have different column sets, and d > 65536 (32-bit indices).
+  const int64_t faces = 50, k = 3 * faces, d = 70000;
+  std::vector<Eigen::Triplet<float>> t;
+  for (int64_t i = 0; i < k; ++i) {
+    t.emplace_back(i, (i * 7919) % d, 1.0f + i);
+    if (i % 3 != 1) t.emplace_back(i, d - 1 - i, -0.5f * i);
+  }
+  Basis basis;
+  basis.type = FieldType::Tensor();
+  basis.U.resize(k, d);
+  basis.U.setFromTriplets(t.begin(), t.end());
+  const LiftPlan plan = LiftPlan::Build(basis.U, 3);
+  EXPECT_EQ(plan.num_faces(), faces);
+  const Eigen::VectorXd x = Eigen::VectorXd::Random(d);
+  std::vector<double> out(k);
+  plan.LiftAll(x.data(), out.data());
+  auto expected = Lift(basis, x);
+  ASSERT_TRUE(expected.ok());
+  EXPECT_EQ(Eigen::Map<Eigen::VectorXd>(out.data(), k), *expected);
+}
+
+TEST_F(ProjectionTest, InvalidInputs) {
+  const Eigen::VectorXd x = Eigen::VectorXd::Random(80);
+  EXPECT_EQ(Lift(*basis_, Eigen::VectorXd::Zero(79)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  Eigen::VectorXd nan_x = x;
+  nan_x[4] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_EQ(Lift(*basis_, nan_x).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LiftFaces(*basis_, x, std::vector<int32_t>{320}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LiftFaces(*basis_, x, std::vector<int32_t>{-1}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  std::vector<double> small(5);
+  EXPECT_EQ(LiftInto(*basis_, x, absl::MakeSpan(small)).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LiftFacesInto(*basis_, x, std::vector<int32_t>{1, 2}, absl::MakeSpan(small)).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(Lift(*sys_, Eigen::VectorXd::Zero(81)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(Lift(*sys_, nan_x).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LiftFaces(*sys_, x, std::vector<int32_t>{320}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LiftInto(*sys_, x, absl::MakeSpan(small)).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(LiftFacesInto(*sys_, x, std::vector<int32_t>{1}, absl::MakeSpan(small)).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(Project(*sys_, Eigen::VectorXd::Zero(op_.dofs() + 1)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  Eigen::VectorXd nan_field = Eigen::VectorXd::Zero(op_.dofs());
+  nan_field[9] = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(Project(*sys_, nan_field).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(
+      RelativeResiduals(*sys_, Eigen::MatrixXd::Zero(op_.dofs(), 2), Eigen::MatrixXd::Zero(80, 3))
+          .status()
+          .code(),
+      absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace fieldspace

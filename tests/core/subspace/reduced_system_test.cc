@@ -1,0 +1,167 @@
+#include "core/subspace/reduced_system.h"
+
+#include <atomic>
+#include <limits>
+#include <memory>
+
+#include "Eigen/Dense"
+#include "gtest/gtest.h"
+#include "tests/core/subspace/subspace_test_util.h"
+
+namespace fieldspace {
+namespace {
+
+using ::fieldspace::testing::DenseU;
+using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::RelativeDifference;
+using ::fieldspace::testing::TorusMesh;
+
+struct DenseReference {
+  Eigen::MatrixXd S, B, M;
+};
+
+// U^T S U, U^T S M^-1 S U, U^T M U computed densely (independent of the sparse row pass).
+DenseReference Reference(const FieldOperator& op, const Basis& basis) {
+  const Eigen::MatrixXd U = DenseU(basis);
+  const Eigen::MatrixXd S = Eigen::MatrixXd(op.stiffness);
+  const Eigen::MatrixXd SU = S * U;
+  DenseReference r;
+  r.S = U.transpose() * SU;
+  r.B = SU.transpose() * op.mass.cwiseInverse().asDiagonal() * SU;
+  r.M = U.transpose() * op.mass.asDiagonal() * U;
+  return r;
+}
+
+void ExpectMatchesReference(const ReducedSystem& sys, const DenseReference& ref) {
+  EXPECT_LT(RelativeDifference(Eigen::MatrixXd(sys.stiffness()), ref.S), 1e-12);
+  EXPECT_LT(RelativeDifference(Eigen::MatrixXd(sys.bilaplacian()), ref.B), 1e-12);
+  EXPECT_LT(RelativeDifference(Eigen::MatrixXd(sys.mass_matrix()), ref.M), 1e-12);
+  // Exactly symmetric storage, one shared pattern.
+  for (const auto* m : {&sys.stiffness(), &sys.bilaplacian(), &sys.mass_matrix()}) {
+    const Eigen::MatrixXd D = *m;
+    EXPECT_EQ((D - D.transpose()).cwiseAbs().maxCoeff(), 0.0);
+    EXPECT_TRUE(sys.pattern_symbolic()->SamePattern(*m));
+  }
+}
+
+TEST(ReducedSystemTest, MatchesDenseProductsForEachFieldType) {
+  const TriangleMesh mesh = IcosphereMesh(2);  // 320 faces
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
+    const FieldOperator op = MakeOperator(mesh, type);
+    auto basis = RandomBasis(type, op.dofs(), 60, 12, 7);
+    auto sys = ReducedSystem::Build(basis, op);
+    ASSERT_TRUE(sys.ok()) << sys.status();
+    EXPECT_EQ((*sys)->dimension(), 60);
+    EXPECT_EQ((*sys)->dofs(), op.dofs());
+    EXPECT_EQ((*sys)->num_faces(), mesh.num_faces());
+    ExpectMatchesReference(**sys, Reference(op, *basis));
+    const ReducedSystemStats& st = (*sys)->stats();
+    EXPECT_GT(st.bilaplacian_nonzeros, 0);
+    EXPECT_LE(st.mass_nonzeros, st.pattern_nonzeros);
+    EXPECT_GE(st.factor_nonzeros, (st.pattern_nonzeros + 60) / 2);
+    EXPECT_GT(st.memory_bytes, (*sys)->lift_plan().memory_bytes());
+    EXPECT_EQ((*sys)->lift_plan().num_faces(), mesh.num_faces());
+  }
+}
+
+TEST(ReducedSystemTest, BandedAccumulationAndThreadCountGiveTheSameMatrices) {
+  const TriangleMesh mesh = TorusMesh(24, 12);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 90, 30, 11);
+  auto full = ReducedSystem::Build(basis, op);
+  ReducedSystemOptions banded;
+  banded.accumulator_budget_bytes = 1;  // one output column per band
+  banded.threads = 1;
+  auto narrow = ReducedSystem::Build(basis, op, banded);
+  ASSERT_TRUE(full.ok() && narrow.ok());
+  ExpectMatchesReference(**narrow, Reference(op, *basis));
+  EXPECT_LT(RelativeDifference(Eigen::MatrixXd((*full)->bilaplacian()),
+                               Eigen::MatrixXd((*narrow)->bilaplacian())),
+            1e-14);
+}
+
+TEST(ReducedSystemTest, MassFactorSolvesTheReducedMass) {
+  const TriangleMesh mesh = IcosphereMesh(2);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op.dofs(), 50, 20, 3), op);
+  ASSERT_TRUE(sys.ok());
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(50);
+  const Eigen::VectorXd x = (*sys)->mass_factor().Solve(b);
+  EXPECT_LT(((*sys)->mass_matrix() * x - b).norm() / b.norm(), 1e-12);
+}
+
+TEST(ReducedSystemTest, ProgressAndCancellation) {
+  const TriangleMesh mesh = IcosphereMesh(2);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 40, 20, 9);
+  std::atomic<int> calls{0};
+  std::atomic<bool> saw_end{false};
+  ReducedSystemOptions options;
+  options.progress = [&](double fraction) {
+    EXPECT_GT(fraction, 0.0);
+    EXPECT_LE(fraction, 1.0);
+    ++calls;
+    if (fraction == 1.0) saw_end = true;
+  };
+  ASSERT_TRUE(ReducedSystem::Build(basis, op, options).ok());
+  EXPECT_GT(calls.load(), 0);
+  EXPECT_TRUE(saw_end.load());
+  std::atomic<bool> cancel{true};
+  ReducedSystemOptions cancelled;
+  cancelled.cancel = &cancel;
+  EXPECT_EQ(ReducedSystem::Build(basis, op, cancelled).status().code(),
+            absl::StatusCode::kCancelled);
+}
+
+TEST(ReducedSystemTest, InvalidInputs) {
+  const TriangleMesh mesh = IcosphereMesh(1);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 10, 8, 1);
+  EXPECT_EQ(ReducedSystem::Build(nullptr, op).status().code(), absl::StatusCode::kInvalidArgument);
+  // Basis for another field type.
+  auto tensor_basis = RandomBasis(FieldType::Tensor(), op.dofs(), 10, 8, 1);
+  EXPECT_EQ(ReducedSystem::Build(tensor_basis, op).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  // Wrong number of rows.
+  auto short_basis = RandomBasis(FieldType::Vector(), op.dofs() - 2, 10, 8, 1);
+  EXPECT_EQ(ReducedSystem::Build(short_basis, op).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  // No columns.
+  auto empty = std::make_shared<Basis>();
+  empty->U.resize(op.dofs(), 0);
+  EXPECT_EQ(ReducedSystem::Build(empty, op).status().code(), absl::StatusCode::kInvalidArgument);
+  // Non-finite basis value.
+  auto nan_basis = RandomBasis(FieldType::Vector(), op.dofs(), 10, 8, 1);
+  nan_basis->U.valuePtr()[5] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(ReducedSystem::Build(nan_basis, op).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  // Non-positive mass.
+  FieldOperator bad_mass = op;
+  bad_mass.mass[0] = 0;
+  EXPECT_EQ(ReducedSystem::Build(basis, bad_mass).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  // Bad options.
+  ReducedSystemOptions bad_options;
+  bad_options.threads = -1;
+  EXPECT_EQ(ReducedSystem::Build(basis, op, bad_options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  // Linearly dependent columns: U^T M U singular.
+  auto dependent = std::make_shared<Basis>(*basis);
+  Eigen::MatrixXf dense = Eigen::MatrixXf(dependent->U);
+  dense.col(3) = dense.col(4);
+  dependent->U = dense.sparseView();
+  EXPECT_EQ(ReducedSystem::Build(dependent, op).status().code(),
+            absl::StatusCode::kFailedPrecondition);
+  // A zero column.
+  dense = Eigen::MatrixXf(basis->U);
+  dense.col(2).setZero();
+  auto zero_column = std::make_shared<Basis>(*basis);
+  zero_column->U = dense.sparseView();
+  EXPECT_EQ(ReducedSystem::Build(zero_column, op).status().code(),
+            absl::StatusCode::kFailedPrecondition);
+}
+
+}  // namespace
+}  // namespace fieldspace

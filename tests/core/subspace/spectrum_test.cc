@@ -1,0 +1,109 @@
+#include "core/subspace/spectrum.h"
+
+#include <cmath>
+#include <memory>
+
+#include "Eigen/Dense"
+#include "core/operators/reference_solvers.h"
+#include "gtest/gtest.h"
+#include "tests/core/subspace/subspace_test_util.h"
+
+namespace fieldspace {
+namespace {
+
+using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::RandomBasis;
+
+class SpectrumTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(3));  // 1280 faces
+    op_ = MakeOperator(*mesh_, FieldType::Vector());
+    EigenOptions options;
+    options.count = 40;
+    auto full = ReferenceEigenpairs(op_, options);
+    ASSERT_TRUE(full.ok()) << full.status();
+    full_ = full->values;
+  }
+  std::unique_ptr<TriangleMesh> mesh_;
+  FieldOperator op_;
+  Eigen::VectorXd full_;
+};
+
+TEST_F(SpectrumTest, RayleighRitzUpperBoundsForAnySubspace) {
+  auto basis = RandomBasis(FieldType::Vector(), op_.dofs(), 400, 60, 2);
+  auto sys = ReducedSystem::Build(basis, op_);
+  ASSERT_TRUE(sys.ok());
+  ReducedEigenOptions options;
+  options.count = 30;
+  auto reduced = ReducedEigenpairs(**sys, options);
+  ASSERT_TRUE(reduced.ok()) << reduced.status();
+  ASSERT_EQ(reduced->values.size(), 30);
+  for (int i = 0; i < 30; ++i) {
+    EXPECT_GE(reduced->values[i], full_[i] * (1 - 1e-10)) << i;
+    if (i > 0) {
+      EXPECT_GE(reduced->values[i], reduced->values[i - 1]);
+    }
+  }
+  // Eigenvectors: (U^T M U)-orthonormal and satisfying the reduced equation.
+  const Eigen::MatrixXd& Y = reduced->coefficients;
+  const Eigen::MatrixXd gram = Y.transpose() * (*sys)->mass_matrix() * Y;
+  EXPECT_LT((gram - Eigen::MatrixXd::Identity(30, 30)).norm(), 1e-8);
+  const Eigen::MatrixXd residual =
+      (*sys)->stiffness() * Y - (*sys)->mass_matrix() * Y * reduced->values.asDiagonal();
+  EXPECT_LT(residual.norm() / ((*sys)->stiffness() * Y).norm(), 1e-8);
+}
+
+TEST_F(SpectrumTest, ExactWhenTheSubspaceSpansTheLowestEigenfields) {
+  auto eigen_basis = BuildEigenBasis(op_, 40);
+  ASSERT_TRUE(eigen_basis.ok()) << eigen_basis.status();
+  EXPECT_EQ(eigen_basis->U.nonZeros(), op_.dofs() * 40);
+  auto sys = ReducedSystem::Build(std::make_shared<Basis>(*std::move(eigen_basis)), op_);
+  ASSERT_TRUE(sys.ok()) << sys.status();
+  ReducedEigenOptions options;
+  options.count = 40;
+  auto reduced = ReducedEigenpairs(**sys, options);
+  ASSERT_TRUE(reduced.ok());
+  // U is stored in float: eigenvalues are second-order accurate in the basis error.
+  for (int i = 0; i < 40; ++i) {
+    EXPECT_NEAR(reduced->values[i], full_[i], 1e-6 * full_[i]) << i;
+  }
+  // The unit sphere's vector Laplacian: eigenvalues near l(l+1), l >= 1, multiplicity 2(2l+1).
+  EXPECT_NEAR(reduced->values[0], 2.0, 0.05);
+  EXPECT_NEAR(reduced->values[5], 2.0, 0.05);
+  EXPECT_NEAR(reduced->values[6], 6.0, 0.2);
+}
+
+TEST_F(SpectrumTest, DenseAndSparseMethodsAgree) {
+  auto basis = RandomBasis(FieldType::Vector(), op_.dofs(), 500, 60, 4);
+  auto sys = ReducedSystem::Build(basis, op_);
+  ASSERT_TRUE(sys.ok());
+  ReducedEigenOptions dense, sparse;
+  dense.count = sparse.count = 20;
+  dense.method = ReducedEigenMethod::kDense;
+  sparse.method = ReducedEigenMethod::kSparse;
+  auto a = ReducedEigenpairs(**sys, dense);
+  auto b = ReducedEigenpairs(**sys, sparse);
+  ASSERT_TRUE(a.ok() && b.ok()) << a.status() << b.status();
+  EXPECT_EQ(a->method, ReducedEigenMethod::kDense);
+  EXPECT_EQ(b->method, ReducedEigenMethod::kSparse);
+  EXPECT_LT((a->values - b->values).norm() / a->values.norm(), 1e-9);
+}
+
+TEST_F(SpectrumTest, InvalidCounts) {
+  auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op_.dofs(), 50, 30, 1), op_);
+  ASSERT_TRUE(sys.ok());
+  ReducedEigenOptions options;
+  options.count = 0;
+  EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.count = 51;
+  EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.count = 50;  // all of them: fine (dense)
+  EXPECT_TRUE(ReducedEigenpairs(**sys, options).ok());
+  options.method = ReducedEigenMethod::kSparse;  // needs a Lanczos basis larger than K <= d
+  EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace fieldspace

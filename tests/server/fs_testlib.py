@@ -1,0 +1,133 @@
+"""Helpers shared by the end-to-end tests: meshes made in code, a daemon process, the CLI."""
+
+import json
+import math
+import os
+import select
+import signal
+import subprocess
+import sys
+import time
+
+
+def icosphere_obj(subdivisions):
+    """OBJ text of a unit icosphere: 20 * 4**s faces (s = 3: 1280 faces, like sphere_1k.obj)."""
+    t = (1.0 + math.sqrt(5.0)) / 2.0
+    verts = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t),
+             (0, -1, -t), (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
+    verts = [tuple(c / math.sqrt(sum(x * x for x in v)) for c in v) for v in verts]
+    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
+             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
+             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
+    for _ in range(subdivisions):
+        cache = {}
+
+        def midpoint(a, b):
+            key = (min(a, b), max(a, b))
+            if key not in cache:
+                m = [(verts[a][k] + verts[b][k]) / 2 for k in range(3)]
+                n = math.sqrt(sum(x * x for x in m))
+                verts.append(tuple(x / n for x in m))
+                cache[key] = len(verts) - 1
+            return cache[key]
+
+        new_faces = []
+        for a, b, c in faces:
+            ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
+            new_faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        faces = new_faces
+    lines = ["v %.17g %.17g %.17g" % v for v in verts]
+    lines += ["f %d %d %d" % (a + 1, b + 1, c + 1) for a, b, c in faces]
+    return "\n".join(lines) + "\n", len(faces)
+
+
+def torus_obj(major=48, minor=24, R=1.0, r=0.4):
+    """OBJ text of a closed torus of genus 1 with 2 * major * minor faces."""
+    lines = []
+    for i in range(major):
+        u = 2 * math.pi * i / major
+        for j in range(minor):
+            v = 2 * math.pi * j / minor
+            lines.append("v %.17g %.17g %.17g" % ((R + r * math.cos(v)) * math.cos(u),
+                                                  (R + r * math.cos(v)) * math.sin(u),
+                                                  r * math.sin(v)))
+    idx = lambda i, j: (i % major) * minor + (j % minor) + 1
+    for i in range(major):
+        for j in range(minor):
+            a, b, c, d = idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)
+            lines.append("f %d %d %d" % (a, b, c))
+            lines.append("f %d %d %d" % (a, c, d))
+    return "\n".join(lines) + "\n", 2 * major * minor
+
+
+class Daemon:
+    """A fieldspaced process on 127.0.0.1 with a free port."""
+
+    def __init__(self, binary, store, data_root=None, extra=(), log=None):
+        self.args = [binary, "--listen", "127.0.0.1:0", "--store", store, "--threads", "2"]
+        if data_root:
+            self.args += ["--data-root", data_root]
+        self.args += list(extra)
+        self.log_path = log or os.path.join(store + ".log")
+        self.proc = None
+        self.address = None
+
+    def start(self, timeout=30):
+        self.log = open(self.log_path, "ab")
+        self.proc = subprocess.Popen(self.args, stdout=subprocess.PIPE, stderr=self.log)
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout)
+        if not ready:
+            self.proc.kill()
+            raise AssertionError("fieldspaced did not print its address within %ds" % timeout)
+        line = self.proc.stdout.readline().decode().strip()
+        assert line.startswith("listening on 127.0.0.1:"), "first stdout line: %r" % line
+        self.address = line[len("listening on "):]
+        self.port = int(self.address.rsplit(":", 1)[1])
+        assert self.port > 0
+        return self
+
+    def stop(self, sig=signal.SIGTERM, timeout=30):
+        self.proc.send_signal(sig)
+        try:
+            rc = self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            raise AssertionError("fieldspaced did not exit within %ds of signal %d" % (timeout, sig))
+        self.log.close()
+        return rc
+
+    def alive(self):
+        return self.proc is not None and self.proc.poll() is None
+
+
+def run(args, timeout=300, check=None):
+    """Runs a command; returns (returncode, stdout, stderr) as text."""
+    p = subprocess.run(args, capture_output=True, text=True, timeout=timeout)
+    if check is not None and p.returncode != check:
+        raise AssertionError("%s exited %d (expected %d)\nstdout: %s\nstderr: %s" %
+                             (" ".join(args), p.returncode, check, p.stdout[-2000:],
+                              p.stderr[-2000:]))
+    return p.returncode, p.stdout, p.stderr
+
+
+class Cli:
+    def __init__(self, binary, address):
+        self.binary = binary
+        self.address = address
+
+    def __call__(self, *args, expect=0, timeout=300):
+        return run([self.binary, "--server", self.address] + list(args), timeout, check=expect)
+
+    def json(self, *args, timeout=300):
+        _, out, _ = self(*args, timeout=timeout)
+        return json.loads(out)
+
+
+def check(condition, message):
+    if not condition:
+        raise AssertionError(message)
+
+
+def log(message):
+    print(message, flush=True)
+    sys.stdout.flush()

@@ -1,0 +1,325 @@
+// Unit tests of the server's building blocks: XXH64, the store (atomic writes, checksums, damage
+// detection), the compute pool and the status mapping.
+
+#include <sys/stat.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <thread>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "server/compute_pool.h"
+#include "server/field_server.h"
+#include "server/hash.h"
+#include "server/status_util.h"
+#include "server/store.h"
+
+namespace fieldspace::server {
+namespace {
+
+namespace fs = std::filesystem;
+using ::testing::HasSubstr;
+
+// --- hash ------------------------------------------------------------------------------------
+
+TEST(HashTest, MatchesPublishedXxh64Vectors) {
+  // Reference values of XXH64 (xxhash's own test vectors, seed 0).
+  EXPECT_EQ(Hash64("", 0), 0xEF46DB3751D8E999ULL);
+  EXPECT_EQ(Hash64("a", 1), 0xD24EC4F1A98C6E5BULL);
+  EXPECT_EQ(Hash64("abc", 3), 0x44BC2CF5AD770999ULL);
+}
+
+TEST(HashTest, StreamingEqualsOneShotForAnySplit) {
+  std::mt19937 rng(7);
+  std::string data(1000, '\0');
+  for (char& c : data) c = static_cast<char>(rng());
+  for (uint64_t seed : {0ULL, 12345ULL}) {
+    const uint64_t expected = Hash64(data.data(), data.size(), seed);
+    for (int trial = 0; trial < 50; ++trial) {
+      Hasher h(seed);
+      size_t pos = 0;
+      while (pos < data.size()) {
+        const size_t n = std::min<size_t>(data.size() - pos, rng() % 70);
+        h.Update(data.data() + pos, n);
+        pos += n;
+      }
+      EXPECT_EQ(h.Digest(), expected);
+    }
+  }
+  EXPECT_NE(Hash64(data.data(), data.size(), 0), Hash64(data.data(), data.size(), 1));
+}
+
+TEST(HashTest, LengthPrefixedStringsDoNotCollideOnConcatenation) {
+  Hasher a, b;
+  a.UpdateString("ab");
+  a.UpdateString("c");
+  b.UpdateString("a");
+  b.UpdateString("bc");
+  EXPECT_NE(a.Digest(), b.Digest());
+  EXPECT_EQ(Hex64(0xabcULL), "0000000000000abc");
+}
+
+// --- store -----------------------------------------------------------------------------------
+
+class StoreTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("fs_store_test_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    auto store = Store::Open(dir_.string());
+    ASSERT_TRUE(store.ok()) << store.status();
+    store_ = std::move(*store);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  static MeshRecord Record(const VertexMatrix& V, const FaceMatrix& F) {
+    MeshRecord r;
+    r.id = "m-0123456789abcdef";
+    r.name = "tet";
+    r.num_vertices = static_cast<int32_t>(V.rows());
+    r.num_faces = static_cast<int32_t>(F.rows());
+    r.genus = 0;
+    r.total_area = 1.5;
+    r.created_unix_ms = 42;
+    return r;
+  }
+  static void Tetrahedron(VertexMatrix* V, FaceMatrix* F) {
+    V->resize(4, 3);
+    *V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1.0 / 3.0;
+    F->resize(4, 3);
+    *F << 0, 2, 1, 0, 1, 3, 1, 2, 3, 0, 3, 2;
+  }
+  static void FlipByte(const std::string& path, int64_t offset_from_end) {
+    std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekg(0, std::ios::end);
+    const int64_t size = f.tellg();
+    f.seekg(size - offset_from_end);
+    char c;
+    f.read(&c, 1);
+    c ^= 0x5a;
+    f.seekp(size - offset_from_end);
+    f.write(&c, 1);
+  }
+
+  fs::path dir_;
+  std::unique_ptr<Store> store_;
+};
+
+TEST_F(StoreTest, MeshRoundTripIsExact) {
+  VertexMatrix V;
+  FaceMatrix F;
+  Tetrahedron(&V, &F);
+  MeshRecord r = Record(V, F);
+  ASSERT_TRUE(store_->SaveMesh(r, V, F).ok());
+  auto loaded = store_->LoadMesh(r.id);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ(loaded->vertices, V);  // bitwise, including 1/3
+  EXPECT_EQ(loaded->faces, F);
+  StoreContents contents = store_->Scan();
+  ASSERT_EQ(contents.meshes.size(), 1u);
+  EXPECT_EQ(contents.meshes[0].id, r.id);
+  EXPECT_EQ(contents.meshes[0].name, "tet");
+  EXPECT_EQ(contents.meshes[0].total_area, 1.5);
+  EXPECT_EQ(contents.meshes[0].created_unix_ms, 42);
+  EXPECT_TRUE(contents.damaged.empty());
+  // No temporary file is left behind.
+  for (const auto& e : fs::directory_iterator(dir_ / "meshes")) {
+    EXPECT_EQ(e.path().filename().string(), r.id + ".fsmesh");
+  }
+}
+
+TEST_F(StoreTest, BasisRoundTripConcatenatesPieces) {
+  BasisRecord r;
+  r.id = "b-00000000000000ff";
+  r.key.mesh_id = "m-0123456789abcdef";
+  r.key.field = FieldType::NField(4);
+  r.key.dimension = 12;
+  r.key.sigma = 33.5;
+  r.key.fields_per_region = 2;
+  r.key.seed = 9;
+  r.key.weights_hash = 77;
+  r.columns = 12;
+  r.nnz = 1234;
+  ASSERT_TRUE(store_->SaveBasis(r, {"hello ", "", "world"}).ok());
+  auto loaded = store_->LoadBasis(r.id);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ(loaded->payload, "hello world");
+  EXPECT_EQ(loaded->record.key.field, FieldType::NField(4));
+  EXPECT_EQ(loaded->record.key.sigma, 33.5);
+  EXPECT_EQ(loaded->record.key.weights_hash, 77u);
+  EXPECT_EQ(loaded->record.nnz, 1234);
+}
+
+TEST_F(StoreTest, FlippedPayloadByteIsDataLoss) {
+  VertexMatrix V;
+  FaceMatrix F;
+  Tetrahedron(&V, &F);
+  MeshRecord r = Record(V, F);
+  ASSERT_TRUE(store_->SaveMesh(r, V, F).ok());
+  FlipByte(store_->MeshPath(r.id), 5);  // inside the face array
+  auto loaded = store_->LoadMesh(r.id);
+  EXPECT_EQ(loaded.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(loaded.status().message(), HasSubstr("checksum"));
+  // The header is intact, so the index still lists it (payload damage shows on load).
+  EXPECT_EQ(store_->Scan().meshes.size(), 1u);
+}
+
+TEST_F(StoreTest, DamagedHeaderTruncationAndForeignFilesAreReportedNotLoaded) {
+  VertexMatrix V;
+  FaceMatrix F;
+  Tetrahedron(&V, &F);
+  MeshRecord r = Record(V, F);
+  ASSERT_TRUE(store_->SaveMesh(r, V, F).ok());
+  MeshRecord r2 = r;
+  r2.id = "m-1111111111111111";
+  ASSERT_TRUE(store_->SaveMesh(r2, V, F).ok());
+  // Header metadata byte flipped in r, r2 truncated, plus a foreign and an empty file.
+  {
+    std::fstream f(store_->MeshPath(r.id), std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(44);
+    f.put('X');
+  }
+  fs::resize_file(store_->MeshPath(r2.id), fs::file_size(store_->MeshPath(r2.id)) - 3);
+  std::ofstream(dir_ / "meshes" / "m-2222222222222222.fsmesh") << "not a mesh at all, honestly";
+  std::ofstream(dir_ / "meshes" / "m-3333333333333333.fsmesh");
+  StoreContents contents = store_->Scan();
+  EXPECT_TRUE(contents.meshes.empty());
+  ASSERT_EQ(contents.damaged.size(), 4u);
+  for (const DamagedEntry& d : contents.damaged) {
+    EXPECT_EQ(d.status.code(), absl::StatusCode::kDataLoss) << d.id << ": " << d.status;
+    EXPECT_FALSE(d.is_basis);
+  }
+  EXPECT_EQ(store_->LoadMesh(r.id).status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_EQ(store_->LoadMesh(r2.id).status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_EQ(store_->LoadMesh("m-2222222222222222").status().code(), absl::StatusCode::kDataLoss);
+}
+
+TEST_F(StoreTest, MissingAndInvalidIds) {
+  EXPECT_EQ(store_->LoadMesh("m-0000000000000000").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(store_->LoadMesh("../../etc/passwd").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(store_->LoadBasis("b-0000000000000000").status().code(), absl::StatusCode::kNotFound);
+  VertexMatrix V;
+  FaceMatrix F;
+  Tetrahedron(&V, &F);
+  MeshRecord r = Record(V, F);
+  r.id = "m-../../x";
+  EXPECT_EQ(store_->SaveMesh(r, V, F).code(), absl::StatusCode::kInvalidArgument);
+  r = Record(V, F);
+  r.num_faces = 3;
+  EXPECT_EQ(store_->SaveMesh(r, V, F).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_TRUE(store_->DeleteMesh("m-0000000000000000").ok());
+}
+
+TEST_F(StoreTest, OpenRemovesTemporaryFilesOfInterruptedSaves) {
+  std::ofstream(dir_ / "bases" / ".b-00000000000000ff.fsbasis.tmp-123-0") << "partial";
+  std::ofstream(dir_ / "meshes" / ".m-0123456789abcdef.fsmesh.tmp-9-1") << "partial";
+  auto reopened = Store::Open(dir_.string());
+  ASSERT_TRUE(reopened.ok());
+  EXPECT_TRUE(fs::is_empty(dir_ / "bases"));
+  EXPECT_TRUE(fs::is_empty(dir_ / "meshes"));
+  EXPECT_TRUE((*reopened)->Scan().damaged.empty());
+}
+
+TEST_F(StoreTest, SavePauseLeavesOnlyATemporaryFileMidway) {
+  auto slow = Store::Open(dir_.string(), StoreOptions{300});
+  ASSERT_TRUE(slow.ok());
+  BasisRecord r;
+  r.id = "b-00000000000000aa";
+  r.key.mesh_id = "m-0123456789abcdef";
+  const std::string payload(1 << 16, 'x');
+  std::thread writer([&] { EXPECT_TRUE((*slow)->SaveBasis(r, {payload}).ok()); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  int temps = 0, finals = 0;
+  for (const auto& e : fs::directory_iterator(dir_ / "bases")) {
+    const std::string name = e.path().filename().string();
+    if (name.find(".tmp-") != std::string::npos) ++temps;
+    if (name == r.id + ".fsbasis") ++finals;
+  }
+  EXPECT_EQ(temps, 1);
+  EXPECT_EQ(finals, 0);
+  writer.join();
+  EXPECT_TRUE(fs::exists((*slow)->BasisPath(r.id)));
+  EXPECT_EQ((*slow)->LoadBasis(r.id)->payload, payload);
+}
+
+// --- compute pool ------------------------------------------------------------------------------
+
+TEST(ComputePoolTest, RunsTasksAndRefusesAfterShutdown) {
+  ComputePool pool({2, 1});
+  std::atomic<int> count{0};
+  for (int i = 0; i < 100; ++i) {
+    ASSERT_TRUE(pool.Submit(ComputePool::Lane::kInteractive, [&] { count.fetch_add(1); }));
+  }
+  pool.Shutdown();  // runs what was queued
+  EXPECT_EQ(count.load(), 100);
+  bool ran = false;
+  EXPECT_FALSE(pool.Submit(ComputePool::Lane::kInteractive, [&] { ran = true; }));
+  EXPECT_FALSE(ran);
+}
+
+TEST(ComputePoolTest, ABusyBuildLaneDoesNotDelayInteractiveWork) {
+  ComputePool pool({1, 1});
+  std::atomic<bool> release{false};
+  ASSERT_TRUE(pool.Submit(ComputePool::Lane::kBuild, [&] {
+    while (!release.load()) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }));
+  std::atomic<bool> done{false};
+  const auto start = std::chrono::steady_clock::now();
+  ASSERT_TRUE(pool.Submit(ComputePool::Lane::kInteractive, [&] { done.store(true); }));
+  while (!done.load() && std::chrono::steady_clock::now() - start < std::chrono::seconds(5)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  EXPECT_TRUE(done.load());
+  EXPECT_EQ(pool.pending(ComputePool::Lane::kBuild), 1);
+  release.store(true);
+}
+
+// --- status mapping, addresses ---------------------------------------------------------------
+
+TEST(StatusUtilTest, CodesMapOneToOneAndUnknownNeverLeaves) {
+  EXPECT_TRUE(ToGrpcStatus(absl::OkStatus()).ok());
+  EXPECT_EQ(ToGrpcStatus(absl::NotFoundError("x")).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(ToGrpcStatus(absl::DataLossError("x")).error_code(), grpc::StatusCode::DATA_LOSS);
+  EXPECT_EQ(ToGrpcStatus(absl::ResourceExhaustedError("x")).error_code(),
+            grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_EQ(ToGrpcStatus(absl::InvalidArgumentError("bad face")).error_message(), "bad face");
+  EXPECT_EQ(ToGrpcStatus(absl::UnknownError("?")).error_code(), grpc::StatusCode::INTERNAL);
+  EXPECT_EQ(FromGrpcStatus(grpc::Status(grpc::StatusCode::ABORTED, "a")).code(),
+            absl::StatusCode::kAborted);
+}
+
+TEST(FieldServerTest, LoopbackDetection) {
+  EXPECT_TRUE(IsLoopbackListenAddress("127.0.0.1:0"));
+  EXPECT_TRUE(IsLoopbackListenAddress("127.5.6.7:50051"));
+  EXPECT_TRUE(IsLoopbackListenAddress("localhost:1"));
+  EXPECT_TRUE(IsLoopbackListenAddress("[::1]:8080"));
+  EXPECT_FALSE(IsLoopbackListenAddress("0.0.0.0:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("[::]:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("10.0.0.1:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("127.0.0.1"));
+}
+
+TEST(FieldServerTest, RefusesNonLoopbackWithoutTokenAndBadOptions) {
+  FieldServerOptions options;
+  options.store_dir = (fs::temp_directory_path() / "fs_refuse_test").string();
+  options.listen = "0.0.0.0:0";
+  auto server = FieldServer::Start(options);
+  EXPECT_EQ(server.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(server.status().message(), HasSubstr("--auth-token-file"));
+  options.listen = "nonsense";
+  EXPECT_EQ(FieldServer::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.listen = "127.0.0.1:0";
+  options.store_dir = "";
+  EXPECT_EQ(FieldServer::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+  fs::remove_all(fs::temp_directory_path() / "fs_refuse_test");
+}
+
+}  // namespace
+}  // namespace fieldspace::server
