@@ -7,6 +7,8 @@ namespace fieldspace::bench {
 
 // Each subcommand gets the arguments after its name and returns the process exit status.
 int RunMesh(int argc, char** argv);
+int RunOperator(int argc, char** argv);
+int RunSpectrum(int argc, char** argv);
 
 // Prints `status` as one line on stderr and returns the exit code: 2 for caller errors
 // (InvalidArgument, NotFound, OutOfRange, FailedPrecondition, ResourceExhausted, DataLoss), else 1.

@@ -16,6 +16,10 @@ struct Command {
 
 constexpr Command kCommands[] = {
     {"mesh", fieldspace::bench::RunMesh, "mesh FILE"},
+    {"operator", fieldspace::bench::RunOperator,
+     "operator MESH --field vector|nfield|tensor [--n N] [--out DIR] [--timing]"},
+    {"spectrum", fieldspace::bench::RunSpectrum,
+     "spectrum MESH --field vector|nfield|tensor [--n N] --count K [--timing]"},
 };
 
 void PrintUsage() {
