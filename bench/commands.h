@@ -7,6 +7,7 @@ namespace fieldspace::bench {
 
 // Each subcommand gets the arguments after its name and returns the process exit status.
 int RunMesh(int argc, char** argv);
+int RunShape(int argc, char** argv);
 int RunOperator(int argc, char** argv);
 int RunSpectrum(int argc, char** argv);
 

@@ -16,6 +16,8 @@ struct Command {
 
 constexpr Command kCommands[] = {
     {"mesh", fieldspace::bench::RunMesh, "mesh FILE"},
+    {"shape", fieldspace::bench::RunShape,
+     "shape torus-knot|icosphere|torus|genus2 --out FILE.ply [--level N]"},
     {"operator", fieldspace::bench::RunOperator,
      "operator MESH --field vector|nfield|tensor [--n N] [--out DIR] [--timing]"},
     {"spectrum", fieldspace::bench::RunSpectrum,

@@ -123,6 +123,16 @@ def main():
                 failures.append(f"corrupt {name}: exit {res.returncode}, stderr {res.stderr!r}")
             else:
                 print(f"ok corrupt {name}: {lines[0]}")
+        # Procedural shapes (the demo mesh among them) have the genus they are built with.
+        for shape, genus in [("torus-knot", 1), ("icosphere", 0), ("torus", 1), ("genus2", 2)]:
+            out = os.path.join(tmp, shape + ".ply")
+            made = subprocess.run([bench, "shape", shape, "--out", out], capture_output=True,
+                                  text=True, timeout=60)
+            res = run(bench, out)
+            if made.returncode != 0 or res.returncode != 0 or json.loads(res.stdout)["genus"] != genus:
+                failures.append(f"shape {shape}: {made.stderr}{res.stdout}{res.stderr}")
+            else:
+                print(f"ok shape {shape}: {res.stdout.strip()}")
         res = run(bench, os.path.join(tmp, "does_not_exist.obj"))
         if res.returncode != 2:
             failures.append(f"missing file: exit {res.returncode}")
