@@ -9,6 +9,8 @@
 #include <mutex>
 #include <numeric>
 #include <thread>
+#include <cstdio>
+#include <cstdlib>
 
 #include "absl/strings/str_format.h"
 #include "core/basis/dual_graph.h"
@@ -185,6 +187,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   absl::StatusOr<std::vector<int32_t>> per_component =
       AllocateSamplesPerComponent(mesh, num_regions);
   if (!per_component.ok()) return per_component.status();
+  if (getenv("FS_TIME")) fprintf(stderr, "dual graph %.3f\n", SecondsSince(t0));
   absl::StatusOr<SamplingResult> sampling =
       FarthestPointSampling(mesh, *graph, *per_component, params.seed, poll);
   if (!sampling.ok()) return sampling.status();
@@ -203,6 +206,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   absl::StatusOr<std::vector<std::vector<int32_t>>> regions =
       GrowRegions(*graph, basis.sample_faces, region_options, poll);
   if (!regions.ok()) return regions.status();
+  if (getenv("FS_TIME")) fprintf(stderr, "grow regions %.3f\n", SecondsSince(t0));
   graph = DualGraph();  // free it
   auto fields_of = [&](int32_t r) { return r + 1 < num_regions ? m : d - m * (num_regions - 1); };
   // Position of each (region, face) pair's entries within the face's rows of U: regions in
@@ -262,6 +266,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   }
   std::vector<int64_t>().swap(per_face);
   basis.timings.regions_seconds = SecondsSince(t0);
+  if (getenv("FS_TIME")) fprintf(stderr, "regions total %.3f\n", SecondsSince(t0));
 
   // 3. Local eigenproblems, written straight into U.
   ticker.SetPhase(BasisPhase::kEigensolve, 0.0);
@@ -275,6 +280,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     if (!matches.ok()) return matches.status();
     basis.stats.hodge_factor_used = *matches;
   }
+  if (getenv("FS_TIME")) fprintf(stderr, "hodge check %.3f\n", SecondsSince(t0));
   const bool use_hodge = basis.stats.hodge_factor_used;
   basis.local_eigenvalues.assign(d, 0.0);
   tbb::enumerable_thread_specific<std::unique_ptr<RegionWorkspace>> workspaces;
@@ -307,8 +313,6 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     eo.initial = &start;
     eo.tolerance = options.eigen_tolerance;
     eo.seed = Mix(params.seed, static_cast<uint64_t>(r));
-    if (getenv("FS_GUARD")) eo.guard = atoi(getenv("FS_GUARD"));
-    if (getenv("FS_NRELAX")) {}
     absl::StatusOr<LocalEigenResult> res = SolveLocalEigenproblem(*local, eo, poll);
     if (!res.ok()) {
       if (absl::IsCancelled(res.status())) return res.status();

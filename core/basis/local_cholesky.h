@@ -12,10 +12,10 @@ struct cholmod_factor_struct;
 
 namespace fieldspace::basis_internal {
 
-// A symmetric positive definite matrix in compressed sparse columns, lower triangle only (every
-// stored entry has row >= column; each column holds its diagonal), int32 indices. Rows within a
+// A symmetric positive definite matrix in compressed sparse columns, upper triangle only (every
+// stored entry has row <= column; each column holds its diagonal), int32 indices. Rows within a
 // column need not be sorted; duplicates are not allowed.
-struct LowerCsc {
+struct UpperCsc {
   int32_t n = 0;
   std::vector<int32_t> outer;  // n + 1
   std::vector<int32_t> inner;
@@ -41,7 +41,7 @@ class LocalCholesky {
   // Orders, analyzes and factors `A`. FailedPrecondition when A is not numerically positive
   // definite, ResourceExhausted when CHOLMOD runs out of memory, Cancelled when `poll` (called
   // every few hundred supernodes) returns true.
-  absl::Status Factorize(const LowerCsc& A, const std::function<bool()>& poll);
+  absl::Status Factorize(const UpperCsc& A, const std::function<bool()>& poll);
 
   // X <- A^-1 X in place; X is n x p, column-major with leading dimension n.
   void SolveInPlace(double* X, int32_t p);

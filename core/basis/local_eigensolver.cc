@@ -166,13 +166,19 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
         return result;
       }
     }
-    op.ApplyShiftInverse(R, &W);
-    W -= X * (X.transpose() * W);
+    op.ApplyShiftInverseAndStiffness(R, &W, &SW);
+    {
+      const Eigen::MatrixXd a = X.transpose() * W;
+      W -= X * a;
+      SW -= SX * a;
+    }
     for (int32_t c = 0; c < p; ++c) {
       const double norm = W.col(c).norm();
-      if (norm > 0) W.col(c) /= norm;
+      if (norm > 0) {
+        W.col(c) /= norm;
+        SW.col(c) /= norm;
+      }
     }
-    op.ApplyStiffness(W, &SW);
     if (P.cols() > 0) {
       for (int32_t c = 0; c < p; ++c) {
         const double norm = P.col(c).norm();

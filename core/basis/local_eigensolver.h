@@ -24,6 +24,13 @@ class LocalOperator {
   virtual absl::Status PrepareShiftInverse(const std::function<bool()>& poll) = 0;
   // Y = (S_bar + tau I)^-1 X (up to rounding) for X n x p, tau = shift() > 0.
   virtual void ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) = 0;
+  // Y = (S_bar + tau I)^-1 X and SY = S_bar Y. Operators that get S_bar Y as a by-product
+  // override this (it is the costlier part of each iteration otherwise).
+  virtual void ApplyShiftInverseAndStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y,
+                                             Eigen::MatrixXd* SY) {
+    ApplyShiftInverse(X, Y);
+    ApplyStiffness(*Y, SY);
+  }
   virtual double shift() const = 0;
 };
 

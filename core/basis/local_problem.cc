@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
 #include "Eigen/SparseCore"
 #include "tbb/blocked_range.h"
@@ -13,23 +11,25 @@
 namespace fieldspace::basis_internal {
 namespace {
 
-// Builds the lower-triangular CSC of an n x n matrix from unsorted (column, row, value) entries
-// with row >= column, summing duplicates, and adds `diagonal_shift` to every diagonal entry
-// (creating it when absent). `marker` is scratch of size >= n, all -1 on entry and on exit.
-void AssembleLower(int32_t n, const std::vector<int32_t>& cols, const std::vector<int32_t>& rows,
+// Builds one triangle (in CSC) of a symmetric n x n matrix from unsorted (i, j) entries, each
+// pair once in either order, summing duplicates, and adds `diagonal_shift` to every diagonal
+// entry (creating it when absent). The upper triangle (row <= column) is what CHOLMOD's analysis
+// uses directly; storing the lower one costs it an extra transpose. `marker` is scratch of size
+// >= n, all -1 on entry and on exit.
+void AssembleUpper(int32_t n, const std::vector<int32_t>& cols, const std::vector<int32_t>& rows,
                    const std::vector<double>& vals, double diagonal_shift,
-                   std::vector<int32_t>& marker, LowerCsc* out) {
+                   std::vector<int32_t>& marker, UpperCsc* out) {
   const size_t m = cols.size();
   std::vector<int32_t> start(static_cast<size_t>(n) + 1, 0);
-  for (size_t t = 0; t < m; ++t) ++start[cols[t] + 1];
+  for (size_t t = 0; t < m; ++t) ++start[std::max(cols[t], rows[t]) + 1];
   for (int32_t j = 0; j < n; ++j) start[j + 1] += start[j];
   std::vector<int32_t> bucket_rows(m);
   std::vector<double> bucket_vals(m);
   {
     std::vector<int32_t> cursor(start.begin(), start.end() - 1);
     for (size_t t = 0; t < m; ++t) {
-      const int32_t q = cursor[cols[t]]++;
-      bucket_rows[q] = rows[t];
+      const int32_t q = cursor[std::max(cols[t], rows[t])]++;
+      bucket_rows[q] = std::min(cols[t], rows[t]);
       bucket_vals[q] = vals[t];
     }
   }
@@ -145,8 +145,8 @@ absl::Status RestrictedLocalOperator::PrepareShiftInverse(const std::function<bo
     }
   }
   if (ws_.marker.size() < static_cast<size_t>(n_)) ws_.marker.resize(n_, -1);
-  LowerCsc A;
-  AssembleLower(n_, cols, rows, vals, tau_, ws_.marker, &A);
+  UpperCsc A;
+  AssembleUpper(n_, cols, rows, vals, tau_, ws_.marker, &A);
   return ws_.cholesky.Factorize(A, poll);
 }
 
@@ -235,7 +235,6 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
                           for (int c = 0; c < 2; ++c) {
                             const int64_t i = 2 * static_cast<int64_t>(f) + c;
                             if (!(std::abs(y1[i] - y2[c]) <= 1e-10 * scale[i] + 1e-300)) {
-                              if (getenv("FS_DEBUG")) fprintf(stderr, "mismatch f %d c %d y1 %g y2 %g scale %g\n", f, c, y1[i], y2[c], scale[i]);
                               mismatch.store(true, std::memory_order_relaxed);
                             }
                           }
@@ -400,9 +399,17 @@ absl::Status HodgeLocalOperator::PrepareShiftInverse(const std::function<bool()>
     }
   }
   if (ws_.marker.size() < static_cast<size_t>(num_nodes_)) ws_.marker.resize(num_nodes_, -1);
-  LowerCsc K;
-  AssembleLower(num_nodes_, cols, rows, vals, tau_, ws_.marker, &K);
+  UpperCsc K;
+  AssembleUpper(num_nodes_, cols, rows, vals, tau_, ws_.marker, &K);
   return ws_.cholesky.Factorize(K, poll);
+}
+
+void HodgeLocalOperator::ApplyShiftInverseAndStiffness(const Eigen::MatrixXd& X,
+                                                       Eigen::MatrixXd* Y, Eigen::MatrixXd* SY) {
+  ApplyBt(X, &z_);
+  ws_.cholesky.SolveInPlace(z_.data(), static_cast<int32_t>(z_.cols()));
+  ApplyB(z_, SY, /*subtract=*/false);
+  *Y = (X - *SY) / tau_;
 }
 
 void HodgeLocalOperator::ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) {

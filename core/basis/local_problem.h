@@ -88,6 +88,10 @@ class HodgeLocalOperator final : public LocalOperator {
   void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;
   absl::Status PrepareShiftInverse(const std::function<bool()>& poll) override;
   void ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;
+  // With z = K^-1 B_D^T x: (S_bar + tau I)^-1 x = (x - B_D z) / tau and, since
+  // B_D^T (x - B_D z) / tau = z, S_bar (S_bar + tau I)^-1 x = B_D z: one pass over B_D each way.
+  void ApplyShiftInverseAndStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y,
+                                     Eigen::MatrixXd* SY) override;
   double shift() const override { return tau_; }
 
  private:

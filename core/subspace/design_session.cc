@@ -20,6 +20,7 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
     const DesignSessionOptions& options) {
   if (system == nullptr) return absl::InvalidArgumentError("DesignSession: no reduced system");
   RETURN_IF_ERROR(ValidateWeights(weights));
+  RETURN_IF_ERROR(ValidateSolveOptions(options.solve));
   std::unique_ptr<DesignSession> session(new DesignSession(std::move(system), options));
   RETURN_IF_ERROR(session->FactorizeEnergy(weights, &session->A_, &session->factor_,
                                            &session->regularization_));

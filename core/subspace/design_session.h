@@ -51,7 +51,7 @@ struct DesignSessionOptions {
 // the immutable ReducedSystem.
 class DesignSession {
  public:
-  // InvalidArgument for invalid weights (see ValidateWeights) or a null system;
+  // InvalidArgument for invalid weights (see ValidateWeights), invalid options or a null system;
   // FailedPrecondition when the energy matrix cannot be factorized.
   static absl::StatusOr<std::unique_ptr<DesignSession>> Create(
       std::shared_ptr<const ReducedSystem> system, const EnergyWeights& weights,

@@ -53,9 +53,21 @@ absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstrai
   return absl::OkStatus();
 }
 
+absl::Status ValidateSolveOptions(const ReducedSolveOptions& o) {
+  if (!(o.regularization >= 0) || !(o.max_regularization >= o.regularization) ||
+      !std::isfinite(o.max_regularization) || !(o.tolerance >= 0) || o.max_refinement_steps < 0 ||
+      !(o.dependence_tolerance > 0) || !(o.dependence_tolerance < 1)) {
+    return absl::InvalidArgumentError(
+        "ReducedSolveOptions: need 0 <= regularization <= max_regularization < inf, "
+        "tolerance >= 0, max_refinement_steps >= 0 and 0 < dependence_tolerance < 1");
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& system,
                                                          const ModelProblem& problem,
                                                          const ReducedSolveOptions& options) {
+  RETURN_IF_ERROR(ValidateSolveOptions(options));
   EnergyWeights w{problem.mu_s, problem.mu_b, problem.mu_c};
   if (!std::isfinite(w.constraint) || w.constraint < 0) {
     return absl::InvalidArgumentError(absl::StrCat(

@@ -67,6 +67,10 @@ struct ReducedSolveOptions {
   bool parallel = true;
 };
 
+// InvalidArgument unless 0 <= regularization <= max_regularization (finite), tolerance >= 0,
+// max_refinement_steps >= 0 and 0 < dependence_tolerance < 1.
+absl::Status ValidateSolveOptions(const ReducedSolveOptions& options);
+
 struct ReducedSolution {
   Eigen::VectorXd coefficients;  // d: the minimizer x in the subspace
   double backward_error = 0;     // of the final iterate (see ReducedSolveOptions::tolerance)

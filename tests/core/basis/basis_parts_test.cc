@@ -25,7 +25,7 @@ namespace {
 using basis_internal::LocalCholesky;
 using basis_internal::LocalEigenOptions;
 using basis_internal::LocalOperator;
-using basis_internal::LowerCsc;
+using basis_internal::UpperCsc;
 using testing::DualDistances;
 using testing::Icosphere;
 using testing::LoadMesh;
@@ -153,7 +153,7 @@ TEST(RegionsTest, RegionsAreDualDisks) {
 }
 
 // A 2D grid Laplacian plus a diagonal: SPD, sparse, with fill.
-LowerCsc GridMatrix(int nx, int ny, double shift, Eigen::MatrixXd* dense) {
+UpperCsc GridMatrix(int nx, int ny, double shift, Eigen::MatrixXd* dense) {
   const int n = nx * ny;
   dense->setZero(n, n);
   for (int y = 0; y < ny; ++y) {
@@ -164,12 +164,12 @@ LowerCsc GridMatrix(int nx, int ny, double shift, Eigen::MatrixXd* dense) {
       if (y + 1 < ny) (*dense)(i, i + nx) = (*dense)(i + nx, i) = -1.0;
     }
   }
-  LowerCsc A;
+  UpperCsc A;
   A.n = n;
   A.outer.push_back(0);
   for (int j = 0; j < n; ++j) {
-    // Unsorted rows on purpose: the diagonal last.
-    for (int i = n - 1; i > j; --i) {
+    // Upper triangle, unsorted rows on purpose: descending, the diagonal last.
+    for (int i = j - 1; i >= 0; --i) {
       if ((*dense)(i, j) != 0.0) {
         A.inner.push_back(i);
         A.values.push_back((*dense)(i, j));
@@ -184,7 +184,7 @@ LowerCsc GridMatrix(int nx, int ny, double shift, Eigen::MatrixXd* dense) {
 
 TEST(LocalCholeskyTest, SolvesLikeDense) {
   Eigen::MatrixXd dense;
-  const LowerCsc A = GridMatrix(37, 29, 0.05, &dense);
+  const UpperCsc A = GridMatrix(37, 29, 0.05, &dense);
   LocalCholesky chol;
   ASSERT_TRUE(chol.Factorize(A, nullptr).ok());
   EXPECT_GT(chol.flops(), 0);
@@ -195,7 +195,7 @@ TEST(LocalCholeskyTest, SolvesLikeDense) {
   EXPECT_LT((X - ref).norm() / ref.norm(), 1e-12);
   // Reuse for another matrix of another size.
   Eigen::MatrixXd dense2;
-  const LowerCsc A2 = GridMatrix(10, 50, 1.0, &dense2);
+  const UpperCsc A2 = GridMatrix(10, 50, 1.0, &dense2);
   ASSERT_TRUE(chol.Factorize(A2, nullptr).ok());
   Eigen::VectorXd b = Eigen::VectorXd::Random(A2.n);
   Eigen::VectorXd x = b;
@@ -205,7 +205,7 @@ TEST(LocalCholeskyTest, SolvesLikeDense) {
 
 TEST(LocalCholeskyTest, RejectsIndefinite) {
   Eigen::MatrixXd dense;
-  LowerCsc A = GridMatrix(8, 8, -5.0, &dense);  // diagonal ~ -1: indefinite
+  UpperCsc A = GridMatrix(8, 8, -5.0, &dense);  // diagonal ~ -1: indefinite
   LocalCholesky chol;
   EXPECT_EQ(chol.Factorize(A, nullptr).code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_EQ(GridMatrix(8, 8, 0.1, &dense).n, 64);

@@ -210,6 +210,14 @@ TEST_P(DesignSessionTest, ErrorsLeaveTheSessionUnchanged) {
   EXPECT_EQ(DesignSession::Create(nullptr, {}).status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(DesignSession::Create(sys_, {1.0, -1.0, 1.0}).status().code(),
             absl::StatusCode::kInvalidArgument);
+  DesignSessionOptions bad_options;
+  bad_options.solve.max_refinement_steps = -1;
+  EXPECT_EQ(DesignSession::Create(sys_, {}, bad_options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  bad_options = {};
+  bad_options.solve.regularization = 1.0;  // above max_regularization
+  EXPECT_EQ(DesignSession::Create(sys_, {}, bad_options).status().code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 TEST_P(DesignSessionTest, ConcurrentSessionsShareTheSystem) {

@@ -185,6 +185,10 @@ TEST(ModelProblemTest, InvalidProblems) {
   p = good;
   p.soft[0].weight = 0;
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  ReducedSolveOptions bad_options;
+  bad_options.dependence_tolerance = 0;
+  EXPECT_EQ(SolveReducedModelProblem(**sys, good, bad_options).status().code(),
+            absl::StatusCode::kInvalidArgument);
   // The same face hard-constrained twice: dependent rows.
   p = good;
   p.hard.push_back(p.hard[0]);
