@@ -63,9 +63,8 @@ absl::StatusOr<Eigen::VectorXd> ReadWeights(const std::string& path, int32_t num
           "%s:%d: '%s' is not a finite positive weight", path, line_no, std::string(s)));
     }
     if (count >= num_faces) {
-      return absl::InvalidArgumentError(
-          absl::StrFormat("%s: more than %d weights (the mesh has %d faces)", path, num_faces,
-                          num_faces));
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "%s: more than %d weights (the mesh has %d faces)", path, num_faces, num_faces));
     }
     w[count++] = v;
   }
@@ -96,7 +95,8 @@ absl::Status ExportMtx(const std::string& dir, const Basis& basis, const FieldOp
   std::FILE* f = std::fopen(samples_path.c_str(), "w");
   if (f == nullptr) return absl::ErrnoToStatus(errno, absl::StrCat("cannot create ", samples_path));
   for (int32_t s : basis.sample_faces) std::fprintf(f, "%d\n", s);
-  if (std::fclose(f) != 0) return absl::ErrnoToStatus(errno, absl::StrCat("writing ", samples_path));
+  if (std::fclose(f) != 0)
+    return absl::ErrnoToStatus(errno, absl::StrCat("writing ", samples_path));
   return absl::OkStatus();
 }
 

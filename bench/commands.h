@@ -10,6 +10,11 @@ int RunMesh(int argc, char** argv);
 int RunShape(int argc, char** argv);
 int RunOperator(int argc, char** argv);
 int RunSpectrum(int argc, char** argv);
+int RunBasis(int argc, char** argv);
+int RunServeLoad(int argc, char** argv);
+int RunApprox(int argc, char** argv);
+int RunEigen(int argc, char** argv);
+int RunDesign(int argc, char** argv);
 
 // Prints `status` as one line on stderr and returns the exit code: 2 for caller errors
 // (InvalidArgument, NotFound, OutOfRange, FailedPrecondition, ResourceExhausted, DataLoss), else 1.

@@ -22,6 +22,21 @@ constexpr Command kCommands[] = {
      "operator MESH --field vector|nfield|tensor [--n N] [--out DIR] [--timing]"},
     {"spectrum", fieldspace::bench::RunSpectrum,
      "spectrum MESH --field vector|nfield|tensor [--n N] --count K [--timing]"},
+    {"basis", fieldspace::bench::RunBasis,
+     "basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--threads T] "
+     "[--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N]"},
+    {"serve-load", fieldspace::bench::RunServeLoad,
+     "serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] [--sessions S] [--edits E] "
+     "[--watch W] [--threads T] [--server HOST:PORT]"},
+    {"approx", fieldspace::bench::RunApprox,
+     "approx MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] --tests K --seed N "
+     "[--basis local|eigen] [--min-constraints A] [--max-constraints B]"},
+    {"eigen", fieldspace::bench::RunEigen,
+     "eigen MESH --field vector|nfield|tensor [--n N] --count K --dim D [--sigma S] [--seed N] "
+     "[--method auto|dense|sparse] [--full]"},
+    {"design", fieldspace::bench::RunDesign,
+     "design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S [--sigma S] "
+     "[--max-constraints C] [--no-full] [--full-biharmonic]"},
 };
 
 void PrintUsage() {

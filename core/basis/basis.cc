@@ -9,8 +9,6 @@
 #include <mutex>
 #include <numeric>
 #include <thread>
-#include <cstdio>
-#include <cstdlib>
 
 #include "absl/strings/str_format.h"
 #include "core/basis/dual_graph.h"
@@ -62,9 +60,9 @@ absl::Status ValidateInputs(const TriangleMesh& mesh, const FieldOperator& op,
         absl::StrFormat("dimension must be >= 1 (got %d)", p.dimension));
   }
   if (p.dimension > k) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "dimension %d exceeds the number of DOFs (%d) of %s fields on this mesh", p.dimension, k,
-        op.type.ToString()));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("dimension %d exceeds the number of DOFs (%d) of %s fields on this mesh",
+                        p.dimension, k, op.type.ToString()));
   }
   if (!std::isfinite(p.sigma) || !(p.sigma > 0.0)) {
     return absl::InvalidArgumentError(
@@ -132,7 +130,7 @@ Eigen::MatrixXd SmoothStartFields(const TriangleMesh& mesh, const FieldType& typ
   }
   const int32_t cols = std::min(m, type.kind == FieldKind::kTensor ? 3 : 2);
   Eigen::MatrixXd X(static_cast<Eigen::Index>(dpf) * nfr, cols);
-  const int32_t turns = type.kind == FieldKind::kNField ? type.n
+  const int32_t turns = type.kind == FieldKind::kNField   ? type.n
                         : type.kind == FieldKind::kTensor ? 2
                                                           : 1;
   for (int32_t i = 0; i < nfr; ++i) {
@@ -187,7 +185,6 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   absl::StatusOr<std::vector<int32_t>> per_component =
       AllocateSamplesPerComponent(mesh, num_regions);
   if (!per_component.ok()) return per_component.status();
-  if (getenv("FS_TIME")) fprintf(stderr, "dual graph %.3f\n", SecondsSince(t0));
   absl::StatusOr<SamplingResult> sampling =
       FarthestPointSampling(mesh, *graph, *per_component, params.seed, poll);
   if (!sampling.ok()) return sampling.status();
@@ -206,7 +203,6 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   absl::StatusOr<std::vector<std::vector<int32_t>>> regions =
       GrowRegions(*graph, basis.sample_faces, region_options, poll);
   if (!regions.ok()) return regions.status();
-  if (getenv("FS_TIME")) fprintf(stderr, "grow regions %.3f\n", SecondsSince(t0));
   graph = DualGraph();  // free it
   auto fields_of = [&](int32_t r) { return r + 1 < num_regions ? m : d - m * (num_regions - 1); };
   // Position of each (region, face) pair's entries within the face's rows of U: regions in
@@ -266,7 +262,6 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   }
   std::vector<int64_t>().swap(per_face);
   basis.timings.regions_seconds = SecondsSince(t0);
-  if (getenv("FS_TIME")) fprintf(stderr, "regions total %.3f\n", SecondsSince(t0));
 
   // 3. Local eigenproblems, written straight into U.
   ticker.SetPhase(BasisPhase::kEigensolve, 0.0);
@@ -280,7 +275,6 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     if (!matches.ok()) return matches.status();
     basis.stats.hodge_factor_used = *matches;
   }
-  if (getenv("FS_TIME")) fprintf(stderr, "hodge check %.3f\n", SecondsSince(t0));
   const bool use_hodge = basis.stats.hodge_factor_used;
   basis.local_eigenvalues.assign(d, 0.0);
   tbb::enumerable_thread_specific<std::unique_ptr<RegionWorkspace>> workspaces;
@@ -299,27 +293,39 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     double region_area = 0.0;
     for (int32_t f : faces) region_area += area[f];
     const double lambda = DiskEigenvalueEstimate(region_area);
-    std::unique_ptr<basis_internal::LocalOperator> local;
-    if (use_hodge) {
-      local = std::make_unique<HodgeLocalOperator>(mesh, hodge, faces, 0.1 * lambda, ws);
-    } else {
-      local = std::make_unique<RestrictedLocalOperator>(op, inv_sqrt_mass, faces, 0.01 * lambda, ws);
-    }
     const Eigen::MatrixXd start =
         SmoothStartFields(mesh, op.type, faces, basis.sample_faces[r], fields_of(r));
     LocalEigenOptions eo;
     eo.count = fields_of(r);
+    // No guard vectors: measured ~12% cheaper overall than one guard (fewer solves per
+    // iteration outweigh the slightly slower convergence); the Lanczos fallback covers the rare
+    // region whose m-th and (m+1)-th eigenvalues nearly coincide.
     eo.guard = 0;
     eo.initial = &start;
     eo.tolerance = options.eigen_tolerance;
     eo.seed = Mix(params.seed, static_cast<uint64_t>(r));
-    absl::StatusOr<LocalEigenResult> res = SolveLocalEigenproblem(*local, eo, poll);
+    // The shift tau only needs to keep the shifted matrix safely positive definite: a fraction
+    // of the lowest eigenvalue (larger for the Woodbury form, whose rounding error grows like
+    // lambda_max / tau). Should a factorization still fail, retry with a larger shift.
+    absl::StatusOr<LocalEigenResult> res;
+    for (double tau_scale : {1.0, 100.0, 1e4}) {
+      std::unique_ptr<basis_internal::LocalOperator> local;
+      if (use_hodge) {
+        local =
+            std::make_unique<HodgeLocalOperator>(mesh, hodge, faces, 0.1 * tau_scale * lambda, ws);
+      } else {
+        local = std::make_unique<RestrictedLocalOperator>(op, inv_sqrt_mass, faces,
+                                                          0.01 * tau_scale * lambda, ws);
+      }
+      res = SolveLocalEigenproblem(*local, eo, poll);
+      if (res.ok() || !absl::IsFailedPrecondition(res.status())) break;
+    }
     if (!res.ok()) {
       if (absl::IsCancelled(res.status())) return res.status();
-      return absl::Status(res.status().code(),
-                          absl::StrFormat("region %d (sample face %d, %d faces): %s", r,
-                                          basis.sample_faces[r], faces.size(),
-                                          res.status().message()));
+      return absl::Status(
+          res.status().code(),
+          absl::StrFormat("region %d (sample face %d, %d faces): %s", r, basis.sample_faces[r],
+                          faces.size(), res.status().message()));
     }
     if (res->dense) dense_regions.fetch_add(1, std::memory_order_relaxed);
     if (res->lanczos_fallback) lanczos.fetch_add(1, std::memory_order_relaxed);
@@ -388,7 +394,8 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
   if (!valid.ok()) return valid;
   ProgressTicker ticker(options.progress, options.cancel);
   if (ticker.cancelled()) return ProgressTicker::CancelledError();
-  const int threads = options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
+  const int threads =
+      options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
   tbb::task_arena arena(threads);
   absl::StatusOr<Basis> result;
   arena.execute([&] { result = Build(mesh, op, options, m, ticker); });

@@ -62,9 +62,9 @@ struct BasisStats {
   // Vector fields only: S matched its factored form B B^T, so the local shift-inverses used the
   // Woodbury form (see local_problem.h); false means the generic path (factoring S_bar).
   bool hodge_factor_used = false;
-  int32_t dense_regions = 0;       // solved densely (tiny regions)
-  int32_t lanczos_fallbacks = 0;   // LOBPCG did not converge; Spectra's Lanczos did
-  int64_t lobpcg_iterations = 0;   // summed over regions
+  int32_t dense_regions = 0;      // solved densely (tiny regions)
+  int32_t lanczos_fallbacks = 0;  // LOBPCG did not converge; Spectra's Lanczos did
+  int64_t lobpcg_iterations = 0;  // summed over regions
   int64_t max_region_faces = 0;
   double mean_region_faces = 0;
 };

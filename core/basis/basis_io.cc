@@ -136,7 +136,8 @@ std::string EncodeHeader(const Header& h) {
 }
 
 absl::Status DataLoss(std::string_view what) {
-  return absl::DataLossError(absl::StrCat("basis file: ", absl::string_view(what.data(), what.size())));
+  return absl::DataLossError(
+      absl::StrCat("basis file: ", absl::string_view(what.data(), what.size())));
 }
 
 absl::StatusOr<Header> DecodeHeader(std::string_view bytes) {
@@ -242,13 +243,14 @@ class StringSource final : public Source {
 
 class FdSource final : public Source {
  public:
-  FdSource(int fd, uint64_t size, std::string path) : fd_(fd), size_(size), path_(std::move(path)) {}
+  FdSource(int fd, uint64_t size, std::string path)
+      : fd_(fd), size_(size), path_(std::move(path)) {}
   uint64_t size() const override { return size_; }
   absl::Status ReadAt(uint64_t offset, void* dst, size_t size) const override {
     char* p = static_cast<char*>(dst);
     while (size > 0) {
-      const ssize_t r = ::pread(fd_, p, std::min<size_t>(size, size_t{1} << 30),
-                                static_cast<off_t>(offset));
+      const ssize_t r =
+          ::pread(fd_, p, std::min<size_t>(size, size_t{1} << 30), static_cast<off_t>(offset));
       if (r < 0) {
         if (errno == EINTR) continue;
         return absl::ErrnoToStatus(errno, absl::StrCat("reading '", path_, "'"));
@@ -380,8 +382,8 @@ absl::StatusOr<Header> ReadHeader(const Source& src, uint64_t* header_end) {
   std::memcpy(&header_size, pre + 16, 8);
   std::memcpy(&header_crc, pre + 24, 4);
   if (version != kVersion) {
-    return DataLoss(absl::StrFormat("unsupported format version %d (this build reads %d)", version,
-                                    kVersion));
+    return DataLoss(
+        absl::StrFormat("unsupported format version %d (this build reads %d)", version, kVersion));
   }
   if (bom != kByteOrderMark) return DataLoss("written with a different byte order");
   if (header_size > kMaxMeshIdBytes + 1024 || header_size > size - kPreambleBytes) {
@@ -390,7 +392,8 @@ absl::StatusOr<Header> ReadHeader(const Source& src, uint64_t* header_end) {
   }
   std::string header(header_size, '\0');
   if (absl::Status s = src.ReadAt(kPreambleBytes, header.data(), header.size()); !s.ok()) return s;
-  if (Crc32c(header.data(), header.size()) != header_crc) return DataLoss("header checksum mismatch");
+  if (Crc32c(header.data(), header.size()) != header_crc)
+    return DataLoss("header checksum mismatch");
   *header_end = kPreambleBytes + header_size;
   return DecodeHeader(header);
 }
@@ -410,7 +413,8 @@ absl::Status ReadSection(const Source& src, uint64_t* offset, const SectionPlan&
   std::memcpy(&reserved, head + 4, 4);
   std::memcpy(&bytes, head + 8, 8);
   const std::string name(reinterpret_cast<const char*>(&plan.tag), 4);
-  if (tag != plan.tag || reserved != 0) return DataLoss(absl::StrCat("section ", name, ": bad tag"));
+  if (tag != plan.tag || reserved != 0)
+    return DataLoss(absl::StrCat("section ", name, ": bad tag"));
   if (bytes != plan.bytes) return DataLoss(absl::StrCat("section ", name, ": bad size"));
   *offset += kSectionHeadBytes;
   constexpr size_t kChunk = size_t{1} << 22;
@@ -436,11 +440,10 @@ absl::StatusOr<LoadedBasis> Decode(const Source& src) {
   const Header& h = *hs;
   // The exact file size implied by the header, before allocating anything (all counts are
   // bounded above, so no overflow).
-  const uint64_t payload[] = {4 * static_cast<uint64_t>(h.num_regions),
-                              8 * static_cast<uint64_t>(h.dimension),
-                              8 * static_cast<uint64_t>(h.num_weights),
-                              4 * (static_cast<uint64_t>(h.rows) + 1),
-                              4 * static_cast<uint64_t>(h.nnz), 4 * static_cast<uint64_t>(h.nnz)};
+  const uint64_t payload[] = {
+      4 * static_cast<uint64_t>(h.num_regions), 8 * static_cast<uint64_t>(h.dimension),
+      8 * static_cast<uint64_t>(h.num_weights), 4 * (static_cast<uint64_t>(h.rows) + 1),
+      4 * static_cast<uint64_t>(h.nnz),         4 * static_cast<uint64_t>(h.nnz)};
   uint64_t expected = offset;
   for (uint64_t b : payload) expected += kSectionHeadBytes + b + kSectionTailBytes;
   if (expected != src.size()) {
@@ -561,7 +564,8 @@ absl::Status SaveBasisFile(const std::string& path, const Basis& basis, std::str
   ::fchmod(fd.fd, 0644);
   FdSink sink(fd.fd, tmp);
   if (absl::Status s = Encode(basis, mesh_id, sink); !s.ok()) return fail(s);
-  if (::fsync(fd.fd) != 0) return fail(absl::ErrnoToStatus(errno, absl::StrCat("fsync '", tmp, "'")));
+  if (::fsync(fd.fd) != 0)
+    return fail(absl::ErrnoToStatus(errno, absl::StrCat("fsync '", tmp, "'")));
   if (::close(fd.fd) != 0) {
     fd.fd = -1;
     return fail(absl::ErrnoToStatus(errno, absl::StrCat("close '", tmp, "'")));

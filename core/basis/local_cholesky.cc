@@ -193,7 +193,8 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<boo
     std::fill(lsx, lsx + static_cast<int64_t>(nsrow) * nscol, 0.0);
     for (int32_t j = k1; j < k2; ++j) {
       double* col = lsx + static_cast<int64_t>(j - k1) * nsrow;
-      for (int32_t p = c_outer_[j]; p < c_outer_[j + 1]; ++p) col[map_[c_inner_[p]]] += c_values_[p];
+      for (int32_t p = c_outer_[j]; p < c_outer_[j + 1]; ++p)
+        col[map_[c_inner_[p]]] += c_values_[p];
     }
     // Updates from every descendant d whose row pattern meets columns [k1, k2).
     for (int32_t d = head_[s]; d != -1;) {
@@ -204,7 +205,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<boo
       const int32_t p = lpos_[d];
       int32_t q = p;
       while (q < ndrow && ls[pdi + q] < k2) ++q;
-      const int32_t ndrow1 = q - p;  // rows of d inside [k1, k2)
+      const int32_t ndrow1 = q - p;      // rows of d inside [k1, k2)
       const int32_t ndrow2 = ndrow - p;  // rows of d from k1 on
       const int32_t* rows = ls + pdi + p;
       const double* ldx = lx_.data() + lpx[d];
@@ -269,14 +270,15 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<boo
       positive = llt.info() == Eigen::Success;
       if (positive && nsrow > nscol) {
         auto below = block.bottomRows(nsrow - nscol);
-        block.topRows(nscol).triangularView<Eigen::Lower>().transpose().solveInPlace<Eigen::OnTheRight>(
-            below);
+        block.topRows(nscol)
+            .triangularView<Eigen::Lower>()
+            .transpose()
+            .solveInPlace<Eigen::OnTheRight>(below);
       }
     }
     if (!positive) {
       FreeSymbolic();
-      return absl::FailedPreconditionError(
-          "local system is not numerically positive definite");
+      return absl::FailedPreconditionError("local system is not numerically positive definite");
     }
     if (nsrow > nscol) {
       lpos_[s] = nscol;
@@ -309,7 +311,8 @@ void LocalCholesky::SolveInPlace(double* X, int32_t p) {
     xp_.resize(static_cast<size_t>(n) * pc);
     double* xp = xp_.data();
     for (int32_t k = 0; k < n; ++k) {
-      for (int32_t c = 0; c < pc; ++c) xp[static_cast<int64_t>(k) * pc + c] = X[static_cast<int64_t>(c0 + c) * n + perm[k]];
+      for (int32_t c = 0; c < pc; ++c)
+        xp[static_cast<int64_t>(k) * pc + c] = X[static_cast<int64_t>(c0 + c) * n + perm[k]];
     }
     switch (pc) {
       case 1:
@@ -334,7 +337,8 @@ void LocalCholesky::SolveInPlace(double* X, int32_t p) {
         break;
     }
     for (int32_t k = 0; k < n; ++k) {
-      for (int32_t c = 0; c < pc; ++c) X[static_cast<int64_t>(c0 + c) * n + perm[k]] = xp[static_cast<int64_t>(k) * pc + c];
+      for (int32_t c = 0; c < pc; ++c)
+        X[static_cast<int64_t>(c0 + c) * n + perm[k]] = xp[static_cast<int64_t>(k) * pc + c];
     }
   }
 }

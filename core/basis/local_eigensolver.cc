@@ -214,8 +214,7 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
       A = llt.matrixL().solve(A.transpose().eval());
       Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (A + A.transpose()));
       if (es.info() != Eigen::Success) continue;
-      const Eigen::MatrixXd C =
-          llt.matrixU().solve(Eigen::MatrixXd(es.eigenvectors().leftCols(p)));
+      const Eigen::MatrixXd C = llt.matrixU().solve(Eigen::MatrixXd(es.eigenvectors().leftCols(p)));
       X = B * C;
       SX = SB * C;
       P = B.rightCols(q - p) * C.bottomRows(q - p);

@@ -92,7 +92,8 @@ RestrictedLocalOperator::RestrictedLocalOperator(const FieldOperator& op,
   n_ = dpf * nfr;
   if (ws.dof_map.size() != static_cast<size_t>(op.dofs())) ws.dof_map.assign(op.dofs(), -1);
   for (int32_t i = 0; i < nfr; ++i) {
-    for (int32_t c = 0; c < dpf; ++c) ws.dof_map[dpf * static_cast<int64_t>(faces[i]) + c] = dpf * i + c;
+    for (int32_t c = 0; c < dpf; ++c)
+      ws.dof_map[dpf * static_cast<int64_t>(faces[i]) + c] = dpf * i + c;
   }
   const Eigen::SparseMatrix<double>& S = op.stiffness;
   outer_.assign(static_cast<size_t>(n_) + 1, 0);
@@ -187,15 +188,19 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
   const FaceMatrix& F = mesh.faces();
   const FaceMatrix& FE = mesh.face_edges();
   uint64_t state = 0x5eed5eedULL;
-  for (int trial = 0; trial < 2; ++trial) {
+  // One random vector: a mismatch anywhere shows up in S x with probability 1.
+  for (int trial = 0; trial < 1; ++trial) {
     Eigen::VectorXd x(k);
     for (int64_t i = 0; i < k; ++i) {
       x[i] = static_cast<double>(SplitMix64(state) >> 11) * 0x1.0p-52 - 1.0;
     }
     // y1 = S x and the entrywise scale |S| |x| (S symmetric: row i = column i).
     Eigen::VectorXd y1(k), scale(k);
+    std::atomic<bool> cancelled{false};
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, k, 16384),
                       [&](const tbb::blocked_range<int64_t>& r) {
+                        if (cancelled.load(std::memory_order_relaxed)) return;
+                        if (poll && poll()) cancelled.store(true);
                         for (int64_t j = r.begin(); j != r.end(); ++j) {
                           double s = 0.0, a = 0.0;
                           for (Eigen::SparseMatrix<double>::InnerIterator it(S, j); it; ++it) {
@@ -206,10 +211,15 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
                           scale[j] = a;
                         }
                       });
-    if (poll && poll()) return absl::CancelledError("basis construction cancelled");
+    if (cancelled.load() || (poll && poll())) {
+      return absl::CancelledError("basis construction cancelled");
+    }
     // z = B^T x (vertex part, edge part), then y2 = B z.
     std::vector<double> zv(mesh.num_vertices(), 0.0), ze(mesh.num_edges(), 0.0);
     for (int32_t f = 0; f < nf; ++f) {
+      if ((f & 0xffff) == 0 && poll && poll()) {
+        return absl::CancelledError("basis construction cancelled");
+      }
       for (int kk = 0; kk < 3; ++kk) {
         double tx, ty;
         EdgeVectorInFrame(mesh, f, kk, &tx, &ty);
@@ -222,6 +232,7 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
     std::atomic<bool> mismatch{false};
     tbb::parallel_for(tbb::blocked_range<int32_t>(0, nf, 8192),
                       [&](const tbb::blocked_range<int32_t>& r) {
+                        if (poll) poll();  // progress only; cancellation checked below
                         for (int32_t f = r.begin(); f != r.end(); ++f) {
                           double y2[2] = {0.0, 0.0};
                           for (int kk = 0; kk < 3; ++kk) {
@@ -404,8 +415,8 @@ absl::Status HodgeLocalOperator::PrepareShiftInverse(const std::function<bool()>
   return ws_.cholesky.Factorize(K, poll);
 }
 
-void HodgeLocalOperator::ApplyShiftInverseAndStiffness(const Eigen::MatrixXd& X,
-                                                       Eigen::MatrixXd* Y, Eigen::MatrixXd* SY) {
+void HodgeLocalOperator::ApplyShiftInverseAndStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y,
+                                                       Eigen::MatrixXd* SY) {
   ApplyBt(X, &z_);
   ws_.cholesky.SolveInPlace(z_.data(), static_cast<int32_t>(z_.cols()));
   ApplyB(z_, SY, /*subtract=*/false);

@@ -18,7 +18,9 @@ using RowBlock = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::Ro
 
 // Estimate of the lowest Dirichlet eigenvalue of a region of area `area`: a flat disk's
 // j_{0,1}^2 pi / area. Sets the scale of the shift tau; accuracy is irrelevant.
-inline double DiskEigenvalueEstimate(double area) { return 5.783185962946784 * 3.141592653589793 / area; }
+inline double DiskEigenvalueEstimate(double area) {
+  return 5.783185962946784 * 3.141592653589793 / area;
+}
 
 // Per-thread scratch reused from region to region: index maps that are -1 everywhere except
 // while a region is being built (reset through touched lists, O(region) per region), and the
@@ -66,7 +68,7 @@ struct HodgeFactorData {
 };
 HodgeFactorData BuildHodgeFactorData(const TriangleMesh& mesh);
 
-// Whether op.stiffness equals B B^T (to rounding): tested on two random vectors, entrywise
+// Whether op.stiffness equals B B^T (to rounding): tested on a random vector, entrywise
 // relative to |S| |x|. Only then may the Woodbury operator below stand in for S_bar.
 absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOperator& op,
                                         const HodgeFactorData& data,
@@ -100,7 +102,7 @@ class HodgeLocalOperator final : public LocalOperator {
   // Y = B_D Z (n x p), or Y -= B_D Z.
   void ApplyB(const Eigen::MatrixXd& Z, Eigen::MatrixXd* Y, bool subtract);
 
-  int32_t n_ = 0;         // 2 * faces
+  int32_t n_ = 0;          // 2 * faces
   int32_t num_nodes_ = 0;  // N: vertices then edges
   int32_t num_vertices_ = 0;
   double tau_ = 0;

@@ -59,9 +59,7 @@ class ProgressTicker {
               fraction_.load(std::memory_order_relaxed));
   }
 
-  bool cancelled() const {
-    return cancel_ != nullptr && cancel_->load(std::memory_order_relaxed);
-  }
+  bool cancelled() const { return cancel_ != nullptr && cancel_->load(std::memory_order_relaxed); }
 
   static absl::Status CancelledError() {
     return absl::CancelledError("basis construction cancelled");

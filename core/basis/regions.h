@@ -19,9 +19,10 @@ struct RegionOptions {
 // `radius` of the sample (Dijkstra truncated at r), as ascending face indices. Regions are grown
 // in parallel (run inside the caller's task arena) with per-thread scratch, O(region size) each.
 // `poll` is called regularly from worker threads; true aborts with Cancelled.
-absl::StatusOr<std::vector<std::vector<int32_t>>> GrowRegions(
-    const DualGraph& graph, const std::vector<int32_t>& samples, const RegionOptions& options,
-    const std::function<bool()>& poll);
+absl::StatusOr<std::vector<std::vector<int32_t>>> GrowRegions(const DualGraph& graph,
+                                                              const std::vector<int32_t>& samples,
+                                                              const RegionOptions& options,
+                                                              const std::function<bool()>& poll);
 
 }  // namespace fieldspace
 

@@ -102,6 +102,7 @@ absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
   if (static_cast<int32_t>(per_component.size()) != nc) {
     return absl::InvalidArgumentError("per_component must have one count per component");
   }
+  if (graph.num_nodes != nf) return absl::InvalidArgumentError("dual graph of another mesh");
   // Faces grouped by component (counting sort keeps each group ascending).
   std::vector<int32_t> comp_offset(static_cast<size_t>(nc) + 1, 0);
   const Eigen::VectorXi& fc = mesh.face_component();
@@ -114,29 +115,57 @@ absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
   }
 
   constexpr double kInf = std::numeric_limits<double>::infinity();
-  std::vector<double> dist(nf, kInf);
+  std::vector<double> dist(nf, kInf);            // per node
   std::vector<std::pair<double, int32_t>> heap;  // Dijkstra min-heap
   const auto greater = [](const std::pair<double, int32_t>& a,
                           const std::pair<double, int32_t>& b) { return a > b; };
   int64_t steps = 0;
   bool cancelled = false;
-  // Lowers dist[] by a Dijkstra from `source`, touching only faces that get closer.
+
+  // The farthest node is found with a bucket queue over distances: distances only decrease, so
+  // each node is re-filed (lazily: old entries are dropped when their bucket is scanned) only
+  // when it moves to a lower bucket, and the maximum is in the highest non-empty bucket. A
+  // global max-heap was several times slower here (every decrease costs a heap operation on a
+  // heap of #F entries with poor locality).
+  int32_t num_buckets = 1;
+  double bucket_scale = 0.0;
+  std::vector<std::vector<int32_t>> buckets;
+  std::vector<int32_t> node_bucket;
+  bool bucketing = false;
+  auto bucket_of = [&](double d) {
+    return std::min(num_buckets - 1, static_cast<int32_t>(d * bucket_scale));
+  };
+
+  // Lowers dist[] by a Dijkstra from `source`, touching only nodes that get closer.
   auto relax_from = [&](int32_t source) {
     heap.clear();
     dist[source] = 0.0;
+    if (bucketing && node_bucket[source] != 0) {
+      node_bucket[source] = 0;
+      buckets[0].push_back(source);
+    }
     heap.emplace_back(0.0, source);
     while (!heap.empty()) {
       std::pop_heap(heap.begin(), heap.end(), greater);
       const auto [d, u] = heap.back();
       heap.pop_back();
       if (d > dist[u]) continue;
-      for (int32_t a = graph.offsets[u]; a < graph.offsets[u + 1]; ++a) {
-        const int32_t v = graph.targets[a];
-        const double nd = d + graph.lengths[a];
+      const DualArc* arcs = &graph.arcs[3 * static_cast<size_t>(u)];
+      for (int k = 0; k < 3; ++k) {
+        const int32_t v = arcs[k].target;
+        if (v < 0) continue;
+        const double nd = d + arcs[k].length;
         if (nd < dist[v]) {
           dist[v] = nd;
           heap.emplace_back(nd, v);
           std::push_heap(heap.begin(), heap.end(), greater);
+          if (bucketing) {
+            const int32_t b = bucket_of(nd);
+            if (b != node_bucket[v]) {
+              node_bucket[v] = b;
+              buckets[b].push_back(v);
+            }
+          }
         }
       }
       if ((++steps & 4095) == 0 && poll && poll()) {
@@ -150,7 +179,6 @@ absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
   int64_t total = 0;
   for (int32_t n : per_component) total += n;
   result.samples.reserve(total);
-  std::vector<std::pair<double, int32_t>> far;  // lazy max-heap of (distance, face)
   for (int32_t c = 0; c < nc; ++c) {
     const int32_t begin = comp_offset[c];
     const int32_t size = comp_offset[c + 1] - begin;
@@ -162,36 +190,53 @@ absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
     const int32_t first =
         comp_faces[begin + static_cast<int32_t>(SplitMix64(seed ^ SplitMix64(c)) % size)];
     result.samples.push_back(first);
-    relax_from(first);
+    bucketing = false;
+    relax_from(graph.face_node[first]);
     if (cancelled) return absl::CancelledError("basis construction cancelled");
-    // Every face keeps exactly one heap entry whose key is >= its current distance (distances
-    // only decrease). A popped entry whose key is stale is re-pushed with the current distance;
-    // a fresh one is the true maximum.
-    far.clear();
-    far.reserve(size);
-    for (int32_t i = 0; i < size; ++i) {
-      const int32_t f = comp_faces[begin + i];
-      far.emplace_back(dist[f], f);
-    }
-    std::make_heap(far.begin(), far.end());
-    for (int32_t s = 1; s < want; ++s) {
-      while (true) {
-        std::pop_heap(far.begin(), far.end());
-        auto [d, f] = far.back();
-        if (d == dist[f]) {
-          far.back().first = 0.0;  // f becomes a sample: distance 0
-          std::push_heap(far.begin(), far.end());
-          result.samples.push_back(f);
-          relax_from(f);
-          break;
-        }
-        far.back().first = dist[f];
-        std::push_heap(far.begin(), far.end());
+    if (want > 1) {
+      double far = 0.0;
+      for (int32_t i = 0; i < size; ++i) {
+        far = std::max(far, dist[graph.face_node[comp_faces[begin + i]]]);
       }
-      if (cancelled) return absl::CancelledError("basis construction cancelled");
+      num_buckets = std::clamp(size, 1, 1 << 16);
+      bucket_scale = far > 0 ? num_buckets / far : 0.0;
+      buckets.assign(num_buckets, {});
+      if (node_bucket.empty()) node_bucket.assign(nf, -1);
+      for (int32_t i = 0; i < size; ++i) {
+        const int32_t v = graph.face_node[comp_faces[begin + i]];
+        node_bucket[v] = bucket_of(dist[v]);
+        buckets[node_bucket[v]].push_back(v);
+      }
+      bucketing = true;
+      int32_t top = num_buckets - 1;
+      for (int32_t s = 1; s < want; ++s) {
+        int32_t best = -1;
+        while (best < 0) {
+          while (top > 0 && buckets[top].empty()) --top;
+          std::vector<int32_t>& bucket = buckets[top];
+          size_t kept = 0;
+          for (int32_t v : bucket) {
+            if (node_bucket[v] != top) continue;  // moved to a lower bucket
+            bucket[kept++] = v;
+            // The maximum distance; ties go to the larger face index (independent of the
+            // graph's node numbering).
+            if (best < 0 || dist[v] > dist[best] ||
+                (dist[v] == dist[best] && graph.node_face[v] > graph.node_face[best])) {
+              best = v;
+            }
+          }
+          bucket.resize(kept);
+          if (best < 0 && top == 0) return absl::InternalError("farthest point sampling ran dry");
+        }
+        result.samples.push_back(graph.node_face[best]);
+        relax_from(best);
+        if (cancelled) return absl::CancelledError("basis construction cancelled");
+      }
+      bucketing = false;
     }
     for (int32_t i = 0; i < size; ++i) {
-      result.coverage_radius = std::max(result.coverage_radius, dist[comp_faces[begin + i]]);
+      result.coverage_radius =
+          std::max(result.coverage_radius, dist[graph.face_node[comp_faces[begin + i]]]);
     }
   }
   return result;

@@ -28,9 +28,10 @@ struct SamplingResult {
 
 // Farthest point sampling on the dual graph (paper section 4): per component, the first sample is
 // a face chosen by `seed`, every next one the face farthest (in dual-graph distance) from the
-// samples so far. Incremental: after each new sample a Dijkstra from it relaxes only the faces
-// whose distance decreases, and a lazy max-heap yields the farthest face without scanning.
-// `poll` is called every few thousand steps; true aborts with Cancelled.
+// samples so far (ties: the larger face index). Incremental: after each new sample a Dijkstra
+// from it relaxes only the faces whose distance decreases, and a bucket queue over distances
+// yields the farthest face without scanning all faces. `poll` is called every few thousand
+// steps; true aborts with Cancelled.
 absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
                                                      const DualGraph& graph,
                                                      const std::vector<int32_t>& per_component,

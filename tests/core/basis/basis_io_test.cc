@@ -53,8 +53,8 @@ class BasisIoTest : public ::testing::Test {
     ASSERT_EQ(a.U.rows(), b.U.rows());
     ASSERT_EQ(a.U.cols(), b.U.cols());
     ASSERT_EQ(a.U.nonZeros(), b.U.nonZeros());
-    EXPECT_TRUE(std::equal(a.U.outerIndexPtr(), a.U.outerIndexPtr() + a.U.rows() + 1,
-                           b.U.outerIndexPtr()));
+    EXPECT_TRUE(
+        std::equal(a.U.outerIndexPtr(), a.U.outerIndexPtr() + a.U.rows() + 1, b.U.outerIndexPtr()));
     EXPECT_TRUE(
         std::equal(a.U.innerIndexPtr(), a.U.innerIndexPtr() + a.U.nonZeros(), b.U.innerIndexPtr()));
     EXPECT_TRUE(std::equal(a.U.valuePtr(), a.U.valuePtr() + a.U.nonZeros(), b.U.valuePtr()));

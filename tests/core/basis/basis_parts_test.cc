@@ -36,11 +36,22 @@ TEST(DualGraphTest, ArcsAndLengths) {
   auto g = BuildDualGraph(mesh, {});
   ASSERT_TRUE(g.ok()) << g.status();
   ASSERT_EQ(g->num_nodes, mesh.num_faces());
-  EXPECT_EQ(g->offsets.back(), 3 * mesh.num_faces());  // closed: 3 neighbors each
+  // node_face and face_node are inverse permutations.
+  std::vector<int32_t> sorted = g->node_face;
+  std::sort(sorted.begin(), sorted.end());
   for (int32_t f = 0; f < mesh.num_faces(); ++f) {
-    for (int32_t a = g->offsets[f]; a < g->offsets[f + 1]; ++a) {
-      const int32_t h = g->targets[a];
-      EXPECT_NEAR(g->lengths[a],
+    ASSERT_EQ(sorted[f], f);
+    ASSERT_EQ(g->node_face[g->face_node[f]], f);
+  }
+  // Arcs: exactly the face neighbors, with barycenter distances.
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    const int32_t v = g->face_node[f];
+    for (int k = 0; k < 3; ++k) {
+      const DualArc& arc = g->arcs[3 * v + k];
+      ASSERT_GE(arc.target, 0);  // closed mesh
+      const int32_t h = g->node_face[arc.target];
+      EXPECT_EQ(h, mesh.face_neighbors()(f, k));
+      EXPECT_NEAR(arc.length,
                   (mesh.face_barycenters().row(f) - mesh.face_barycenters().row(h)).norm(), 1e-15);
     }
   }
@@ -48,10 +59,14 @@ TEST(DualGraphTest, ArcsAndLengths) {
   w[0] = 4.0;
   auto gw = BuildDualGraph(mesh, w);
   ASSERT_TRUE(gw.ok());
-  for (int32_t a = gw->offsets[0]; a < gw->offsets[1]; ++a) {
-    EXPECT_NEAR(gw->lengths[a], 3.0 * g->lengths[a], 1e-15);  // mean of 4 and 2
+  for (int k = 0; k < 3; ++k) {
+    EXPECT_NEAR(gw->arcs[3 * gw->face_node[0] + k].length,
+                3.0 * g->arcs[3 * g->face_node[0] + k].length, 1e-15);  // mean of 4 and 2
+    EXPECT_NEAR(
+        gw->arcs[3 * gw->face_node[5] + k].length,
+        (mesh.face_neighbors()(5, k) == 0 ? 3.0 : 2.0) * g->arcs[3 * g->face_node[5] + k].length,
+        1e-15);
   }
-  EXPECT_NEAR(gw->lengths[gw->offsets[5]], 2.0 * g->lengths[g->offsets[5]], 1e-15);
 }
 
 TEST(DualGraphTest, BoundaryFacesHaveFewerArcs) {
@@ -59,9 +74,11 @@ TEST(DualGraphTest, BoundaryFacesHaveFewerArcs) {
   const TriangleMesh mesh = LoadMesh(path);
   auto g = BuildDualGraph(mesh, {});
   ASSERT_TRUE(g.ok());
-  int64_t interior_edges = 0;
-  for (int32_t e = 0; e < mesh.num_edges(); ++e) interior_edges += mesh.edge_faces()(e, 1) != kNoFace;
-  EXPECT_EQ(g->offsets.back(), 2 * interior_edges);
+  int64_t interior_edges = 0, arcs = 0;
+  for (int32_t e = 0; e < mesh.num_edges(); ++e)
+    interior_edges += mesh.edge_faces()(e, 1) != kNoFace;
+  for (const DualArc& a : g->arcs) arcs += a.target >= 0;
+  EXPECT_EQ(arcs, 2 * interior_edges);
 }
 
 TEST(DualGraphTest, RejectsBadWeights) {
@@ -272,10 +289,9 @@ TEST(LocalEigensolverTest, LowestEigenpairsOfPathLaplacian) {
             absl::StatusCode::kInvalidArgument);
   PathOperator big(500, 1e-3);
   options.count = 2;
-  EXPECT_EQ(basis_internal::SolveLocalEigenproblem(big, options, [] { return true; })
-                .status()
-                .code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_EQ(
+      basis_internal::SolveLocalEigenproblem(big, options, [] { return true; }).status().code(),
+      absl::StatusCode::kCancelled);
 }
 
 TEST(LocalEigensolverTest, FallsBackToLanczosWhenLobpcgDoesNotConverge) {

@@ -76,13 +76,15 @@ void CheckStructure(const TriangleMesh& mesh, const FieldOperator& op, const Bas
     // Support: zero outside the region, and the region's faces are all used.
     for (int64_t i = 0; i < op.dofs(); ++i) {
       if (!inside[i / dpf]) {
-        ASSERT_EQ(block.row(i).norm(), 0.0) << "region " << region << " leaks into face " << i / dpf;
+        ASSERT_EQ(block.row(i).norm(), 0.0)
+            << "region " << region << " leaks into face " << i / dpf;
       }
     }
     // M-orthonormal: U_D^T M U_D = I.
     const Eigen::MatrixXd gram = block.transpose() * op.mass.asDiagonal() * block;
     EXPECT_LT((gram - Eigen::MatrixXd::Identity(count, count)).cwiseAbs().maxCoeff(), 1e-5)
-        << "region " << region << "\n" << gram;
+        << "region " << region << "\n"
+        << gram;
   }
 }
 
@@ -108,8 +110,8 @@ TEST(BasisTest, VectorBasisOnRealMeshHasPaperStructure) {
 
 // The local eigenproblem (eq. 7) against an independent dense solve of S_bar built from the
 // operator: same eigenvalues, same eigenspace.
-void CheckLocalEigenproblems(const TriangleMesh& mesh, const FieldOperator& op,
-                             const Basis& basis, int32_t regions_to_check) {
+void CheckLocalEigenproblems(const TriangleMesh& mesh, const FieldOperator& op, const Basis& basis,
+                             int32_t regions_to_check) {
   const int32_t m = FieldsPerRegion(basis);
   const int32_t dpf = op.type.dofs_per_face();
   const Eigen::SparseMatrix<double> Uc = ColumnMajor(basis);
@@ -324,7 +326,8 @@ TEST(BasisTest, OddDimensionDropsTheLastRegionsSecondField) {
   // The last region's single field is its lowest one: a Rayleigh quotient no larger than the
   // other regions' second fields typically are, and equal to its own local eigenvalue.
   const Eigen::VectorXd u = DenseColumn(ColumnMajor(basis), 40);
-  EXPECT_NEAR(u.dot(op.stiffness * u), basis.local_eigenvalues[40], 1e-4 * basis.local_eigenvalues[40]);
+  EXPECT_NEAR(u.dot(op.stiffness * u), basis.local_eigenvalues[40],
+              1e-4 * basis.local_eigenvalues[40]);
 }
 
 TEST(BasisTest, CustomFieldsPerRegion) {
@@ -391,8 +394,7 @@ TEST(BasisTest, InvalidParameters) {
   EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = -1; }), StatusCode::kInvalidArgument);
   EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = std::nan(""); }),
             StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = INFINITY; }),
-            StatusCode::kInvalidArgument);
+  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = INFINITY; }), StatusCode::kInvalidArgument);
   EXPECT_EQ(code([](BasisOptions& o) { o.params.fields_per_region = 0; }),
             StatusCode::kInvalidArgument);
   EXPECT_EQ(code([](BasisOptions& o) { o.params.face_weights = Eigen::VectorXd::Ones(319); }),

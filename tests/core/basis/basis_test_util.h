@@ -115,7 +115,8 @@ inline Eigen::MatrixXd DenseRestricted(const FieldOperator& op, const std::vecto
   Eigen::MatrixXd S(n, n);
   for (Eigen::Index i = 0; i < n; ++i) {
     for (Eigen::Index j = 0; j < n; ++j) {
-      S(i, j) = op.stiffness.coeff(dofs[i], dofs[j]) / std::sqrt(op.mass[dofs[i]] * op.mass[dofs[j]]);
+      S(i, j) =
+          op.stiffness.coeff(dofs[i], dofs[j]) / std::sqrt(op.mass[dofs[i]] * op.mass[dofs[j]]);
     }
   }
   return S;
