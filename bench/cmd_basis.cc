@@ -1,5 +1,5 @@
 // `fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S]
-//   [--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats]`:
+//   [--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] [--tolerance T]`:
 // builds the locally supported basis (paper section 4) and prints one JSON object
 //   {"dim","regions","dofs","nnz_u","nnz_per_row",
 //    "seconds":{"sampling","regions","eigensolve","total"},"peak_rss_mb"}.
@@ -8,6 +8,7 @@
 // --export-mtx DIR: DIR/U.mtx (k x d), DIR/S.mtx, DIR/M.mtx (MatrixMarket coordinate real
 // general, 1-based, DESIGN.md DOF order, the operator subcommand's writer) and DIR/samples.txt
 // (the sample face of each region, 0-based, one per line).
+// --tolerance T: residual tolerance of the local eigenproblems (BasisOptions::eigen_tolerance).
 // --stats adds "stats":{...} (how the local problems were solved; core/basis/basis.h BasisStats).
 #include <cstdio>
 #include <filesystem>
@@ -36,7 +37,7 @@ namespace {
 
 constexpr char kUsage[] =
     "usage: fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] "
-    "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats]";
+    "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] [--tolerance T]";
 
 absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -106,7 +107,7 @@ int RunBasis(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {"stats"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "threads", "weights", "save",
-                                  "export-mtx", "seed", "stats"});
+                                  "export-mtx", "seed", "stats", "tolerance"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -123,6 +124,8 @@ int RunBasis(int argc, char** argv) {
   if (!threads.ok()) return ReportError(threads.status());
   auto seed = args->GetInt("seed", 0);
   if (!seed.ok()) return ReportError(seed.status());
+  auto tolerance = args->GetDouble("tolerance", BasisOptions().eigen_tolerance);
+  if (!tolerance.ok()) return ReportError(tolerance.status());
   if (*dim < 1 || *dim > (int64_t{1} << 31) - 1) {
     return ReportError(absl::InvalidArgumentError(absl::StrCat("--dim ", *dim, " out of range")));
   }
@@ -142,6 +145,7 @@ int RunBasis(int argc, char** argv) {
   options.params.sigma = *sigma;
   options.params.seed = static_cast<uint64_t>(*seed);
   options.threads = static_cast<int32_t>(*threads);
+  options.eigen_tolerance = *tolerance;
   if (const auto weights = args->Get("weights"); weights.has_value()) {
     auto w = ReadWeights(*weights, mesh->num_faces());
     if (!w.ok()) return ReportError(w.status());
