@@ -53,7 +53,7 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
         [--no-coefficients]           stream edits; one JSON line per update
 
 FIELD_FILE: text (one face per line; '# encoding: dof' or ambient, the default) or, for output,
-.ply (the mesh with the field as face properties). Formats: server/README-api.md.
+.ply (the mesh with the field as face properties). Formats: README.md.
 )";
 
 // Command line: positional arguments and --flags (with a value unless listed as boolean).

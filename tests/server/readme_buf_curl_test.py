@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Runs the tested shell blocks of server/README-api.md as written (the fieldspace CLI block and
+"""Runs the tested shell blocks of README.md as written (the fieldspace CLI block and
 the buf curl block) against a live fieldspaced, and checks what they print.
 
 Exit 0 on success, 1 on failure, 77 (skip) when npx cannot provide buf (no node / no registry).
