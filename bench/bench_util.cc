@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <string>
 
@@ -144,17 +145,26 @@ JsonWriter& JsonWriter::DoubleArray(const std::string& key, const std::vector<do
   return *this;
 }
 
-double PeakRssMb() {
+namespace {
+
+// A "Name:   123 kB" line of /proc/self/status, in MiB (0 when absent).
+double StatusFieldMb(const char* name) {
   std::ifstream in("/proc/self/status");
   std::string line;
+  const size_t len = std::strlen(name);
   while (std::getline(in, line)) {
-    if (line.rfind("VmHWM:", 0) == 0) {
+    if (line.compare(0, len, name) == 0) {
       double kb = 0;
-      std::sscanf(line.c_str() + 6, "%lf", &kb);
+      std::sscanf(line.c_str() + len, "%lf", &kb);
       return kb / 1024.0;
     }
   }
   return 0;
 }
+
+}  // namespace
+
+double PeakRssMb() { return StatusFieldMb("VmHWM:"); }
+double CurrentRssMb() { return StatusFieldMb("VmRSS:"); }
 
 }  // namespace fieldspace::bench

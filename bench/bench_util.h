@@ -53,6 +53,8 @@ class JsonWriter {
 
 // Peak resident set size of this process in MiB (VmHWM).
 double PeakRssMb();
+// Current resident set size of this process, MiB.
+double CurrentRssMb();
 
 class Stopwatch {
  public:

@@ -1,5 +1,6 @@
 // `fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S]
-//   [--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] [--tolerance T]`:
+//   [--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats]
+//   [--tolerance T]`:
 // builds the locally supported basis (paper section 4) and prints one JSON object
 //   {"dim","regions","dofs","nnz_u","nnz_per_row",
 //    "seconds":{"sampling","regions","eigensolve","total"},"peak_rss_mb"}.
@@ -37,7 +38,8 @@ namespace {
 
 constexpr char kUsage[] =
     "usage: fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] "
-    "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] [--tolerance T]";
+    "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] "
+    "[--tolerance T]";
 
 absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);

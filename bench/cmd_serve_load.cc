@@ -1,9 +1,14 @@
 // `fieldspace-bench serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] [--sessions S]
-//  [--edits E] [--watch W] [--threads T] [--server HOST:PORT]`: load on fieldspaced's interactive
+//  [--edits E] [--watch W] [--threads T] [--rate HZ] [--server HOST:PORT]`: load on fieldspaced's
+// interactive
 // path. Without --server it starts an in-process server on 127.0.0.1:0 with a temporary store.
 // Uploads MESH, builds (or finds) the basis, then runs S concurrent design sessions of E edits each
 // (add / move / remove constraints on random faces, W watched faces) and prints the latency
 // distribution of the server-side edit time and of the client round trip, and the throughput.
+// --rate HZ paces each session like a user dragging a constraint: one edit every 1/HZ seconds
+// (start times staggered), the round trip measured from the send; 0 (default) sends each edit as
+// soon as the previous answer arrives (closed loop, a saturation test). RSS is sampled before and
+// after the sessions ("rss_mb") to show that memory stays bounded.
 
 #include <unistd.h>
 
@@ -73,7 +78,8 @@ struct SessionResult {
 };
 
 SessionResult RunSession(v1::FieldSpace::Stub* stub, const std::string& basis_id, int32_t num_faces,
-                         int32_t values_per_face, int edits, int watch, uint32_t seed) {
+                         int32_t values_per_face, int edits, int watch, uint32_t seed,
+                         double rate) {
   SessionResult out;
   std::mt19937 rng(seed);
   std::uniform_int_distribution<int32_t> face(0, num_faces - 1);
@@ -97,7 +103,16 @@ SessionResult RunSession(v1::FieldSpace::Stub* stub, const std::string& basis_id
       std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
   std::vector<int32_t> live;  // constraint ids in the session
   int32_t next_id = 1;
+  const auto paced_start =
+      std::chrono::steady_clock::now() +
+      std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(
+          rate > 0 ? static_cast<double>(seed % 1000) / 1000.0 / rate : 0.0));
   for (int e = 0; e < edits; ++e) {
+    if (rate > 0) {
+      std::this_thread::sleep_until(paced_start +
+                                    std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                        std::chrono::duration<double>(e / rate)));
+    }
     v1::DesignRequest r;
     r.set_seq(e + 1);
     const int kind = live.size() < 4 ? 0 : (live.size() > 24 ? 2 : static_cast<int>(rng() % 3));
@@ -139,14 +154,14 @@ int RunServeLoad(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown(
-          {"dim", "field", "n", "sessions", "edits", "watch", "threads", "server"});
+          {"dim", "field", "n", "sessions", "edits", "watch", "threads", "server", "rate"});
       !st.ok()) {
     return ReportError(st);
   }
   if (args->positional().size() != 1) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] "
-        "[--sessions S] [--edits E] [--watch W] [--threads T] [--server HOST:PORT]"));
+        "[--sessions S] [--edits E] [--watch W] [--threads T] [--rate HZ] [--server HOST:PORT]"));
   }
   auto dim = args->GetInt("dim", 0);
   auto sessions = args->GetInt("sessions", 4);
@@ -156,6 +171,11 @@ int RunServeLoad(int argc, char** argv) {
   auto n = args->GetInt("n", 4);
   for (const auto* v : {&dim, &sessions, &edits, &watch, &threads, &n}) {
     if (!v->ok()) return ReportError(v->status());
+  }
+  auto rate = args->GetDouble("rate", 0.0);
+  if (!rate.ok()) return ReportError(rate.status());
+  if (!(*rate >= 0.0 && *rate <= 1e4)) {
+    return ReportError(absl::InvalidArgumentError("--rate must be in [0, 10000] edits/s"));
   }
   if (*dim < 1 || *sessions < 1 || *edits < 1 || *watch < 0) {
     return ReportError(
@@ -255,6 +275,7 @@ int RunServeLoad(int argc, char** argv) {
   }
   const double build_seconds = build_watch.Seconds();
 
+  const double rss_before_mb = CurrentRssMb();
   Stopwatch load_watch;
   std::vector<SessionResult> results(static_cast<size_t>(*sessions));
   std::vector<std::thread> workers;
@@ -262,11 +283,12 @@ int RunServeLoad(int argc, char** argv) {
     workers.emplace_back([&, s] {
       results[s] = RunSession(stub.get(), basis.id(), info.num_faces(), values_per_face,
                               static_cast<int>(*edits), static_cast<int>(*watch),
-                              static_cast<uint32_t>(1000 + s));
+                              static_cast<uint32_t>(1000 + s), *rate);
     });
   }
   for (auto& w : workers) w.join();
   const double load_seconds = load_watch.Seconds();
+  const double rss_after_mb = CurrentRssMb();
   std::vector<double> server_ms, round_trip_ms, open_ms;
   int refactorizations = 0;
   for (const SessionResult& r : results) {
@@ -292,11 +314,13 @@ int RunServeLoad(int argc, char** argv) {
   j.Int("sessions", *sessions);
   j.Int("edits", static_cast<int64_t>(server_ms.size()));
   j.Int("watched_faces", *watch);
+  j.Double("rate_hz", *rate);
   j.Int("refactorizations", refactorizations);
   j.Double("edits_per_second", static_cast<double>(server_ms.size()) / load_seconds);
   WritePercentiles(j, "open_ms", Summarize(open_ms));
   WritePercentiles(j, "server_edit_ms", Summarize(server_ms));
   WritePercentiles(j, "round_trip_ms", Summarize(round_trip_ms));
+  j.BeginObject("rss_mb").Double("before", rss_before_mb).Double("after", rss_after_mb).EndObject();
   j.Double("peak_rss_mb", PeakRssMb());
   j.EndObject();
   std::printf("%s\n", j.str().c_str());
