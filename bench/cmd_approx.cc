@@ -63,12 +63,24 @@ absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh&
   if (*dim < 1 || *dim > (int64_t{1} << 24)) {
     return absl::InvalidArgumentError("--dim must be a positive subspace dimension");
   }
+  auto coarse_dim = args.GetInt("coarse-dim", 0);
+  if (!coarse_dim.ok()) return coarse_dim.status();
+  if (*coarse_dim < 0 || *coarse_dim >= *dim) {
+    return absl::InvalidArgumentError("--coarse-dim must be in [0, dim)");
+  }
   BasisOptions options;
-  options.params.dimension = static_cast<int32_t>(*dim);
+  options.params.dimension = static_cast<int32_t>(*dim - *coarse_dim);
   options.params.sigma = *sigma;
   options.params.seed = static_cast<uint64_t>(*seed);
   auto basis = BuildBasis(mesh, op, options);
   if (!basis.ok()) return basis.status();
+  if (*coarse_dim > 0) {
+    options.params.dimension = static_cast<int32_t>(*coarse_dim);
+    auto coarse = BuildBasis(mesh, op, options);
+    if (!coarse.ok()) return coarse.status();
+    basis = StackBases(*std::move(basis), *coarse);
+    if (!basis.ok()) return basis.status();
+  }
   return std::shared_ptr<const Basis>(std::make_shared<Basis>(*std::move(basis)));
 }
 
@@ -76,7 +88,7 @@ int RunApprox(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "tests", "seed", "basis",
-                                  "min-constraints", "max-constraints"});
+                                  "min-constraints", "max-constraints", "coarse-dim"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -84,7 +96,7 @@ int RunApprox(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench approx MESH --field vector|nfield|tensor [--n N] --dim D "
         "[--sigma S] --tests K --seed N [--basis local|eigen] [--min-constraints A] "
-        "[--max-constraints B]"));
+        "[--max-constraints B] [--coarse-dim C]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());

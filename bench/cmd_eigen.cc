@@ -31,14 +31,15 @@ namespace fieldspace::bench {
 int RunEigen(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {"full"});
   if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "count", "dim", "sigma", "seed", "method", "full"});
+  if (auto st = args->CheckKnown(
+          {"field", "n", "count", "dim", "sigma", "seed", "method", "full", "coarse-dim"});
       !st.ok()) {
     return ReportError(st);
   }
   if (args->positional().size() != 1 || !args->Has("count") || !args->Has("dim")) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench eigen MESH --field vector|nfield|tensor [--n N] --count K "
-        "--dim D [--sigma S] [--seed N] [--method auto|dense|sparse] [--full]"));
+        "--dim D [--sigma S] [--seed N] [--method auto|dense|sparse] [--full] [--coarse-dim C]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());

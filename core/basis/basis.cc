@@ -403,4 +403,53 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
   return result;
 }
 
+absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
+  if (fine.U.rows() != coarse.U.rows()) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("StackBases: %d rows against %d", fine.U.rows(), coarse.U.rows()));
+  }
+  if (!(fine.type == coarse.type)) {
+    return absl::InvalidArgumentError("StackBases: the bases are of different field types");
+  }
+  const int64_t nnz = static_cast<int64_t>(fine.U.nonZeros()) + coarse.U.nonZeros();
+  if (nnz > std::numeric_limits<int32_t>::max()) {
+    return absl::ResourceExhaustedError(
+        absl::StrFormat("StackBases: %d nonzeros exceed the 2^31 - 1 of U's indices", nnz));
+  }
+  const int64_t k = fine.U.rows();
+  const int32_t d1 = fine.dimension();
+  Eigen::SparseMatrix<float, Eigen::RowMajor> U(k, d1 + coarse.dimension());
+  U.resizeNonZeros(static_cast<Eigen::Index>(nnz));
+  const auto& a = fine.U;
+  const auto& b = coarse.U;
+  int32_t* outer = U.outerIndexPtr();
+  outer[0] = 0;
+  for (int64_t row = 0; row < k; ++row) {
+    const int32_t na = a.outerIndexPtr()[row + 1] - a.outerIndexPtr()[row];
+    const int32_t nb = b.outerIndexPtr()[row + 1] - b.outerIndexPtr()[row];
+    outer[row + 1] = outer[row] + na + nb;
+  }
+  tbb::parallel_for(
+      tbb::blocked_range<int64_t>(0, k, 4096), [&](const tbb::blocked_range<int64_t>& range) {
+        for (int64_t row = range.begin(); row != range.end(); ++row) {
+          int32_t pos = outer[row];
+          for (int32_t q = a.outerIndexPtr()[row]; q < a.outerIndexPtr()[row + 1]; ++q, ++pos) {
+            U.innerIndexPtr()[pos] = a.innerIndexPtr()[q];
+            U.valuePtr()[pos] = a.valuePtr()[q];
+          }
+          for (int32_t q = b.outerIndexPtr()[row]; q < b.outerIndexPtr()[row + 1]; ++q, ++pos) {
+            U.innerIndexPtr()[pos] = b.innerIndexPtr()[q] + d1;
+            U.valuePtr()[pos] = b.valuePtr()[q];
+          }
+        }
+      });
+  fine.U.swap(U);
+  fine.sample_faces.insert(fine.sample_faces.end(), coarse.sample_faces.begin(),
+                           coarse.sample_faces.end());
+  fine.local_eigenvalues.insert(fine.local_eigenvalues.end(), coarse.local_eigenvalues.begin(),
+                                coarse.local_eigenvalues.end());
+  fine.uncovered_faces = std::min(fine.uncovered_faces, coarse.uncovered_faces);
+  return fine;
+}
+
 }  // namespace fieldspace

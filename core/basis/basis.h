@@ -110,6 +110,15 @@ struct Basis {
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options);
 
+// A two-level basis: the columns of `fine` followed by those of `coarse` (same mesh and field
+// type; typically a basis of fewer, larger regions). The local Dirichlet fields of a dense basis
+// form no partition of unity, so smooth large-scale fields (the lowest eigenfields, the smooth
+// part of any field) are poorly represented; a coarse level of wider fields restores them. The
+// result keeps fine's params and radius; samples and local eigenvalues are concatenated, so the
+// "column j belongs to region j / m" rule holds only for the fine columns. InvalidArgument when
+// the row counts or field types differ, ResourceExhausted past 2^31 - 1 nonzeros.
+absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse);
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_BASIS_BASIS_H_

@@ -376,6 +376,36 @@ TEST(BasisTest, ProgressAndCancellation) {
   EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kCancelled);
 }
 
+TEST(BasisTest, StackBasesConcatenatesColumns) {
+  const TriangleMesh mesh = Icosphere(3);  // 1280 faces
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 60;
+  auto fine = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(fine.ok()) << fine.status();
+  options.params.dimension = 9;  // odd: the last coarse region has one field
+  auto coarse = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(coarse.ok()) << coarse.status();
+  auto stacked = StackBases(*fine, *coarse);
+  ASSERT_TRUE(stacked.ok()) << stacked.status();
+  EXPECT_EQ(stacked->dimension(), 69);
+  EXPECT_EQ(stacked->U.rows(), fine->U.rows());
+  EXPECT_EQ(stacked->U.nonZeros(), fine->U.nonZeros() + coarse->U.nonZeros());
+  EXPECT_EQ(stacked->num_regions(), fine->num_regions() + coarse->num_regions());
+  EXPECT_EQ(stacked->local_eigenvalues.size(), 69u);
+  const Eigen::MatrixXf s = Eigen::MatrixXf(stacked->U);
+  EXPECT_EQ(s.leftCols(60), Eigen::MatrixXf(fine->U));
+  EXPECT_EQ(s.rightCols(9), Eigen::MatrixXf(coarse->U));
+
+  const TriangleMesh small = Icosphere(2);
+  auto other = BuildBasis(small, Operator(small, FieldType::Vector()), options);
+  ASSERT_TRUE(other.ok());
+  EXPECT_EQ(StackBases(*fine, *other).status().code(), absl::StatusCode::kInvalidArgument);
+  auto nfield = BuildBasis(mesh, Operator(mesh, FieldType::NField(4)), options);
+  ASSERT_TRUE(nfield.ok());
+  EXPECT_EQ(StackBases(*fine, *nfield).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
 TEST(BasisTest, InvalidParameters) {
   const TriangleMesh mesh = Icosphere(2);  // 320 faces, 640 DOFs
   const FieldOperator op = Operator(mesh, FieldType::Vector());

@@ -4,6 +4,7 @@
 #include <memory>
 
 #include "Eigen/Dense"
+#include "core/basis/basis.h"
 #include "core/operators/reference_solvers.h"
 #include "gtest/gtest.h"
 #include "tests/core/subspace/subspace_test_util.h"
@@ -53,6 +54,39 @@ TEST_F(SpectrumTest, RayleighRitzUpperBoundsForAnySubspace) {
   const Eigen::MatrixXd residual =
       (*sys)->stiffness() * Y - (*sys)->mass_matrix() * Y * reduced->values.asDiagonal();
   EXPECT_LT(residual.norm() / ((*sys)->stiffness() * Y).norm(), 1e-8);
+}
+
+// A coarse second level only enlarges the span: by Courant-Fischer every reduced eigenvalue of
+// the two-level basis lies between the full one and the fine-only one. A dense local basis (small
+// Dirichlet regions) overestimates the lowest modes badly; the coarse level must fix most of that.
+TEST_F(SpectrumTest, TwoLevelBasisLowersEveryEigenvalue) {
+  BasisOptions options;
+  options.params.dimension = 400;
+  auto fine = BuildBasis(*mesh_, op_, options);
+  ASSERT_TRUE(fine.ok()) << fine.status();
+  options.params.dimension = 40;
+  auto coarse = BuildBasis(*mesh_, op_, options);
+  ASSERT_TRUE(coarse.ok()) << coarse.status();
+  auto stacked = StackBases(*fine, *coarse);
+  ASSERT_TRUE(stacked.ok()) << stacked.status();
+  ASSERT_EQ(stacked->dimension(), 440);
+  ReducedEigenOptions eo;
+  eo.count = 20;
+  auto spectrum = [&](Basis b) {
+    auto sys = ReducedSystem::Build(std::make_shared<Basis>(std::move(b)), op_);
+    EXPECT_TRUE(sys.ok()) << sys.status();
+    auto r = ReducedEigenpairs(**sys, eo);
+    EXPECT_TRUE(r.ok()) << r.status();
+    return r->values;
+  };
+  const Eigen::VectorXd one = spectrum(*std::move(fine));
+  const Eigen::VectorXd two = spectrum(*std::move(stacked));
+  for (int i = 0; i < 20; ++i) {
+    EXPECT_GE(two[i], full_[i] * (1 - 1e-9)) << i;
+    EXPECT_LE(two[i], one[i] * (1 + 1e-9)) << i;
+  }
+  // The lowest mode (l = 1, lambda ~ 2 on the unit sphere).
+  EXPECT_LT(two[0] - full_[0], 0.5 * (one[0] - full_[0]));
 }
 
 TEST_F(SpectrumTest, ExactWhenTheSubspaceSpansTheLowestEigenfields) {
