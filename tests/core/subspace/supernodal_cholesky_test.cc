@@ -89,6 +89,7 @@ TEST(SupernodalCholeskyTest, SolvesGeometricSystemsLikeDenseCholesky) {
     auto f = SupernodalFactor::Factorize(*sym, A);
     ASSERT_TRUE(f.ok()) << f.status();
     EXPECT_LT(SolveError(A, *f, 1), 1e-12) << "n = " << n;
+    EXPECT_LT(SolveError(A, *f, 2), 1e-12) << "n = " << n;  // the per-column path
     EXPECT_LT(SolveError(A, *f, 5), 1e-12) << "n = " << n;
     const double logdet = Eigen::MatrixXd(A).llt().matrixLLT().diagonal().array().log().sum() * 2;
     EXPECT_NEAR(f->LogDeterminant(), logdet, 1e-9 * std::abs(logdet) + 1e-12);
