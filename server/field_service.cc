@@ -816,6 +816,10 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
         // The client closed its side (or went away): end the session.
         finish = !finish_sent_;
         finish_sent_ = true;
+      } else if (finish_sent_) {
+        // Drain() finished the stream while this read was in flight: the message is dropped
+        // (the client gets UNAVAILABLE), and no work may be queued for a finishing reactor.
+        return;
       } else {
         working_ = true;
       }
@@ -824,7 +828,12 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
       Finish(grpc::Status::OK);
       return;
     }
-    const bool submitted = service_->pool()->Submit(Lane::kInteractive, [this] { Work(); });
+    // The queued task holds a reference: OnDone (and deletion) cannot overtake it.
+    Ref();
+    const bool submitted = service_->pool()->Submit(Lane::kInteractive, [this] {
+      Work();
+      Unref();
+    });
     if (!submitted) {
       {
         std::lock_guard<std::mutex> lock(mu_);
@@ -832,6 +841,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
         finish_sent_ = true;
       }
       Finish(ToGrpcStatus(absl::UnavailableError("server is shutting down")));
+      Unref();
     }
   }
 
