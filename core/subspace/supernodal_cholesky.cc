@@ -490,55 +490,11 @@ absl::Status SupernodalFactor::Refactorize(absl::Span<const double> values,
   return absl::OkStatus();
 }
 
-void SupernodalFactor::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {
+template <typename Block>
+void SupernodalFactor::Substitute(Block& X) const {
   const SupernodalSymbolic& sym = *symbolic_;
-  const int64_t n = sym.n_;
-  const int64_t nrhs = B.cols();
-  if (nrhs == 0) return;
-  if (nrhs <= 2) {
-    // One or two right-hand sides (every constraint edit of a design session): matrix-vector
-    // kernels per column. Eigen's matrix-matrix path would pack each panel for a 1-2 column
-    // product, which costs more than the product itself.
-    Eigen::VectorXd x(n), t;
-    for (int64_t c = 0; c < nrhs; ++c) {
-      for (int64_t k = 0; k < n; ++k) x[k] = B(sym.perm_[k], c);
-      for (int64_t s = 0; s < sym.num_supernodes(); ++s) {
-        const int64_t c0 = sym.super_begin_[s];
-        const int64_t nc = sym.super_begin_[s + 1] - c0;
-        const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
-        const int64_t m = nr - nc;
-        Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
-        auto xs = x.segment(c0, nc);
-        P.topRows(nc).triangularView<Eigen::Lower>().solveInPlace(xs);
-        if (m > 0) {
-          t.noalias() = P.bottomRows(m) * xs;
-          const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
-          for (int64_t k = 0; k < m; ++k) x[rows[k]] -= t[k];
-        }
-      }
-      for (int64_t s = sym.num_supernodes() - 1; s >= 0; --s) {
-        const int64_t c0 = sym.super_begin_[s];
-        const int64_t nc = sym.super_begin_[s + 1] - c0;
-        const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
-        const int64_t m = nr - nc;
-        Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
-        auto xs = x.segment(c0, nc);
-        if (m > 0) {
-          t.resize(m);
-          const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
-          for (int64_t k = 0; k < m; ++k) t[k] = x[rows[k]];
-          xs.noalias() -= P.bottomRows(m).transpose() * t;
-        }
-        P.topRows(nc).transpose().triangularView<Eigen::Upper>().solveInPlace(xs);
-      }
-      for (int64_t k = 0; k < n; ++k) B(sym.perm_[k], c) = x[k];
-    }
-    return;
-  }
-  RowMajorMatrix X(n, nrhs);
-  for (int64_t k = 0; k < n; ++k) X.row(k) = B.row(sym.perm_[k]);
   const int64_t nsuper = sym.num_supernodes();
-  RowMajorMatrix tmp;
+  Block tmp;
   // Forward: L y = P b.
   for (int64_t s = 0; s < nsuper; ++s) {
     const int64_t c0 = sym.super_begin_[s];
@@ -547,7 +503,7 @@ void SupernodalFactor::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {
     const int64_t m = nr - nc;
     Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
     auto Xs = X.middleRows(c0, nc);
-    P.topRows(nc).triangularView<Eigen::Lower>().solveInPlace(Xs);
+    P.topRows(nc).template triangularView<Eigen::Lower>().solveInPlace(Xs);
     if (m > 0) {
       tmp.noalias() = P.bottomRows(m) * Xs;
       const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
@@ -563,13 +519,35 @@ void SupernodalFactor::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {
     Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
     auto Xs = X.middleRows(c0, nc);
     if (m > 0) {
-      tmp.resize(m, nrhs);
+      tmp.resize(m, X.cols());
       const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
       for (int64_t k = 0; k < m; ++k) tmp.row(k) = X.row(rows[k]);
       Xs.noalias() -= P.bottomRows(m).transpose() * tmp;
     }
-    P.topRows(nc).transpose().triangularView<Eigen::Upper>().solveInPlace(Xs);
+    P.topRows(nc).transpose().template triangularView<Eigen::Upper>().solveInPlace(Xs);
   }
+}
+
+void SupernodalFactor::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {
+  const SupernodalSymbolic& sym = *symbolic_;
+  const int64_t n = sym.n_;
+  const int64_t nrhs = B.cols();
+  if (nrhs == 0) return;
+  if (nrhs <= 2) {
+    // One or two right-hand sides (every constraint edit of a design session): one column at a
+    // time, with matrix-vector kernels. Eigen's matrix-matrix path would pack each panel for a
+    // 1-2 column product, which costs more than the product itself.
+    Eigen::VectorXd x(n);
+    for (int64_t c = 0; c < nrhs; ++c) {
+      for (int64_t k = 0; k < n; ++k) x[k] = B(sym.perm_[k], c);
+      Substitute(x);
+      for (int64_t k = 0; k < n; ++k) B(sym.perm_[k], c) = x[k];
+    }
+    return;
+  }
+  RowMajorMatrix X(n, nrhs);
+  for (int64_t k = 0; k < n; ++k) X.row(k) = B.row(sym.perm_[k]);
+  Substitute(X);
   for (int64_t k = 0; k < n; ++k) B.row(sym.perm_[k]) = X.row(k);
 }
 

@@ -128,6 +128,10 @@ class SupernodalFactor {
 
  private:
   SupernodalFactor() = default;
+  // L y = X, then L^T x = y, in place on X (rows in the permuted order): a column vector, for
+  // which Eigen uses matrix-vector kernels, or a row-major block of right-hand sides.
+  template <typename Block>
+  void Substitute(Block& X) const;
 
   std::shared_ptr<const SupernodalSymbolic> symbolic_;
   std::vector<double> panels_;  // L: per supernode nr x nc column-major (upper part unused)
