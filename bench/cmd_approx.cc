@@ -84,6 +84,22 @@ absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh&
   return std::shared_ptr<const Basis>(std::make_shared<Basis>(*std::move(basis)));
 }
 
+absl::StatusOr<BenchSubspace> LoadBenchSubspace(const Args& args, const FieldType& type) {
+  auto mesh = LoadUnitAreaMesh(args.positional()[0]);
+  if (!mesh.ok()) return mesh.status();
+  auto op = BuildFieldOperator(*mesh, type);
+  if (!op.ok()) return op.status();
+  Stopwatch basis_watch;
+  auto basis = BuildBenchBasis(*mesh, *op, args);
+  if (!basis.ok()) return basis.status();
+  const double basis_seconds = basis_watch.Seconds();
+  Stopwatch reduced_watch;
+  auto system = ReducedSystem::Build(*basis, *op);
+  if (!system.ok()) return system.status();
+  return BenchSubspace{*std::move(mesh),   *std::move(op), *std::move(basis),
+                       *std::move(system), basis_seconds,  reduced_watch.Seconds()};
+}
+
 int RunApprox(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {});
   if (!args.ok()) return ReportError(args.status());

@@ -83,19 +83,9 @@ int RunDesign(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError("--edits and --max-constraints must be >= 1"));
   }
 
-  auto mesh = LoadUnitAreaMesh(args->positional()[0]);
-  if (!mesh.ok()) return ReportError(mesh.status());
-  auto op = BuildFieldOperator(*mesh, *type);
-  if (!op.ok()) return ReportError(op.status());
-  Stopwatch basis_watch;
-  auto basis = BuildBenchBasis(*mesh, *op, *args);
-  if (!basis.ok()) return ReportError(basis.status());
-  const double basis_seconds = basis_watch.Seconds();
-  Stopwatch reduced_watch;
-  auto system = ReducedSystem::Build(*basis, *op);
-  if (!system.ok()) return ReportError(system.status());
-  const double reduced_seconds = reduced_watch.Seconds();
-  const ReducedSystem& sys = **system;
+  auto sub = LoadBenchSubspace(*args, *type);
+  if (!sub.ok()) return ReportError(sub.status());
+  const ReducedSystem& sys = *sub->system;
 
   const EnergyWeights initial{1.0, 0.01, 10.0};
   // The factorization alone (what a weight change costs before the constraints are re-solved).
@@ -117,7 +107,7 @@ int RunDesign(int argc, char** argv) {
     }
   }
   Stopwatch create_watch;
-  auto session = DesignSession::Create(*system, initial);
+  auto session = DesignSession::Create(sub->system, initial);
   if (!session.ok()) return ReportError(session.status());
   const double create_ms = create_watch.Seconds() * 1e3;
   DesignSession& s = **session;
@@ -196,7 +186,7 @@ int RunDesign(int argc, char** argv) {
     for (const HardConstraint& h : problem.hard) problem.soft.push_back({h.face, h.value, 1.0});
     problem.hard.clear();
     if (!full_biharmonic) problem.mu_b = 0;
-    auto full = AssembleModelSystem(*op, problem);
+    auto full = AssembleModelSystem(sub->op, problem);
     if (!full.ok()) return ReportError(full.status());
     Stopwatch fw;
     auto factor = SparseCholesky::Factorize(full->A);
@@ -251,8 +241,8 @@ int RunDesign(int argc, char** argv) {
       .Double("factor_mflops", sys.stats().factor_flops * 1e-6)
       .EndObject()
       .BeginObject("seconds")
-      .Double("basis", basis_seconds)
-      .Double("reduced_system", reduced_seconds)
+      .Double("basis", sub->basis_seconds)
+      .Double("reduced_system", sub->reduced_seconds)
       .Double("reduced_products", sys.stats().products_seconds)
       .Double("reduced_analysis", sys.stats().analysis_seconds)
       .EndObject()

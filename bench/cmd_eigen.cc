@@ -60,23 +60,11 @@ int RunEigen(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError("--method must be auto, dense or sparse"));
   }
 
-  auto mesh = LoadUnitAreaMesh(args->positional()[0]);
-  if (!mesh.ok()) return ReportError(mesh.status());
-  auto op = BuildFieldOperator(*mesh, *type);
-  if (!op.ok()) return ReportError(op.status());
-
-  Stopwatch basis_watch;
-  auto basis = BuildBenchBasis(*mesh, *op, *args);
-  if (!basis.ok()) return ReportError(basis.status());
-  const double basis_seconds = basis_watch.Seconds();
-
-  Stopwatch reduced_watch;
-  auto system = ReducedSystem::Build(*basis, *op);
-  if (!system.ok()) return ReportError(system.status());
-  const double reduced_seconds = reduced_watch.Seconds();
+  auto sub = LoadBenchSubspace(*args, *type);
+  if (!sub.ok()) return ReportError(sub.status());
 
   Stopwatch solve_watch;
-  auto reduced = ReducedEigenpairs(**system, options);
+  auto reduced = ReducedEigenpairs(*sub->system, options);
   if (!reduced.ok()) return ReportError(reduced.status());
   const double solve_seconds = solve_watch.Seconds();
 
@@ -88,7 +76,7 @@ int RunEigen(int argc, char** argv) {
     EigenOptions full_options;
     full_options.count = options.count;
     full_options.compute_vectors = false;
-    auto full = ReferenceEigenpairs(*op, full_options);
+    auto full = ReferenceEigenpairs(sub->op, full_options);
     if (!full.ok()) return ReportError(full.status());
     full_seconds = full_watch.Seconds();
     // Eigenvalues of the kernel (harmonic fields on surfaces of genus > 0) are numerically zero:
@@ -113,15 +101,15 @@ int RunEigen(int argc, char** argv) {
       .DoubleArray("full", full_values)
       .DoubleArray("relative_errors", relative_errors)
       .BeginObject("seconds")
-      .Double("basis", basis_seconds)
-      .Double("reduced_system", reduced_seconds)
+      .Double("basis", sub->basis_seconds)
+      .Double("reduced_system", sub->reduced_seconds)
       .Double("solve", solve_seconds)
       .Double("full", full_seconds)
       .EndObject()
       .String("method", reduced->method == ReducedEigenMethod::kDense ? "dense" : "sparse")
       .Int("full_kernel_dimension", kernel_dimension)
-      .Int("dim", (*basis)->dimension())
-      .Int("nnz_u", (*basis)->U.nonZeros())
+      .Int("dim", sub->basis->dimension())
+      .Int("nnz_u", sub->basis->U.nonZeros())
       .EndObject();
   std::printf("%s\n", json.str().c_str());
   return 0;

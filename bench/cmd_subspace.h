@@ -11,6 +11,7 @@
 #include "core/basis/basis.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_operator.h"
+#include "core/subspace/reduced_system.h"
 
 namespace fieldspace::bench {
 
@@ -18,10 +19,23 @@ namespace fieldspace::bench {
 // that errors and weights are comparable across meshes.
 absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path);
 
-// BuildBasis with --dim (required), --sigma (default 40) and --seed (default 0).
+// BuildBasis with --dim (required), --sigma (default 40), --seed (default 0) and --coarse-dim
+// (default 0: no coarse level; see StackBases).
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
                                                              const FieldOperator& op,
                                                              const Args& args);
+
+// What the eigen and design subcommands start from: the unit-area mesh of the first positional
+// argument, its operator, the bench basis and its reduced system, with the two build times.
+struct BenchSubspace {
+  TriangleMesh mesh;
+  FieldOperator op;
+  std::shared_ptr<const Basis> basis;
+  std::shared_ptr<const ReducedSystem> system;
+  double basis_seconds = 0;
+  double reduced_seconds = 0;
+};
+absl::StatusOr<BenchSubspace> LoadBenchSubspace(const Args& args, const FieldType& type);
 
 }  // namespace fieldspace::bench
 
