@@ -448,7 +448,11 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
                            coarse.sample_faces.end());
   fine.local_eigenvalues.insert(fine.local_eigenvalues.end(), coarse.local_eigenvalues.begin(),
                                 coarse.local_eigenvalues.end());
-  fine.uncovered_faces = std::min(fine.uncovered_faces, coarse.uncovered_faces);
+  // A face is uncovered when no column of either level touches its rows.
+  const int32_t dpf = fine.type.dofs_per_face();
+  int64_t uncovered = 0;
+  for (int64_t row = 0; row < k; row += dpf) uncovered += outer[row + dpf] == outer[row] ? 1 : 0;
+  fine.uncovered_faces = uncovered;
   return fine;
 }
 

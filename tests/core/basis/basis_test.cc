@@ -393,6 +393,7 @@ TEST(BasisTest, StackBasesConcatenatesColumns) {
   EXPECT_EQ(stacked->U.nonZeros(), fine->U.nonZeros() + coarse->U.nonZeros());
   EXPECT_EQ(stacked->num_regions(), fine->num_regions() + coarse->num_regions());
   EXPECT_EQ(stacked->local_eigenvalues.size(), 69u);
+  EXPECT_EQ(stacked->uncovered_faces, 0);
   const Eigen::MatrixXf s = Eigen::MatrixXf(stacked->U);
   EXPECT_EQ(s.leftCols(60), Eigen::MatrixXf(fine->U));
   EXPECT_EQ(s.rightCols(9), Eigen::MatrixXf(coarse->U));
