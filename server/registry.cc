@@ -283,7 +283,13 @@ absl::StatusOr<std::shared_ptr<const TriangleMesh>> Registry::GetMesh(const std:
     if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
     if (!it->second.damaged.ok()) return it->second.damaged;
     it->second.last_used = ++clock_;
-    if (it->second.loaded != nullptr) return it->second.loaded;
+    if (it->second.loaded != nullptr) {
+      // Held before evicting, so that this entry counts as in use. Memory over budget (artifacts
+      // that were busy when the last load happened) is trimmed on every hit, not only on loads.
+      std::shared_ptr<const TriangleMesh> handle = it->second.loaded;
+      EvictLocked();
+      return handle;
+    }
     load_mu = it->second.load_mu;
   }
   // One loader per mesh; others wait here and then find it loaded.
@@ -576,7 +582,11 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std:
     }
     if (!it->second.damaged.ok()) return it->second.damaged;
     it->second.last_used = ++clock_;
-    if (it->second.loaded != nullptr) return it->second.loaded;
+    if (it->second.loaded != nullptr) {
+      std::shared_ptr<const ServedBasis> handle = it->second.loaded;  // see GetMesh
+      EvictLocked();
+      return handle;
+    }
     load_mu = it->second.load_mu;
   }
   std::lock_guard<std::mutex> load_lock(*load_mu);

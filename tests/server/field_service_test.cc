@@ -660,11 +660,19 @@ TEST_F(ServiceTest, IdenticalBuildsJoinAndCancelEndsOnlyTheCancelledOne) {
 
   v1::BuildBasisRequest r = BuildRequest(*mesh_id_, v1::FIELD_KIND_VECTOR, 30);
   r.set_seed(77);
+  // Both identical requests are opened in order and each has answered its first progress message
+  // before the next step, so the test knows (rather than assumes from a sleep) who started first.
+  auto open = [&](grpc::ClientContext* context, Built* out) {
+    auto reader = stub()->BuildBasis(context, r);
+    v1::BuildBasisProgress p;
+    EXPECT_TRUE(reader->Read(&p));
+    out->progress.push_back(p);
+    return reader;
+  };
   Built a, b;
-  std::thread ta([&] { a = Build(stub(), r); });
-  std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  std::thread tb([&] { b = Build(stub(), r); });
-  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  grpc::ClientContext a_context, b_context;
+  auto a_reader = open(&a_context, &a);
+  auto b_reader = open(&b_context, &b);
   // Status of a running build; cancelling it.
   v1::GetBasisRequest gb;
   gb.set_basis_id(blocker_id);
@@ -694,8 +702,11 @@ TEST_F(ServiceTest, IdenticalBuildsJoinAndCancelEndsOnlyTheCancelledOne) {
   }
   EXPECT_EQ(blocker_reader->Finish().error_code(), grpc::StatusCode::CANCELLED);
   EXPECT_LT(std::chrono::steady_clock::now() - cancel_time, std::chrono::seconds(2));
-  ta.join();
-  tb.join();
+  for (auto [reader, out] : {std::pair{a_reader.get(), &a}, std::pair{b_reader.get(), &b}}) {
+    v1::BuildBasisProgress p;
+    while (reader->Read(&p)) out->progress.push_back(p);
+    out->status = reader->Finish();
+  }
   ASSERT_TRUE(a.status.ok()) << a.status.error_message();
   ASSERT_TRUE(b.status.ok()) << b.status.error_message();
   EXPECT_EQ(a.basis().id(), b.basis().id());
@@ -1365,17 +1376,20 @@ TEST(ServerLifecycleTest, MemoryBudgetEvictsIdleBasesWhichReloadIdentically) {
   const std::vector<double> xb = TestCoefficients(b.basis().columns());
   Lifted first = Lift(h->stub.get(), LiftRequest(a.basis().id(), xa, v1::FIELD_ENCODING_DOF));
   ASSERT_TRUE(first.status.ok());
-  // The server drops its handle when the call object goes away, just after the client's Finish.
-  std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  ASSERT_TRUE(
-      Lift(h->stub.get(), LiftRequest(b.basis().id(), xb, v1::FIELD_ENCODING_DOF)).status.ok());
+  // The server drops its handle for `a` when the call object goes away, some time after the
+  // client's Finish (later on a loaded machine). Every later use of another artifact trims memory
+  // over budget, so `a` must be evicted after a bounded number of uses of `b`.
   v1::GetBasisRequest gb;
   gb.set_basis_id(a.basis().id());
   v1::BasisInfo info;
-  {
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  do {
+    ASSERT_TRUE(
+        Lift(h->stub.get(), LiftRequest(b.basis().id(), xb, v1::FIELD_ENCODING_DOF)).status.ok());
     grpc::ClientContext c;
     ASSERT_TRUE(h->stub->GetBasis(&c, gb, &info).ok());
-  }
+    if (info.loaded()) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  } while (info.loaded() && std::chrono::steady_clock::now() < give_up);
   EXPECT_FALSE(info.loaded());
   Lifted reloaded = Lift(h->stub.get(), LiftRequest(a.basis().id(), xa, v1::FIELD_ENCODING_DOF));
   ASSERT_TRUE(reloaded.status.ok());

@@ -228,19 +228,24 @@ TEST_F(StoreTest, OpenRemovesTemporaryFilesOfInterruptedSaves) {
 }
 
 TEST_F(StoreTest, SavePauseLeavesOnlyATemporaryFileMidway) {
-  auto slow = Store::Open(dir_.string(), StoreOptions{300});
+  auto slow = Store::Open(dir_.string(), StoreOptions{1000});
   ASSERT_TRUE(slow.ok());
   BasisRecord r;
   r.id = "b-00000000000000aa";
   r.key.mesh_id = "m-0123456789abcdef";
   const std::string payload(1 << 16, 'x');
   std::thread writer([&] { EXPECT_TRUE((*slow)->SaveBasis(r, {payload}).ok()); });
-  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  // Watch the directory (bounded) until the writer shows anything; inside the 1 s pause that
+  // must be the temporary file alone.
   int temps = 0, finals = 0;
-  for (const auto& e : fs::directory_iterator(dir_ / "bases")) {
-    const std::string name = e.path().filename().string();
-    if (name.find(".tmp-") != std::string::npos) ++temps;
-    if (name == r.id + ".fsbasis") ++finals;
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (temps == 0 && finals == 0 && std::chrono::steady_clock::now() < give_up) {
+    for (const auto& e : fs::directory_iterator(dir_ / "bases")) {
+      const std::string name = e.path().filename().string();
+      if (name.find(".tmp-") != std::string::npos) ++temps;
+      if (name == r.id + ".fsbasis") ++finals;
+    }
+    if (temps == 0 && finals == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
   EXPECT_EQ(temps, 1);
   EXPECT_EQ(finals, 0);
