@@ -141,15 +141,15 @@ int64_t ModelBytes(const SubspaceModel& model) {
 }
 
 absl::StatusOr<ProjectResult> ProjectField(const ServedBasis& basis, const Eigen::VectorXd& X,
-                                           const std::atomic<bool>*) {
+                                           const std::atomic<bool>* cancel) {
   ASSIGN_OR_RETURN(const ReducedSystem* system, SystemOf(basis));
-  ASSIGN_OR_RETURN(ProjectionResult r, Project(*system, X));
+  ASSIGN_OR_RETURN(ProjectionResult r, Project(*system, X, cancel));
   return ProjectResult{std::move(r.coefficients), r.relative_error};
 }
 
 absl::StatusOr<SolveResult> SolveModel(const ServedBasis& basis, const ModelWeights& weights,
                                        const std::vector<ConstraintSpec>& constraints,
-                                       const std::atomic<bool>*) {
+                                       const std::atomic<bool>* cancel) {
   ASSIGN_OR_RETURN(const ReducedSystem* system, SystemOf(basis));
   const int32_t dpf = basis.basis->type.dofs_per_face();
   ModelProblem problem;
@@ -164,7 +164,9 @@ absl::StatusOr<SolveResult> SolveModel(const ServedBasis& basis, const ModelWeig
     }
   }
   const auto start = Clock::now();
-  ASSIGN_OR_RETURN(ReducedSolution solution, SolveReducedModelProblem(*system, problem));
+  ReducedSolveOptions options;
+  options.cancel = cancel;
+  ASSIGN_OR_RETURN(ReducedSolution solution, SolveReducedModelProblem(*system, problem, options));
   SolveResult result;
   result.coefficients = std::move(solution.coefficients);
   result.solve_ms = MsSince(start);
@@ -177,10 +179,11 @@ absl::Status LiftFaces(const ServedBasis& basis, const Eigen::VectorXd& coeffici
 }
 
 absl::StatusOr<ReducedEigenfieldsResult> ReducedEigenfields(const ServedBasis& basis, int32_t count,
-                                                            const std::atomic<bool>*) {
+                                                            const std::atomic<bool>* cancel) {
   ASSIGN_OR_RETURN(const ReducedSystem* system, SystemOf(basis));
   ReducedEigenOptions options;
   options.count = count;
+  options.cancel = cancel;
   ASSIGN_OR_RETURN(ReducedEigenResult r, ReducedEigenpairs(*system, options));
   return ReducedEigenfieldsResult{std::move(r.values), std::move(r.coefficients)};
 }

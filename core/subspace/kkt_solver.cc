@@ -32,6 +32,7 @@ absl::StatusOr<SupernodalFactor> FactorizeRegularized(
   }
   SupernodalFactorOptions factor_options;
   factor_options.parallel = options.parallel;
+  factor_options.cancel = options.cancel;
   double shift = options.regularization;
   absl::Status last;
   while (true) {

@@ -1,6 +1,7 @@
 #ifndef FIELDSPACE_CORE_SUBSPACE_MODEL_PROBLEM_H_
 #define FIELDSPACE_CORE_SUBSPACE_MODEL_PROBLEM_H_
 
+#include <atomic>
 #include <cstdint>
 #include <vector>
 
@@ -65,6 +66,9 @@ struct ReducedSolveOptions {
   // constraint row and the span of the others): FailedPrecondition.
   double dependence_tolerance = 1e-10;
   bool parallel = true;
+  // SolveReducedModelProblem: checked between its phases and before every front of the
+  // factorization; Cancelled once *cancel is true. Not owned; may be null.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 // InvalidArgument unless 0 <= regularization <= max_regularization (finite), tolerance >= 0,
@@ -86,7 +90,7 @@ struct ReducedSolution {
 // constraints). Errors: InvalidArgument for invalid weights or constraints (bad face id, wrong
 // value size, non-finite value, non-positive soft weight); FailedPrecondition when the hard
 // constraints are linearly dependent in the subspace (e.g. the same face twice, or more
-// constraint DOFs than d) or the system cannot be factorized.
+// constraint DOFs than d) or the system cannot be factorized; Cancelled (options.cancel).
 absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& system,
                                                          const ModelProblem& problem,
                                                          const ReducedSolveOptions& options = {});

@@ -40,6 +40,14 @@ absl::Status CheckFields(const ReducedSystem& system,
   return absl::OkStatus();
 }
 
+bool Cancelled(const std::atomic<bool>* cancel) {
+  return cancel != nullptr && cancel->load(std::memory_order_relaxed);
+}
+
+absl::Status CancelledError(absl::string_view what) {
+  return absl::CancelledError(absl::StrCat(what, ": cancelled"));
+}
+
 // sum_j U_ij x_j for one row.
 inline double RowDot(const BasisRow& row, const double* x) {
   double v = 0;
@@ -50,7 +58,8 @@ inline double RowDot(const BasisRow& row, const double* x) {
 }  // namespace
 
 absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
-    const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields) {
+    const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields,
+    const std::atomic<bool>* cancel) {
   RETURN_IF_ERROR(CheckFields(system, fields, "MassWeightedProducts"));
   const BasisMatrix& U = system.basis().U;
   const int64_t d = U.cols();
@@ -60,6 +69,7 @@ absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
       [&] { return RowMajorMatrix::Zero(d, m).eval(); });
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, U.rows(), 4096),
                     [&](const tbb::blocked_range<int64_t>& r) {
+                      if (Cancelled(cancel)) return;
                       RowMajorMatrix& acc = partial.local();
                       Eigen::RowVectorXd w(m);
                       for (int64_t i = r.begin(); i < r.end(); ++i) {
@@ -71,6 +81,7 @@ absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
                         }
                       }
                     });
+  if (Cancelled(cancel)) return CancelledError("MassWeightedProducts");
   Eigen::MatrixXd result = Eigen::MatrixXd::Zero(d, m);
   for (const RowMajorMatrix& acc : partial) result += acc;
   return result;
@@ -78,7 +89,7 @@ absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
 
 absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
     const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields,
-    const Eigen::Ref<const Eigen::MatrixXd>& coefficients) {
+    const Eigen::Ref<const Eigen::MatrixXd>& coefficients, const std::atomic<bool>* cancel) {
   RETURN_IF_ERROR(CheckFields(system, fields, "RelativeResiduals"));
   const BasisMatrix& U = system.basis().U;
   if (coefficients.rows() != U.cols() || coefficients.cols() != fields.cols()) {
@@ -98,6 +109,7 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
   });
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, U.rows(), 4096),
                     [&](const tbb::blocked_range<int64_t>& r) {
+                      if (Cancelled(cancel)) return;
                       Sums& s = sums.local();
                       Eigen::RowVectorXd v(m);
                       for (int64_t i = r.begin(); i < r.end(); ++i) {
@@ -111,6 +123,7 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
                         s.norm += mi * fields.row(i).cwiseAbs2().transpose();
                       }
                     });
+  if (Cancelled(cancel)) return CancelledError("RelativeResiduals");
   Sums total{Eigen::VectorXd::Zero(m), Eigen::VectorXd::Zero(m)};
   sums.combine_each([&](const Sums& s) {
     total.residual += s.residual;
@@ -124,18 +137,20 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
 }
 
 absl::StatusOr<ProjectionBatch> ProjectMany(const ReducedSystem& system,
-                                            const Eigen::Ref<const Eigen::MatrixXd>& fields) {
-  ASSIGN_OR_RETURN(Eigen::MatrixXd rhs, MassWeightedProducts(system, fields));
+                                            const Eigen::Ref<const Eigen::MatrixXd>& fields,
+                                            const std::atomic<bool>* cancel) {
+  ASSIGN_OR_RETURN(Eigen::MatrixXd rhs, MassWeightedProducts(system, fields, cancel));
   system.mass_factor().SolveInPlace(rhs);
   ProjectionBatch batch;
-  ASSIGN_OR_RETURN(batch.relative_errors, RelativeResiduals(system, fields, rhs));
+  ASSIGN_OR_RETURN(batch.relative_errors, RelativeResiduals(system, fields, rhs, cancel));
   batch.coefficients = std::move(rhs);
   return batch;
 }
 
 absl::StatusOr<ProjectionResult> Project(const ReducedSystem& system,
-                                         const Eigen::Ref<const Eigen::VectorXd>& field) {
-  ASSIGN_OR_RETURN(ProjectionBatch batch, ProjectMany(system, field));
+                                         const Eigen::Ref<const Eigen::VectorXd>& field,
+                                         const std::atomic<bool>* cancel) {
+  ASSIGN_OR_RETURN(ProjectionBatch batch, ProjectMany(system, field, cancel));
   ProjectionResult result;
   result.coefficients = batch.coefficients.col(0);
   result.relative_error = batch.relative_errors[0];

@@ -12,16 +12,21 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/operators/reference_solvers.h"
+#include "core/subspace/dense_eigen.h"
 #include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace {
 namespace {
 
+// Thrown out of Spectra (from perform_op) to stop a cancelled solve.
+struct LanczosCancelled {};
+
 // (S - sigma M)^-1 for Spectra, factorized on the system's shared pattern.
 class ShiftInvertOp {
  public:
   using Scalar = double;
-  explicit ShiftInvertOp(const ReducedSystem& system) : system_(system) {}
+  ShiftInvertOp(const ReducedSystem& system, const std::atomic<bool>* cancel)
+      : system_(system), cancel_(cancel) {}
 
   Eigen::Index rows() const { return system_.dimension(); }
   Eigen::Index cols() const { return system_.dimension(); }
@@ -32,7 +37,9 @@ class ShiftInvertOp {
     for (int64_t p = 0; p < S.nonZeros(); ++p) {
       values[p] = S.valuePtr()[p] - sigma * M.valuePtr()[p];
     }
-    auto factor = SupernodalFactor::Factorize(system_.pattern_symbolic(), values);
+    SupernodalFactorOptions factor_options;
+    factor_options.cancel = cancel_;
+    auto factor = SupernodalFactor::Factorize(system_.pattern_symbolic(), values, factor_options);
     if (factor.ok()) {
       factor_ = std::make_unique<SupernodalFactor>(*std::move(factor));
       status_ = absl::OkStatus();
@@ -42,6 +49,7 @@ class ShiftInvertOp {
     }
   }
   void perform_op(const double* x_in, double* y_out) const {
+    if (cancel_ != nullptr && cancel_->load(std::memory_order_relaxed)) throw LanczosCancelled{};
     Eigen::Map<Eigen::VectorXd> y(y_out, rows());
     y = Eigen::Map<const Eigen::VectorXd>(x_in, rows());
     factor_->SolveInPlace(y);
@@ -50,6 +58,7 @@ class ShiftInvertOp {
 
  private:
   const ReducedSystem& system_;
+  const std::atomic<bool>* const cancel_;
   std::unique_ptr<SupernodalFactor> factor_;
   absl::Status status_ = absl::FailedPreconditionError("shift not set");
 };
@@ -74,19 +83,18 @@ absl::StatusOr<ReducedEigenResult> DenseEigenpairs(const ReducedSystem& system,
                                                    const ReducedEigenOptions& options) {
   const Eigen::MatrixXd S = system.stiffness();
   const Eigen::MatrixXd M = system.mass_matrix();
-  Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> solver(
-      S, M,
-      (options.compute_vectors ? Eigen::ComputeEigenvectors : Eigen::EigenvaluesOnly) |
-          Eigen::Ax_lBx);
-  if (solver.info() != Eigen::Success) {
+  auto solved =
+      LowestGeneralizedEigenpairs(S, M, options.count, options.compute_vectors, options.cancel);
+  if (absl::IsFailedPrecondition(solved.status())) {
     return absl::FailedPreconditionError(
         "ReducedEigenpairs: dense generalized eigensolver failed (is U^T M U positive "
         "definite?)");
   }
+  if (!solved.ok()) return solved.status();
   ReducedEigenResult result;
   result.method = ReducedEigenMethod::kDense;
-  result.values = solver.eigenvalues().head(options.count);
-  if (options.compute_vectors) result.coefficients = solver.eigenvectors().leftCols(options.count);
+  result.values = std::move(solved->values);
+  if (options.compute_vectors) result.coefficients = std::move(solved->vectors);
   return result;
 }
 
@@ -110,7 +118,7 @@ absl::StatusOr<ReducedEigenResult> SparseEigenpairs(const ReducedSystem& system,
   double scale = 0;
   for (int64_t i = 0; i < d; ++i) scale = std::max(scale, sd[i] / md[i]);
   const double sigma = -1e-8 * std::max(scale, 1e-300);
-  ShiftInvertOp op(system);
+  ShiftInvertOp op(system, options.cancel);
   MassOp bop(system.mass_matrix());
   try {
     Spectra::SymGEigsShiftSolver<ShiftInvertOp, MassOp, Spectra::GEigsMode::ShiftInvert> solver(
@@ -131,6 +139,8 @@ absl::StatusOr<ReducedEigenResult> SparseEigenpairs(const ReducedSystem& system,
     result.values = solver.eigenvalues();
     if (options.compute_vectors) result.coefficients = solver.eigenvectors();
     return result;
+  } catch (const LanczosCancelled&) {
+    return absl::CancelledError("ReducedEigenpairs: cancelled");
   } catch (const std::exception& e) {
     return absl::InternalError(absl::StrCat("ReducedEigenpairs: Spectra: ", e.what()));
   }

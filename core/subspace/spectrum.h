@@ -1,6 +1,7 @@
 #ifndef FIELDSPACE_CORE_SUBSPACE_SPECTRUM_H_
 #define FIELDSPACE_CORE_SUBSPACE_SPECTRUM_H_
 
+#include <atomic>
 #include <cstdint>
 #include <string>
 
@@ -28,6 +29,9 @@ struct ReducedEigenOptions {
   int32_t subspace_size = 0;
   double tolerance = 1e-10;
   int32_t max_iterations = 1000;
+  // Checked at every Lanczos step (sparse) and every column / QR step / block (dense): the solve
+  // returns Cancelled within milliseconds of *cancel becoming true. Not owned; may be null.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 struct ReducedEigenResult {
@@ -40,8 +44,8 @@ struct ReducedEigenResult {
 // (U^T S U) y = lambda (U^T M U) y, the Rayleigh-Ritz approximations from span(U) of the lowest
 // eigenpairs of S x = lambda M x; each reduced eigenvalue is >= the corresponding full one.
 // InvalidArgument for K outside [1, d] or bad options; ResourceExhausted when the sparse method
-// does not converge; FailedPrecondition when a factorization fails; Internal for an unexpected
-// solver failure.
+// does not converge; Cancelled (options.cancel); FailedPrecondition when a factorization fails;
+// Internal for an unexpected solver failure.
 absl::StatusOr<ReducedEigenResult> ReducedEigenpairs(const ReducedSystem& system,
                                                      const ReducedEigenOptions& options = {});
 

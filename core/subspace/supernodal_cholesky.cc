@@ -413,8 +413,15 @@ absl::Status SupernodalFactor::Refactorize(absl::Span<const double> values,
   int64_t failed_column = -1;
   const double diag_scale = 1.0 + options.diagonal_shift;
 
+  std::atomic<bool> cancelled{false};
   auto factor_front = [&](int32_t s) {
-    if (failed.load(std::memory_order_relaxed)) return;
+    if (failed.load(std::memory_order_relaxed) || cancelled.load(std::memory_order_relaxed)) {
+      return;
+    }
+    if (options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed)) {
+      cancelled.store(true);
+      return;
+    }
     const int64_t c0 = sym.super_begin_[s];
     const int64_t nc = sym.super_begin_[s + 1] - c0;
     const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
@@ -481,6 +488,7 @@ absl::Status SupernodalFactor::Refactorize(absl::Span<const double> values,
     tbb::parallel_for(static_cast<size_t>(0), sym.roots_.size(),
                       [&](size_t r) { process(sym.roots_[r]); });
   }
+  if (cancelled.load()) return absl::CancelledError("SupernodalFactor: cancelled");
   if (failed.load()) {
     return absl::FailedPreconditionError(
         absl::StrCat("SupernodalFactor: matrix is not positive definite (pivot of permuted column ",

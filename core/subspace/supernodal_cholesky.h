@@ -1,6 +1,7 @@
 #ifndef FIELDSPACE_CORE_SUBSPACE_SUPERNODAL_CHOLESKY_H_
 #define FIELDSPACE_CORE_SUBSPACE_SUPERNODAL_CHOLESKY_H_
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -94,6 +95,8 @@ struct SupernodalFactorOptions {
   // Tikhonov regularization for positive semi-definite matrices (0: none). Must be >= 0.
   double diagonal_shift = 0.0;
   bool parallel = true;  // oneTBB over the supernodal tree and inside large fronts
+  // Checked before each front: Cancelled (and an unusable factor) once *cancel is true. Not owned.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 // Numeric factorization P A P^T = L L^T of a symmetric positive definite matrix with an analyzed
@@ -103,7 +106,7 @@ class SupernodalFactor {
   // `values`: the matrix's stored values in the order of the analyzed pattern (pattern_nonzeros()
   // entries; e.g. A.valuePtr() of a matrix for which SamePattern() is true). InvalidArgument for a
   // wrong length, non-finite values or a bad option; FailedPrecondition when the matrix (with the
-  // shift) is not numerically positive definite.
+  // shift) is not numerically positive definite; Cancelled (options.cancel).
   static absl::StatusOr<SupernodalFactor> Factorize(
       std::shared_ptr<const SupernodalSymbolic> symbolic, absl::Span<const double> values,
       const SupernodalFactorOptions& options = {});

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <memory>
 #include <string>
 #include <thread>
@@ -1395,6 +1396,57 @@ TEST(ServerLifecycleTest, MemoryBudgetEvictsIdleBasesWhichReloadIdentically) {
   ASSERT_TRUE(reloaded.status.ok());
   EXPECT_EQ(reloaded.values(), first.values());
   EXPECT_LE(h->server->registry()->memory_in_use(), int64_t{64} << 20);
+}
+
+TEST(ServerLifecycleTest, DeadlineStopsEigenfieldsWorkOnTheServer) {
+  // One compute thread: if the server kept working on an expired Eigenfields call (a dense
+  // d = 1200 eigensolve, seconds of work), the Project call right after it would wait for it.
+  FieldServerOptions options;
+  options.threads = 1;
+  auto h = Harness::Start("deadline", options);
+  ASSERT_NE(h, nullptr);
+  MeshArrays m = Icosphere(4);  // 5120 faces
+  Uploaded up = Upload(h->stub.get(), Chunked(RawBytes(m), RawHeader(m), 1 << 20));
+  ASSERT_TRUE(up.status.ok());
+  Built b = Build(h->stub.get(), BuildRequest(up.info.id(), v1::FIELD_KIND_VECTOR, 1200));
+  ASSERT_TRUE(b.status.ok()) << b.status.error_message();
+  v1::ProjectRequest p;
+  p.set_basis_id(b.basis().id());
+  for (int f = 0; f < 5120; ++f) {
+    p.mutable_field()->add_values(1.0f);
+    p.mutable_field()->add_values(0.0f);
+  }
+  auto project_seconds = [&] {
+    v1::ProjectResponse resp;
+    grpc::ClientContext c;
+    const auto start = std::chrono::steady_clock::now();
+    EXPECT_TRUE(h->stub->Project(&c, p, &resp).ok());
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  const double unloaded = project_seconds();
+
+  v1::EigenfieldsRequest e;
+  e.set_basis_id(b.basis().id());
+  e.set_count(250);
+  v1::EigenfieldsResponse er;
+  {
+    grpc::ClientContext c;
+    c.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(150));
+    EXPECT_EQ(h->stub->Eigenfields(&c, e, &er).error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
+  }
+  const double after_deadline = project_seconds();
+  EXPECT_LT(after_deadline, unloaded + 0.3) << "the expired eigensolve kept the compute thread";
+  // The same request without a deadline completes (and is what the deadline cut short).
+  grpc::ClientContext c;
+  const auto start = std::chrono::steady_clock::now();
+  ASSERT_TRUE(h->stub->Eigenfields(&c, e, &er).ok());
+  const double full =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  EXPECT_EQ(er.eigenvalues_size(), 250);
+  std::cout << "project " << unloaded << " s, after the deadline " << after_deadline
+            << " s, full eigensolve " << full << " s\n";
+  EXPECT_GT(full, after_deadline + 0.6)
+      << "the eigensolve is too cheap for this test to discriminate";
 }
 
 }  // namespace

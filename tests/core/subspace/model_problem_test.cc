@@ -1,5 +1,6 @@
 #include "core/subspace/model_problem.h"
 
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -196,6 +197,21 @@ TEST(ModelProblemTest, InvalidProblems) {
   // More hard DOFs (2 x 11 = 22) than the dimension (20).
   p = RandomProblem(mesh.num_faces(), 2, 0, 11, 5, 1.0, 0.0, 1.0);
   EXPECT_EQ(code(p), absl::StatusCode::kFailedPrecondition);
+}
+
+TEST(ModelProblemTest, CancelledSolveStopsWithCancelled) {
+  const TriangleMesh mesh = IcosphereMesh(2);
+  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  auto sys = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
+  ASSERT_TRUE(sys.ok());
+  const ModelProblem problem = RandomProblem(mesh.num_faces(), 2, 5, 4, 3, 0.5, 0.02, 3.0);
+  std::atomic<bool> cancel{true};
+  ReducedSolveOptions options;
+  options.cancel = &cancel;
+  EXPECT_EQ(SolveReducedModelProblem(**sys, problem, options).status().code(),
+            absl::StatusCode::kCancelled);
+  cancel = false;
+  EXPECT_TRUE(SolveReducedModelProblem(**sys, problem, options).ok());
 }
 
 }  // namespace

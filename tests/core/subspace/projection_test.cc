@@ -1,5 +1,6 @@
 #include "core/subspace/projection.h"
 
+#include <atomic>
 #include <limits>
 #include <vector>
 
@@ -167,6 +168,18 @@ TEST_F(ProjectionTest, InvalidInputs) {
           .status()
           .code(),
       absl::StatusCode::kInvalidArgument);
+}
+
+TEST_F(ProjectionTest, CancelledProjectionStopsWithCancelled) {
+  const Eigen::VectorXd X = Eigen::VectorXd::Random(op_.dofs());
+  std::atomic<bool> cancel{true};
+  EXPECT_EQ(Project(*sys_, X, &cancel).status().code(), absl::StatusCode::kCancelled);
+  EXPECT_EQ(RelativeResiduals(*sys_, X, Eigen::VectorXd::Zero(80), &cancel).status().code(),
+            absl::StatusCode::kCancelled);
+  cancel = false;
+  auto p = Project(*sys_, X, &cancel);
+  ASSERT_TRUE(p.ok());
+  EXPECT_EQ(p->coefficients, Project(*sys_, X)->coefficients);
 }
 
 }  // namespace

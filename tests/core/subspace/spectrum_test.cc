@@ -1,5 +1,6 @@
 #include "core/subspace/spectrum.h"
 
+#include <atomic>
 #include <cmath>
 #include <memory>
 
@@ -137,6 +138,22 @@ TEST_F(SpectrumTest, InvalidCounts) {
   EXPECT_TRUE(ReducedEigenpairs(**sys, options).ok());
   options.method = ReducedEigenMethod::kSparse;  // needs a Lanczos basis larger than K <= d
   EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST_F(SpectrumTest, CancelledSolvesStopWithCancelled) {
+  auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op_.dofs(), 500, 60, 4), op_);
+  ASSERT_TRUE(sys.ok());
+  std::atomic<bool> cancel{true};
+  for (ReducedEigenMethod method : {ReducedEigenMethod::kDense, ReducedEigenMethod::kSparse}) {
+    ReducedEigenOptions options;
+    options.count = 20;
+    options.method = method;
+    options.cancel = &cancel;
+    cancel = true;
+    EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kCancelled);
+    cancel = false;  // the same call, not cancelled, runs to the end
+    EXPECT_TRUE(ReducedEigenpairs(**sys, options).ok());
+  }
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "core/subspace/supernodal_cholesky.h"
 
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -240,6 +241,25 @@ TEST(SupernodalCholeskyTest, InvalidInputs) {
   no_diag.makeCompressed();
   EXPECT_EQ(SupernodalSymbolic::Analyze(no_diag).status().code(),
             absl::StatusCode::kInvalidArgument);
+}
+
+TEST(SupernodalCholeskyTest, CancelledFactorizationIsCancelledAndRefactorizeRecovers) {
+  Eigen::SparseMatrix<double> A = GeometricSpd(400, 0.2, 5);
+  auto sym = SupernodalSymbolic::Analyze(A);
+  ASSERT_TRUE(sym.ok());
+  std::atomic<bool> cancel{true};
+  SupernodalFactorOptions options;
+  options.cancel = &cancel;
+  EXPECT_EQ(SupernodalFactor::Factorize(*sym, A, options).status().code(),
+            absl::StatusCode::kCancelled);
+  auto f = SupernodalFactor::Factorize(*sym, A);
+  ASSERT_TRUE(f.ok());
+  EXPECT_EQ(f->Refactorize(absl::MakeConstSpan(A.valuePtr(), A.nonZeros()), options).code(),
+            absl::StatusCode::kCancelled);
+  EXPECT_FALSE(f->is_valid());
+  ASSERT_TRUE(f->Refactorize(absl::MakeConstSpan(A.valuePtr(), A.nonZeros())).ok());
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(A.rows());
+  EXPECT_LT((A * f->Solve(b) - b).norm() / b.norm(), 1e-10);
 }
 
 }  // namespace
