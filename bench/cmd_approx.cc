@@ -69,18 +69,11 @@ absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh&
     return absl::InvalidArgumentError("--coarse-dim must be in [0, dim)");
   }
   BasisOptions options;
-  options.params.dimension = static_cast<int32_t>(*dim - *coarse_dim);
+  options.params.dimension = static_cast<int32_t>(*dim);
   options.params.sigma = *sigma;
   options.params.seed = static_cast<uint64_t>(*seed);
-  auto basis = BuildBasis(mesh, op, options);
+  auto basis = BuildTwoLevelBasis(mesh, op, options, static_cast<int32_t>(*coarse_dim));
   if (!basis.ok()) return basis.status();
-  if (*coarse_dim > 0) {
-    options.params.dimension = static_cast<int32_t>(*coarse_dim);
-    auto coarse = BuildBasis(mesh, op, options);
-    if (!coarse.ok()) return coarse.status();
-    basis = StackBases(*std::move(basis), *coarse);
-    if (!basis.ok()) return basis.status();
-  }
   return std::shared_ptr<const Basis>(std::make_shared<Basis>(*std::move(basis)));
 }
 

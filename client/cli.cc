@@ -39,7 +39,9 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   mesh MESH_ID                        one mesh
   delete-mesh MESH_ID [--cascade]     delete a mesh (with --cascade: and its bases)
   build MESH_ID --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--seed S]
-        [--fields-per-region M]       build a basis: progress on stderr, BasisInfo ("id") on stdout
+        [--fields-per-region M] [--coarse-dim C]
+                                      build a basis: progress on stderr, BasisInfo ("id") on stdout;
+                                      C > 0 adds a coarse level of C of the D columns
   bases [--mesh MESH_ID]              list bases (and running builds)
   basis BASIS_ID                      one basis
   delete-basis BASIS_ID               delete a basis
@@ -248,6 +250,7 @@ void WriteBasisInfo(JsonWriter& j, const v1::BasisInfo& b) {
   j.Key("sigma").Number(b.sigma());
   j.Key("fields_per_region").Int(b.fields_per_region());
   j.Key("seed").Int(static_cast<int64_t>(b.seed()));
+  j.Key("coarse_dimension").Int(b.coarse_dimension());
   j.Key("adaptive").Bool(b.adaptive());
   j.Key("state").String(b.state() == v1::BASIS_STATE_READY ? "ready" : "building");
   j.Key("dofs").Int(b.dofs());
@@ -399,7 +402,7 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"mesh", {{}, {}, 1, &Cli::Mesh}},
         {"delete-mesh", {{}, {"--cascade"}, 1, &Cli::DeleteMesh}},
         {"build",
-         {{"--field", "--n", "--dim", "--sigma", "--seed", "--fields-per-region"},
+         {{"--field", "--n", "--dim", "--sigma", "--seed", "--fields-per-region", "--coarse-dim"},
           {},
           1,
           &Cli::Build}},
@@ -560,6 +563,9 @@ int Cli::Build(const Args& a) {
   if (a.Has("--sigma")) request.set_sigma(ParseDouble(a, "--sigma", 40));
   request.set_seed(static_cast<uint64_t>(ParseInt(a, "--seed", 0)));
   request.set_fields_per_region(static_cast<int32_t>(ParseInt(a, "--fields-per-region", 0)));
+  const int64_t coarse = ParseInt(a, "--coarse-dim", 0);
+  if (coarse < 0 || coarse >= dim) throw UsageError("--coarse-dim must be in [0, --dim)");
+  request.set_coarse_dimension(static_cast<int32_t>(coarse));
 
   auto context = Context();
   auto reader = stub_->BuildBasis(context.get(), request);

@@ -47,7 +47,7 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
       context.progress(StageFor(phase), fraction);
     };
   }
-  ASSIGN_OR_RETURN(Basis basis, BuildBasis(mesh, op, options));
+  ASSIGN_OR_RETURN(Basis basis, BuildTwoLevelBasis(mesh, op, options, key.coarse_dimension));
   BuiltBasis out;
   out.basis = std::make_shared<const Basis>(std::move(basis));
   out.op = std::make_shared<const FieldOperator>(std::move(op));

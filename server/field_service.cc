@@ -144,6 +144,7 @@ void BasisInfoFromStatus(const BasisStatus& s, v1::BasisInfo* p) {
   p->set_sigma(r.key.sigma);
   p->set_fields_per_region(r.key.fields_per_region);
   p->set_seed(r.key.seed);
+  p->set_coarse_dimension(r.key.coarse_dimension);
   p->set_adaptive(r.key.weights_hash != 0);
   p->set_dofs(r.dofs);
   if (s.ready) {
@@ -723,6 +724,7 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
     build.key.sigma = request.has_sigma() ? request.sigma() : 40.0;
     build.key.fields_per_region = request.fields_per_region();
     build.key.seed = request.seed();
+    build.key.coarse_dimension = request.coarse_dimension();
     build.face_weights = Eigen::Map<const Eigen::VectorXd>(request.face_weights().data(),
                                                            request.face_weights().size());
     return service->registry()->StartBuild(std::move(build));

@@ -35,7 +35,8 @@ struct BasisKey {
   double sigma = 40.0;
   int32_t fields_per_region = 0;  // resolved m (never 0 once a request is validated)
   uint64_t seed = 0;
-  uint64_t weights_hash = 0;  // 0 for uniform weights
+  uint64_t weights_hash = 0;     // 0 for uniform weights
+  int32_t coarse_dimension = 0;  // C of a two-level basis (0: one level)
 };
 
 // What the server knows about a built basis without loading it.

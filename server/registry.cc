@@ -340,6 +340,9 @@ std::string Registry::BasisIdFor(const BasisKey& key) {
   hasher.UpdateValue<int32_t>(key.fields_per_region);
   hasher.UpdateValue<uint64_t>(key.seed);
   hasher.UpdateValue<uint64_t>(key.weights_hash);
+  // Only two-level bases hash C, so the ids of one-level bases stay what they were before C
+  // existed.
+  if (key.coarse_dimension != 0) hasher.UpdateValue<int32_t>(key.coarse_dimension);
   return "b-" + Hex64(hasher.Digest());
 }
 
@@ -364,6 +367,10 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
   if (key.dimension > dofs) {
     return absl::InvalidArgumentError(
         absl::StrCat("dimension ", key.dimension, " exceeds the number of DOFs (", dofs, ")"));
+  }
+  if (key.coarse_dimension < 0 || key.coarse_dimension >= key.dimension) {
+    return absl::InvalidArgumentError(absl::StrCat("coarse_dimension must be in [0, dimension = ",
+                                                   key.dimension, "), got ", key.coarse_dimension));
   }
   if (!std::isfinite(key.sigma) || key.sigma <= 0 || key.sigma > 1e6) {
     return absl::InvalidArgumentError(

@@ -158,6 +158,8 @@ std::string EncodeBasisRecord(const BasisRecord& r) {
   w.Put<int64_t>(r.nnz);
   w.Put<double>(r.build_seconds);
   w.Put<int64_t>(r.created_unix_ms);
+  // Appended field: records written before it end here (C = 0).
+  if (r.key.coarse_dimension != 0) w.Put<int32_t>(r.key.coarse_dimension);
   return std::move(w.bytes());
 }
 
@@ -180,7 +182,10 @@ bool DecodeBasisRecord(std::string_view bytes, BasisRecord* r) {
   r->nnz = in.Get<int64_t>();
   r->build_seconds = in.Get<double>();
   r->created_unix_ms = in.Get<int64_t>();
-  return in.Done() && kind <= static_cast<uint8_t>(FieldKind::kTensor);
+  r->key.coarse_dimension = in.Done() ? 0 : in.Get<int32_t>();
+  return in.Done() && kind <= static_cast<uint8_t>(FieldKind::kTensor) &&
+         r->key.coarse_dimension >= 0 &&
+         (r->key.coarse_dimension == 0 || r->key.coarse_dimension < r->key.dimension);
 }
 
 struct Header {

@@ -10,6 +10,7 @@
 #include <numeric>
 #include <thread>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/basis/dual_graph.h"
 #include "core/basis/local_eigensolver.h"
@@ -17,6 +18,7 @@
 #include "core/basis/progress.h"
 #include "core/basis/regions.h"
 #include "core/basis/sampling.h"
+#include "core/common/status_macros.h"
 #include "tbb/blocked_range.h"
 #include "tbb/enumerable_thread_specific.h"
 #include "tbb/parallel_for.h"
@@ -444,6 +446,7 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
         }
       });
   fine.U.swap(U);
+  fine.params.dimension = static_cast<int32_t>(fine.U.cols());
   fine.sample_faces.insert(fine.sample_faces.end(), coarse.sample_faces.begin(),
                            coarse.sample_faces.end());
   fine.local_eigenvalues.insert(fine.local_eigenvalues.end(), coarse.local_eigenvalues.begin(),
@@ -454,6 +457,31 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
   for (int64_t row = 0; row < k; row += dpf) uncovered += outer[row + dpf] == outer[row] ? 1 : 0;
   fine.uncovered_faces = uncovered;
   return fine;
+}
+
+absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
+                                         const BasisOptions& options, int32_t coarse_dimension) {
+  const int32_t d = options.params.dimension;
+  if (coarse_dimension < 0 || coarse_dimension >= d) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("coarse dimension must be in [0, d = ", d, "), got ", coarse_dimension));
+  }
+  if (coarse_dimension == 0) return BuildBasis(mesh, op, options);
+  BasisOptions level = options;
+  double start = 0;
+  double share = static_cast<double>(d - coarse_dimension) / d;
+  if (options.progress) {
+    level.progress = [&](BasisPhase phase, double fraction) {
+      options.progress(phase, start + share * fraction);
+    };
+  }
+  level.params.dimension = d - coarse_dimension;
+  ASSIGN_OR_RETURN(Basis fine, BuildBasis(mesh, op, level));
+  start = share;
+  share = 1 - start;
+  level.params.dimension = coarse_dimension;
+  ASSIGN_OR_RETURN(Basis coarse, BuildBasis(mesh, op, level));
+  return StackBases(std::move(fine), coarse);
 }
 
 }  // namespace fieldspace

@@ -114,10 +114,18 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
 // type; typically a basis of fewer, larger regions). The local Dirichlet fields of a dense basis
 // form no partition of unity, so smooth large-scale fields (the lowest eigenfields, the smooth
 // part of any field) are poorly represented; a coarse level of wider fields restores them. The
-// result keeps fine's params and radius; samples and local eigenvalues are concatenated, so the
+// result keeps fine's params (but params.dimension = the total column count) and radius; samples and local eigenvalues are concatenated, so the
 // "column j belongs to region j / m" rule holds only for the fine columns. InvalidArgument when
 // the row counts or field types differ, ResourceExhausted past 2^31 - 1 nonzeros.
 absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse);
+
+// BuildBasis with a coarse second level of `coarse_dimension` = C columns: StackBases of the basis
+// of dimension d - C (d = options.params.dimension) and the basis of dimension C, both with the
+// other options as given; d columns in all. C = 0 is BuildBasis. Progress fractions cover the
+// fine level in the first (d - C) / d of each phase and the coarse level in the rest.
+// InvalidArgument unless 0 <= C < d; otherwise errors as BuildBasis and StackBases.
+absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
+                                         const BasisOptions& options, int32_t coarse_dimension);
 
 }  // namespace fieldspace
 

@@ -582,6 +582,19 @@ TEST_F(ServiceTest, BuildStreamsProgressAndIsIdempotent) {
   EXPECT_EQ(fresh.basis().id(), fresh.progress[0].basis_id());
   EXPECT_NE(fresh.basis().id(), *vector_id_);  // the seed is part of the id
   EXPECT_EQ(fresh.basis().seed(), 5u);
+  EXPECT_EQ(fresh.basis().coarse_dimension(), 0);
+  // A coarse second level: another basis, still d columns, more nonzeros (wider regions).
+  v1::BuildBasisRequest two_level = r;
+  two_level.set_coarse_dimension(12);
+  Built stacked = Build(stub(), two_level);
+  ASSERT_TRUE(stacked.status.ok()) << stacked.status.error_message();
+  EXPECT_NE(stacked.basis().id(), fresh.basis().id());
+  EXPECT_EQ(stacked.basis().coarse_dimension(), 12);
+  EXPECT_EQ(stacked.basis().columns(), 60);
+  EXPECT_GT(stacked.basis().nnz(), fresh.basis().nnz());
+  auto loaded_stacked = Loaded(stacked.basis().id());
+  ASSERT_NE(loaded_stacked, nullptr);
+  EXPECT_EQ(loaded_stacked->basis->dimension(), 60);
   // Listed, and removable.
   v1::ListBasesRequest lr;
   lr.set_mesh_id(*mesh_id_);
@@ -636,6 +649,11 @@ TEST_F(ServiceTest, BuildErrors) {
   r.set_sigma(-1);
   EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
   r.clear_sigma();
+  r.set_coarse_dimension(10);  // must be below d = 10
+  EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
+  r.set_coarse_dimension(-1);
+  EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
+  r.set_coarse_dimension(0);
   r.set_fields_per_region(-2);
   EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
   r.set_fields_per_region(0);

@@ -155,6 +155,15 @@ TEST_F(StoreTest, BasisRoundTripConcatenatesPieces) {
   EXPECT_EQ(loaded->record.key.sigma, 33.5);
   EXPECT_EQ(loaded->record.key.weights_hash, 77u);
   EXPECT_EQ(loaded->record.nnz, 1234);
+  EXPECT_EQ(loaded->record.key.coarse_dimension, 0);  // the format of records before C existed
+  // A two-level basis record keeps C.
+  r.id = "b-00000000000000fe";
+  r.key.coarse_dimension = 5;
+  ASSERT_TRUE(store_->SaveBasis(r, {"x"}).ok());
+  loaded = store_->LoadBasis(r.id);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ(loaded->record.key.coarse_dimension, 5);
+  EXPECT_EQ(loaded->record.key.seed, 9u);
 }
 
 TEST_F(StoreTest, FlippedPayloadByteIsDataLoss) {

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "Eigen/Eigenvalues"
+#include "core/basis/basis_io.h"
 #include "gtest/gtest.h"
 #include "tests/core/basis/basis_test_util.h"
 #include "tests/testing/test_meshes.h"
@@ -405,6 +406,53 @@ TEST(BasisTest, StackBasesConcatenatesColumns) {
   auto nfield = BuildBasis(mesh, Operator(mesh, FieldType::NField(4)), options);
   ASSERT_TRUE(nfield.ok());
   EXPECT_EQ(StackBases(*fine, *nfield).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
+  const TriangleMesh mesh = Icosphere(3);
+  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 69;
+  std::vector<std::pair<BasisPhase, double>> seen;
+  options.progress = [&](BasisPhase phase, double fraction) { seen.emplace_back(phase, fraction); };
+  auto two = BuildTwoLevelBasis(mesh, op, options, 9);
+  ASSERT_TRUE(two.ok()) << two.status();
+  options.progress = nullptr;
+  options.params.dimension = 60;
+  auto fine = BuildBasis(mesh, op, options);
+  options.params.dimension = 9;
+  auto coarse = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(fine.ok() && coarse.ok());
+  auto stacked = StackBases(*fine, *coarse);
+  ASSERT_TRUE(stacked.ok());
+  EXPECT_EQ(two->dimension(), 69);
+  EXPECT_EQ(two->params.dimension, 69);
+  EXPECT_EQ(Eigen::MatrixXf(two->U), Eigen::MatrixXf(stacked->U));
+  // It is stored and loaded like any basis.
+  auto bytes = EncodeBasis(*two, "m-0000000000000001");
+  ASSERT_TRUE(bytes.ok()) << bytes.status();
+  auto decoded = DecodeBasis(*bytes);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  EXPECT_EQ(Eigen::MatrixXf(decoded->basis.U), Eigen::MatrixXf(two->U));
+  EXPECT_EQ(decoded->basis.local_eigenvalues, two->local_eigenvalues);
+  // Progress stays in [0, 1]; the coarse level reports past the fine level's share 60/69.
+  ASSERT_FALSE(seen.empty());
+  double highest = 0;
+  for (const auto& [phase, fraction] : seen) {
+    EXPECT_GE(fraction, 0.0);
+    EXPECT_LE(fraction, 1.0);
+    highest = std::max(highest, fraction);
+  }
+  EXPECT_GT(highest, 60.0 / 69.0);
+  // C = 0 is the one-level basis; C outside [0, d) is rejected.
+  options.params.dimension = 60;
+  auto one = BuildTwoLevelBasis(mesh, op, options, 0);
+  ASSERT_TRUE(one.ok());
+  EXPECT_EQ(Eigen::MatrixXf(one->U), Eigen::MatrixXf(fine->U));
+  EXPECT_EQ(BuildTwoLevelBasis(mesh, op, options, 60).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(BuildTwoLevelBasis(mesh, op, options, -1).status().code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 TEST(BasisTest, InvalidParameters) {
