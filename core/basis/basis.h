@@ -114,9 +114,10 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
 // type; typically a basis of fewer, larger regions). The local Dirichlet fields of a dense basis
 // form no partition of unity, so smooth large-scale fields (the lowest eigenfields, the smooth
 // part of any field) are poorly represented; a coarse level of wider fields restores them. The
-// result keeps fine's params (but params.dimension = the total column count) and radius; samples and local eigenvalues are concatenated, so the
-// "column j belongs to region j / m" rule holds only for the fine columns. InvalidArgument when
-// the row counts or field types differ, ResourceExhausted past 2^31 - 1 nonzeros.
+// result keeps fine's params (but params.dimension = the total column count) and radius; samples
+// and local eigenvalues are concatenated, so the "column j belongs to region j / m" rule holds only
+// for the fine columns. InvalidArgument when the row counts or field types differ,
+// ResourceExhausted past 2^31 - 1 nonzeros.
 absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse);
 
 // BuildBasis with a coarse second level of `coarse_dimension` = C columns: StackBases of the basis
