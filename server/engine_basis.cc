@@ -3,6 +3,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/basis/basis.h"
 #include "core/basis/basis_io.h"
+#include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 #include "core/operators/field_operator.h"
 #include "server/engine.h"
@@ -31,7 +32,7 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
                                             const BuildContext& context) {
   if (context.progress) context.progress(BuildStage::kOperator, 0);
   ASSIGN_OR_RETURN(FieldOperator op, BuildFieldOperator(mesh, key.field));
-  if (context.cancel != nullptr && context.cancel->load()) {
+  if (IsCancelled(context.cancel)) {
     return absl::CancelledError("basis construction cancelled");
   }
   BasisOptions options;

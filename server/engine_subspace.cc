@@ -5,6 +5,7 @@
 #include <map>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 #include "core/operators/field_operator.h"
 #include "core/subspace/design_session.h"
@@ -122,7 +123,7 @@ absl::StatusOr<std::shared_ptr<const SubspaceModel>> PrepareModel(
     ASSIGN_OR_RETURN(assembled, BuildFieldOperator(mesh, basis->type));
     op = &assembled;
   }
-  if (context.cancel != nullptr && context.cancel->load()) {
+  if (IsCancelled(context.cancel)) {
     return absl::CancelledError("cancelled");
   }
   if (context.progress) context.progress(BuildStage::kPrecompute, 0.5);

@@ -9,6 +9,7 @@
 
 #include "absl/status/status.h"
 #include "core/basis/basis.h"
+#include "core/common/cancel.h"
 
 namespace fieldspace::basis_internal {
 
@@ -59,7 +60,7 @@ class ProgressTicker {
               fraction_.load(std::memory_order_relaxed));
   }
 
-  bool cancelled() const { return cancel_ != nullptr && cancel_->load(std::memory_order_relaxed); }
+  bool cancelled() const { return IsCancelled(cancel_); }
 
   static absl::Status CancelledError() {
     return absl::CancelledError("basis construction cancelled");

@@ -10,13 +10,10 @@
 #include "Eigen/Eigenvalues"
 #include "Eigen/Householder"
 #include "absl/strings/str_cat.h"
+#include "core/common/cancel.h"
 
 namespace fieldspace {
 namespace {
-
-bool Cancelled(const std::atomic<bool>* cancel) {
-  return cancel != nullptr && cancel->load(std::memory_order_relaxed);
-}
 
 absl::Status CancelledStatus() { return absl::CancelledError("dense eigensolve cancelled"); }
 
@@ -58,7 +55,7 @@ absl::StatusOr<DenseEigenResult> LowestSymmetricEigenpairs(Eigen::MatrixXd& a, i
   Eigen::VectorXd tau(std::max<Eigen::Index>(n - 1, 1));
   Eigen::VectorXd w(n);
   for (Eigen::Index i = 0; i + 1 < n; ++i) {
-    if (Cancelled(cancel)) return CancelledStatus();
+    if (IsCancelled(cancel)) return CancelledStatus();
     const Eigen::Index r = n - i - 1;
     auto v = a.col(i).tail(r);
     double beta = 0;
@@ -97,7 +94,7 @@ absl::StatusOr<DenseEigenResult> LowestSymmetricEigenpairs(Eigen::MatrixXd& a, i
     if (++steps > max_steps) {
       return absl::InternalError("dense eigensolve: the QR iteration did not converge");
     }
-    if (Cancelled(cancel)) return CancelledStatus();
+    if (IsCancelled(cancel)) return CancelledStatus();
     start = end - 1;
     while (start > 0 && sub[start - 1] != 0) --start;
     Eigen::internal::tridiagonal_qr_step<Eigen::ColMajor>(
@@ -122,7 +119,7 @@ absl::StatusOr<DenseEigenResult> LowestSymmetricEigenpairs(Eigen::MatrixXd& a, i
                        .setLength(n - 1)
                        .setShift(1);
     for (Eigen::Index j = 0; j < count; j += kBlock) {
-      if (Cancelled(cancel)) return CancelledStatus();
+      if (IsCancelled(cancel)) return CancelledStatus();
       auto block = result.vectors.middleCols(j, std::min<Eigen::Index>(kBlock, count - j));
       Q.applyThisOnTheLeft(block);
     }
@@ -145,13 +142,13 @@ absl::StatusOr<DenseEigenResult> LowestGeneralizedEigenpairs(const Eigen::Matrix
   if (llt.info() != Eigen::Success) {
     return absl::FailedPreconditionError("dense eigensolve: M is not positive definite");
   }
-  if (Cancelled(cancel)) return CancelledStatus();
+  if (IsCancelled(cancel)) return CancelledStatus();
   // C = L^-1 S L^-T as L^-1 (L^-1 S)^T (S symmetric), each triangular solve a block of columns
   // at a time.
   Eigen::MatrixXd C = S.selfadjointView<Eigen::Lower>();
   for (int pass = 0; pass < 2; ++pass) {
     for (Eigen::Index j = 0; j < n; j += kBlock) {
-      if (Cancelled(cancel)) return CancelledStatus();
+      if (IsCancelled(cancel)) return CancelledStatus();
       auto block = C.middleCols(j, std::min<Eigen::Index>(kBlock, n - j));
       llt.matrixL().solveInPlace(block);
     }

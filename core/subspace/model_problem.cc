@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/kkt_solver.h"
 
@@ -84,11 +85,8 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   for (const HardConstraint& c : problem.hard) {
     RETURN_IF_ERROR(ValidateConstraint(system, {c.face, c.value, 1.0}, false));
   }
-  const auto cancelled = [&] {
-    return options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed);
-  };
   const absl::Status cancelled_error = absl::CancelledError("reduced model solve cancelled");
-  if (cancelled()) return cancelled_error;
+  if (IsCancelled(options.cancel)) return cancelled_error;
   const int64_t d = system.dimension();
   // A_s = U^T (mu_S S + mu_B B) U + mu_C sum_soft w_i U_i^T U_i, b = mu_C sum_soft w_i U_i^T c_i.
   Eigen::SparseMatrix<double> A = system.stiffness();
@@ -125,18 +123,18 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
     ASSIGN_OR_RETURN(symbolic, SupernodalSymbolic::Analyze(A));
   }
   double tau = 0;
-  if (cancelled()) return cancelled_error;
+  if (IsCancelled(options.cancel)) return cancelled_error;
   ASSIGN_OR_RETURN(SupernodalFactor factor, FactorizeRegularized(symbolic, A, options, &tau));
 
   KktSolver kkt(d, system.dofs_per_face(), options);
   for (const HardConstraint& c : problem.hard) {
     kkt.Append(BasisRowsOfFace(system, c.face), c.value, 0.0, /*hard=*/true);
   }
-  if (cancelled()) return cancelled_error;
+  if (IsCancelled(options.cancel)) return cancelled_error;
   kkt.SetMatrix(&A, &factor);
-  if (cancelled()) return cancelled_error;
+  if (IsCancelled(options.cancel)) return cancelled_error;
   RETURN_IF_ERROR(kkt.FactorizeSchur());
-  if (cancelled()) return cancelled_error;
+  if (IsCancelled(options.cancel)) return cancelled_error;
   ReducedSolution solution = kkt.Solve(&b);
   solution.regularization = tau;
   return solution;

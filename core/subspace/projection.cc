@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/subspace_util.h"
 #include "oneapi/tbb/blocked_range.h"
@@ -40,10 +41,6 @@ absl::Status CheckFields(const ReducedSystem& system,
   return absl::OkStatus();
 }
 
-bool Cancelled(const std::atomic<bool>* cancel) {
-  return cancel != nullptr && cancel->load(std::memory_order_relaxed);
-}
-
 absl::Status CancelledError(absl::string_view what) {
   return absl::CancelledError(absl::StrCat(what, ": cancelled"));
 }
@@ -69,7 +66,7 @@ absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
       [&] { return RowMajorMatrix::Zero(d, m).eval(); });
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, U.rows(), 4096),
                     [&](const tbb::blocked_range<int64_t>& r) {
-                      if (Cancelled(cancel)) return;
+                      if (IsCancelled(cancel)) return;
                       RowMajorMatrix& acc = partial.local();
                       Eigen::RowVectorXd w(m);
                       for (int64_t i = r.begin(); i < r.end(); ++i) {
@@ -81,7 +78,7 @@ absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
                         }
                       }
                     });
-  if (Cancelled(cancel)) return CancelledError("MassWeightedProducts");
+  if (IsCancelled(cancel)) return CancelledError("MassWeightedProducts");
   Eigen::MatrixXd result = Eigen::MatrixXd::Zero(d, m);
   for (const RowMajorMatrix& acc : partial) result += acc;
   return result;
@@ -109,7 +106,7 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
   });
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, U.rows(), 4096),
                     [&](const tbb::blocked_range<int64_t>& r) {
-                      if (Cancelled(cancel)) return;
+                      if (IsCancelled(cancel)) return;
                       Sums& s = sums.local();
                       Eigen::RowVectorXd v(m);
                       for (int64_t i = r.begin(); i < r.end(); ++i) {
@@ -123,7 +120,7 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
                         s.norm += mi * fields.row(i).cwiseAbs2().transpose();
                       }
                     });
-  if (Cancelled(cancel)) return CancelledError("RelativeResiduals");
+  if (IsCancelled(cancel)) return CancelledError("RelativeResiduals");
   Sums total{Eigen::VectorXd::Zero(m), Eigen::VectorXd::Zero(m)};
   sums.combine_each([&](const Sums& s) {
     total.residual += s.residual;

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 #include "core/linalg/sparse_checks.h"
 #include "core/subspace/subspace_util.h"
@@ -177,7 +178,7 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
             }
             for (int64_t g = range.begin(); g < range.end(); ++g) {
               if (cancelled.load(std::memory_order_relaxed)) return;
-              if (options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed)) {
+              if (IsCancelled(options.cancel)) {
                 cancelled.store(true);
                 return;
               }

@@ -7,9 +7,9 @@
 #include <utility>
 #include <vector>
 
-#include "Eigen/Eigenvalues"
 #include "Spectra/SymGEigsShiftSolver.h"
 #include "absl/strings/str_cat.h"
+#include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 #include "core/operators/reference_solvers.h"
 #include "core/subspace/dense_eigen.h"
@@ -49,7 +49,7 @@ class ShiftInvertOp {
     }
   }
   void perform_op(const double* x_in, double* y_out) const {
-    if (cancel_ != nullptr && cancel_->load(std::memory_order_relaxed)) throw LanczosCancelled{};
+    if (IsCancelled(cancel_)) throw LanczosCancelled{};
     Eigen::Map<Eigen::VectorXd> y(y_out, rows());
     y = Eigen::Map<const Eigen::VectorXd>(x_in, rows());
     factor_->SolveInPlace(y);

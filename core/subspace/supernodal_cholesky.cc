@@ -11,6 +11,7 @@
 
 #include "Eigen/Cholesky"
 #include "absl/strings/str_cat.h"
+#include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 #include "oneapi/tbb/blocked_range.h"
 #include "oneapi/tbb/parallel_for.h"
@@ -418,7 +419,7 @@ absl::Status SupernodalFactor::Refactorize(absl::Span<const double> values,
     if (failed.load(std::memory_order_relaxed) || cancelled.load(std::memory_order_relaxed)) {
       return;
     }
-    if (options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed)) {
+    if (IsCancelled(options.cancel)) {
       cancelled.store(true);
       return;
     }
