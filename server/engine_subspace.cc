@@ -20,11 +20,14 @@ namespace fieldspace::server {
 class SubspaceModel {
  public:
   explicit SubspaceModel(std::shared_ptr<const ReducedSystem> system)
-      : system_(std::move(system)) {}
+      : system_(std::move(system)), energy_cache_(std::make_shared<EnergyFactorCache>()) {}
   const std::shared_ptr<const ReducedSystem>& system() const { return system_; }
+  // Design sessions on this basis with equal (mu_S, mu_B) share one factorization.
+  const std::shared_ptr<EnergyFactorCache>& energy_cache() const { return energy_cache_; }
 
  private:
   std::shared_ptr<const ReducedSystem> system_;
+  std::shared_ptr<EnergyFactorCache> energy_cache_;
 };
 
 namespace {
@@ -86,10 +89,9 @@ class CoreSession final : public InteractiveSession {
 
   absl::StatusOr<EditResult> SetWeights(const ModelWeights& w) override {
     const auto start = Clock::now();
-    const bool refactorize = w.mu_s != weights_.mu_s || w.mu_b != weights_.mu_b;
     RETURN_IF_ERROR(session_->SetWeights(EnergyWeights{w.mu_s, w.mu_b, w.mu_c}));
     weights_ = w;
-    return EditResult{MsSince(start), refactorize};
+    return EditResult{MsSince(start), session_->last_factorized()};
   }
 
   const Eigen::VectorXd& coefficients() const override { return session_->coefficients(); }
@@ -194,11 +196,14 @@ absl::StatusOr<OpenSessionResult> OpenDesignSession(std::shared_ptr<const Served
   ASSIGN_OR_RETURN(const ReducedSystem* system, SystemOf(*basis));
   (void)system;
   const auto start = Clock::now();
-  ASSIGN_OR_RETURN(std::unique_ptr<DesignSession> session,
-                   DesignSession::Create(basis->model->system(),
-                                         EnergyWeights{weights.mu_s, weights.mu_b, weights.mu_c}));
+  DesignSessionOptions options;
+  options.energy_cache = basis->model->energy_cache();
+  ASSIGN_OR_RETURN(
+      std::unique_ptr<DesignSession> session,
+      DesignSession::Create(basis->model->system(),
+                            EnergyWeights{weights.mu_s, weights.mu_b, weights.mu_c}, options));
   OpenSessionResult out;
-  out.timings = {MsSince(start), true};
+  out.timings = {MsSince(start), session->last_factorized()};
   out.session = std::make_unique<CoreSession>(std::move(basis), std::move(session), weights);
   return out;
 }

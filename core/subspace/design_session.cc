@@ -1,5 +1,6 @@
 #include "core/subspace/design_session.h"
 
+#include <tuple>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -8,6 +9,74 @@
 #include "core/subspace/projection.h"
 
 namespace fieldspace {
+
+absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
+    const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options) {
+  RETURN_IF_ERROR(ValidateWeights(weights));
+  auto out = std::make_shared<EnergyFactorization>();
+  out->mu_s = weights.harmonic;
+  out->mu_b = weights.biharmonic;
+  Eigen::SparseMatrix<double> A = system.stiffness();
+  const double* s = system.stiffness().valuePtr();
+  const double* b = system.bilaplacian().valuePtr();
+  double* v = A.valuePtr();
+  for (int64_t p = 0; p < A.nonZeros(); ++p) {
+    v[p] = weights.harmonic * s[p] + weights.biharmonic * b[p];
+  }
+  ASSIGN_OR_RETURN(SupernodalFactor f, FactorizeRegularized(system.pattern_symbolic(), A, options,
+                                                            &out->regularization));
+  out->factor = std::make_unique<SupernodalFactor>(std::move(f));
+  ASSIGN_OR_RETURN(SupernodalMatrix panels, SupernodalMatrix::Create(system.pattern_symbolic(), A));
+  out->A = std::make_unique<SupernodalMatrix>(std::move(panels));
+  return std::shared_ptr<const EnergyFactorization>(std::move(out));
+}
+
+bool EnergyFactorCache::Key::operator<(const Key& o) const {
+  return std::tie(system, mu_s, mu_b, regularization, max_regularization, parallel) <
+         std::tie(o.system, o.mu_s, o.mu_b, o.regularization, o.max_regularization, o.parallel);
+}
+
+absl::StatusOr<std::shared_ptr<const EnergyFactorization>> EnergyFactorCache::Get(
+    const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options,
+    bool* factorized) {
+  if (factorized != nullptr) *factorized = false;
+  const Key key{&system,
+                weights.harmonic,
+                weights.biharmonic,
+                options.regularization,
+                options.max_regularization,
+                options.parallel};
+  std::shared_ptr<Entry> entry;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    // Drop entries nobody holds (and nobody is computing: their Entry is referenced only here).
+    for (auto it = entries_.begin(); it != entries_.end();) {
+      if (it->second.use_count() == 1 && it->second->value.expired()) {
+        it = entries_.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    std::shared_ptr<Entry>& slot = entries_[key];
+    if (slot == nullptr) slot = std::make_shared<Entry>();
+    entry = slot;
+  }
+  std::lock_guard<std::mutex> lock(entry->mu);
+  if (std::shared_ptr<const EnergyFactorization> value = entry->value.lock()) return value;
+  // On error (or cancellation) nothing is stored; the next caller tries again.
+  ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> value,
+                   FactorizeEnergy(system, weights, options));
+  entry->value = value;
+  if (factorized != nullptr) *factorized = true;
+  return value;
+}
+
+int32_t EnergyFactorCache::live_entries() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  int32_t n = 0;
+  for (const auto& [key, entry] : entries_) n += entry->value.expired() ? 0 : 1;
+  return n;
+}
 
 DesignSession::DesignSession(std::shared_ptr<const ReducedSystem> system,
                              const DesignSessionOptions& options)
@@ -22,33 +91,26 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
   RETURN_IF_ERROR(ValidateWeights(weights));
   RETURN_IF_ERROR(ValidateSolveOptions(options.solve));
   std::unique_ptr<DesignSession> session(new DesignSession(std::move(system), options));
-  RETURN_IF_ERROR(session->FactorizeEnergy(weights, &session->A_, &session->factor_,
-                                           &session->regularization_));
+  ASSIGN_OR_RETURN(session->energy_, session->Energy(weights));
   session->weights_ = weights;
   session->kkt_ = std::make_unique<KktSolver>(session->system_->dimension(),
                                               session->system_->dofs_per_face(), options.solve);
-  session->kkt_->SetMatrix(&session->A_, session->factor_.get());
+  session->kkt_->SetMatrix(session->energy_->A.get(), session->energy_->factor.get());
   RETURN_IF_ERROR(session->kkt_->FactorizeSchur());
   session->Resolve();
   return session;
 }
 
-absl::Status DesignSession::FactorizeEnergy(const EnergyWeights& weights,
-                                            Eigen::SparseMatrix<double>* A,
-                                            std::unique_ptr<SupernodalFactor>* factor,
-                                            double* tau) const {
-  Eigen::SparseMatrix<double> a = system_->stiffness();
-  const double* s = system_->stiffness().valuePtr();
-  const double* b = system_->bilaplacian().valuePtr();
-  double* v = a.valuePtr();
-  for (int64_t p = 0; p < a.nonZeros(); ++p) {
-    v[p] = weights.harmonic * s[p] + weights.biharmonic * b[p];
+absl::StatusOr<std::shared_ptr<const EnergyFactorization>> DesignSession::Energy(
+    const EnergyWeights& weights) {
+  last_factorized_ = false;
+  if (options_.energy_cache != nullptr) {
+    return options_.energy_cache->Get(*system_, weights, options_.solve, &last_factorized_);
   }
-  ASSIGN_OR_RETURN(SupernodalFactor f,
-                   FactorizeRegularized(system_->pattern_symbolic(), a, options_.solve, tau));
-  *A = std::move(a);
-  *factor = std::make_unique<SupernodalFactor>(std::move(f));
-  return absl::OkStatus();
+  ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> energy,
+                   FactorizeEnergy(*system_, weights, options_.solve));
+  last_factorized_ = true;
+  return energy;
 }
 
 void DesignSession::Resolve() {
@@ -151,20 +213,12 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
   const EnergyWeights old_weights = weights_;
   const bool energy_changed =
       weights.harmonic != weights_.harmonic || weights.biharmonic != weights_.biharmonic;
-  Eigen::SparseMatrix<double> old_A;
-  std::unique_ptr<SupernodalFactor> old_factor;
-  double old_tau = regularization_;
+  std::shared_ptr<const EnergyFactorization> old_energy = energy_;
+  last_factorized_ = false;
   if (energy_changed) {
-    Eigen::SparseMatrix<double> A;
-    std::unique_ptr<SupernodalFactor> factor;
-    double tau = 0;
-    RETURN_IF_ERROR(FactorizeEnergy(weights, &A, &factor, &tau));
-    old_A = std::move(A_);
-    old_factor = std::move(factor_);
-    A_ = std::move(A);
-    factor_ = std::move(factor);
-    regularization_ = tau;
-    kkt_->SetMatrix(&A_, factor_.get());
+    ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> energy, Energy(weights));
+    energy_ = std::move(energy);
+    kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
   }
   weights_ = weights;
   for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
@@ -175,10 +229,8 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
   if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
     weights_ = old_weights;
     if (energy_changed) {
-      A_ = std::move(old_A);
-      factor_ = std::move(old_factor);
-      regularization_ = old_tau;
-      kkt_->SetMatrix(&A_, factor_.get());
+      energy_ = std::move(old_energy);
+      kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
     }
     for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
       if (records_[slot].kind == ConstraintKind::kSoft) {

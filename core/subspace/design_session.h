@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "Eigen/Core"
@@ -26,8 +27,58 @@ struct ConstraintInfo {
   FieldConstraint constraint;
 };
 
+// The energy matrix A = U^T (mu_S S + mu_B B) U of one reduced system for one (mu_S, mu_B), and
+// its (possibly regularized) factorization. Immutable; shared by sessions.
+struct EnergyFactorization {
+  double mu_s = 0;
+  double mu_b = 0;
+  std::unique_ptr<SupernodalMatrix> A;  // d x d, on the system's shared pattern
+  std::unique_ptr<SupernodalFactor> factor;
+  double regularization = 0;  // the diagonal shift that was needed
+};
+
+// Factorizes A for `weights` (mu_S, mu_B) with the regularization policy of `options`.
+// FailedPrecondition when it cannot be factorized; Cancelled (options.cancel).
+absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
+    const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options);
+
+// Energy factorizations shared by the design sessions of a reduced system: sessions with the
+// same (mu_S, mu_B) and regularization policy use one factorization while any of them holds it,
+// so a server with many sessions on one basis keeps one factor in memory (and in cache), and
+// opening a session with weights already in use costs no factorization. Concurrent requests for
+// the same weights wait for one factorization instead of repeating it. Thread-safe. Entries are
+// kept only while a holder exists (weak references).
+class EnergyFactorCache {
+ public:
+  // As FactorizeEnergy(system, weights, options), shared. The system's address is part of the
+  // key, so one cache may serve several systems (each entry keeps none of them alive).
+  // *factorized (optional): whether this call computed the factorization.
+  absl::StatusOr<std::shared_ptr<const EnergyFactorization>> Get(const ReducedSystem& system,
+                                                                 const EnergyWeights& weights,
+                                                                 const ReducedSolveOptions& options,
+                                                                 bool* factorized = nullptr);
+  // Entries with a live factorization.
+  int32_t live_entries() const;
+
+ private:
+  struct Key {
+    const ReducedSystem* system;
+    double mu_s, mu_b, regularization, max_regularization;
+    bool parallel;
+    bool operator<(const Key& o) const;
+  };
+  struct Entry {
+    std::mutex mu;  // held while the factorization is computed
+    std::weak_ptr<const EnergyFactorization> value;
+  };
+  mutable std::mutex mu_;
+  std::map<Key, std::shared_ptr<Entry>> entries_;
+};
+
 struct DesignSessionOptions {
   ReducedSolveOptions solve;
+  // Where energy factorizations come from; null: the session factorizes its own.
+  std::shared_ptr<EnergyFactorCache> energy_cache;
 };
 
 // An interactive design session on one basis (paper section 8, DESIGN.md section 4): the model
@@ -35,13 +86,14 @@ struct DesignSessionOptions {
 // at a time.
 //
 // Cost model: the energy matrix A = U^T (mu_S S + mu_B B) U is factorized once per (mu_S, mu_B)
-// (sparse supernodal Cholesky on the basis's shared symbolic analysis). Constraints never touch
-// that factorization: each one keeps Z = A^-1 U_f^T (2-3 columns, one multi-RHS solve when it
-// is added or moved to another face), and every edit refactorizes only the small dense matrix
-// H = U_C A^-1 U_C^T + E over the current constraint rows (Woodbury for soft constraints, Schur
-// complement for hard ones; see KktSolver). An edit costs O(nnz(L) + d r + r^3) for r constraint
-// rows instead of a refactorization. Changing mu_S or mu_B refactorizes A and recomputes Z;
-// changing only mu_C does not.
+// (sparse supernodal Cholesky P A P^T = L L^T on the basis's shared symbolic analysis; shared
+// between sessions through an EnergyFactorCache). Constraints never touch that factorization:
+// each one keeps W = L^-1 P U_f^T (2-3 columns, sparse forward substitutions when it is added or
+// moved to another face), and every edit refactorizes only the small dense matrix
+// H = U_C A^-1 U_C^T + E = W^T W + E over the current constraint rows (Woodbury for soft
+// constraints, Schur complement for hard ones; see KktSolver). An edit costs
+// O(nnz(L) + d r + r^3) for r constraint rows instead of a refactorization. Changing mu_S or mu_B
+// refactorizes A and recomputes W; changing only mu_C does not.
 //
 // Every successful call leaves coefficients() = the minimizer for the current weights and
 // constraint set, equal (up to the solver tolerance) to SolveReducedModelProblem(problem()).
@@ -97,13 +149,15 @@ class DesignSession {
   // shift that was needed.
   double last_backward_error() const { return last_backward_error_; }
   int32_t last_refinement_steps() const { return last_refinement_steps_; }
-  double regularization() const { return regularization_; }
+  double regularization() const { return energy_->regularization; }
+  // Whether the last Create() or SetWeights() computed a factorization of A (false when the
+  // weights kept mu_S and mu_B, or the factorization came from the cache).
+  bool last_factorized() const { return last_factorized_; }
 
  private:
   DesignSession(std::shared_ptr<const ReducedSystem> system, const DesignSessionOptions& options);
-  // Factorizes mu_S U^T S U + mu_B U^T B U into the given outputs.
-  absl::Status FactorizeEnergy(const EnergyWeights& weights, Eigen::SparseMatrix<double>* A,
-                               std::unique_ptr<SupernodalFactor>* factor, double* tau) const;
+  // mu_S U^T S U + mu_B U^T B U, from the cache when there is one; sets last_factorized_.
+  absl::StatusOr<std::shared_ptr<const EnergyFactorization>> Energy(const EnergyWeights& weights);
   void Resolve();
   double SoftE(double weight) const { return 1.0 / (weights_.constraint * weight); }
 
@@ -112,9 +166,7 @@ class DesignSession {
   std::shared_ptr<const ReducedSystem> system_;
   DesignSessionOptions options_;
   EnergyWeights weights_;
-  Eigen::SparseMatrix<double> A_;  // d x d, on the system's shared pattern
-  std::unique_ptr<SupernodalFactor> factor_;
-  double regularization_ = 0;
+  std::shared_ptr<const EnergyFactorization> energy_;
   std::unique_ptr<KktSolver> kkt_;
   std::map<int64_t, int32_t> slot_by_id_;
   std::vector<int64_t> ids_by_slot_;
@@ -123,6 +175,7 @@ class DesignSession {
   Eigen::VectorXd coefficients_;
   double last_backward_error_ = 0;
   int32_t last_refinement_steps_ = 0;
+  bool last_factorized_ = false;
 };
 
 }  // namespace fieldspace

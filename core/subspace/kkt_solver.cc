@@ -61,63 +61,43 @@ void KktSolver::EnsureCapacity(int64_t rows) {
   const int64_t cap = K_.rows();
   if (rows <= cap) return;
   const int64_t new_cap = std::max<int64_t>(rows, std::max<int64_t>(2 * cap, 16 * p_));
-  Z_.conservativeResize(d_, new_cap);
+  W_.conservativeResize(d_, new_cap);
   K_.conservativeResize(new_cap, new_cap);
   t_.conservativeResize(new_cap);
   e_.conservativeResize(new_cap);
 }
 
-void KktSolver::ComputeGroup(int32_t g) {
-  if (factor_ == nullptr) return;  // SetMatrix() computes every group later
+void KktSolver::ComputeGroupColumns(int32_t g) {
   const int64_t r0 = static_cast<int64_t>(g) * p_;
-  Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(d_, p_);
   for (int32_t c = 0; c < p_; ++c) {
     const SparseRow& row = rows_[g][c];
-    for (size_t q = 0; q < row.cols.size(); ++q) Y(row.cols[q], c) += row.vals[q];
-  }
-  factor_->SolveInPlace(Y);
-  Z_.middleCols(r0, p_) = Y;
-  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  for (int64_t i = 0; i < r; ++i) {
-    const SparseRow& row = rows_[i / p_][i % p_];
-    for (int32_t c = 0; c < p_; ++c) {
-      const double v = row.Dot(Y.col(c).data());
-      K_(i, r0 + c) = v;
-      K_(r0 + c, i) = v;
-    }
-  }
-  // The group's own block was written twice (both triangles from one side each): symmetrize.
-  for (int32_t a = 0; a < p_; ++a) {
-    for (int32_t c = a + 1; c < p_; ++c) {
-      const double v = 0.5 * (rows_[g][a].Dot(Y.col(c).data()) + rows_[g][c].Dot(Y.col(a).data()));
-      K_(r0 + a, r0 + c) = v;
-      K_(r0 + c, r0 + a) = v;
-    }
+    factor_->ForwardSparse(row.cols, row.vals, W_.col(r0 + c));
   }
 }
 
-void KktSolver::SetMatrix(const Eigen::SparseMatrix<double>* A, const SupernodalFactor* factor) {
+void KktSolver::ComputeGroup(int32_t g) {
+  if (factor_ == nullptr) return;  // SetMatrix() computes every group later
+  ComputeGroupColumns(g);
+  const int64_t r0 = static_cast<int64_t>(g) * p_;
+  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  // K = R A^-1 R^T = W^T W: the group's rows and columns against all groups (its own block
+  // included; W^T W is symmetric by construction).
+  // Matrix-vector products, one column at a time: a matrix-matrix product would pack all of W
+  // for p columns.
+  for (int32_t c = 0; c < p_; ++c) {
+    K_.col(r0 + c).head(r).noalias() = W_.leftCols(r).transpose() * W_.col(r0 + c);
+    K_.row(r0 + c).head(r) = K_.col(r0 + c).head(r).transpose();
+  }
+}
+
+void KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor) {
   A_ = A;
   factor_ = factor;
   schur_valid_ = false;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   if (r == 0) return;
-  Eigen::MatrixXd Y = Eigen::MatrixXd::Zero(d_, r);
-  for (int64_t i = 0; i < r; ++i) {
-    const SparseRow& row = rows_[i / p_][i % p_];
-    for (size_t q = 0; q < row.cols.size(); ++q) Y(row.cols[q], i) += row.vals[q];
-  }
-  factor_->SolveInPlace(Y);
-  Z_.leftCols(r) = Y;
-  for (int64_t j = 0; j < r; ++j) {
-    for (int64_t i = j; i < r; ++i) {
-      const SparseRow& ri = rows_[i / p_][i % p_];
-      const SparseRow& rj = rows_[j / p_][j % p_];
-      const double v = 0.5 * (ri.Dot(Y.col(j).data()) + rj.Dot(Y.col(i).data()));
-      K_(i, j) = v;
-      K_(j, i) = v;
-    }
-  }
+  for (int32_t g = 0; g < num_groups_; ++g) ComputeGroupColumns(g);
+  K_.topLeftCorner(r, r).noalias() = W_.leftCols(r).transpose() * W_.leftCols(r);
 }
 
 void KktSolver::Append(std::vector<SparseRow> rows, const Eigen::VectorXd& target, double e,
@@ -161,7 +141,7 @@ void KktSolver::RemoveSwapLast(int32_t g) {
     hard_[g] = hard_[last];
     t_.segment(a, p_) = t_.segment(b, p_);
     e_.segment(a, p_) = e_.segment(b, p_);
-    Z_.middleCols(a, p_) = Z_.middleCols(b, p_);
+    W_.middleCols(a, p_) = W_.middleCols(b, p_);
     // Move row/column block b to a (K symmetric): first the columns, then the rows.
     K_.block(0, a, r, p_) = K_.block(0, b, r, p_);
     K_.block(a, 0, p_, r) = K_.block(b, 0, p_, r);
@@ -239,10 +219,13 @@ Eigen::VectorXd KktSolver::SolveSchur(const Eigen::VectorXd& v) const {
 }
 
 ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b) const {
+  // With P A_hat P^T = L L^T and W = L^-1 P R^T: A_hat^-1 v = P^T L^-T u for u = L^-1 P v,
+  // R A_hat^-1 v = W^T u, and the solution of the saddle-point system is
+  //   nu = H^-1 (W^T u - t),   x = P^T L^-T (u - W nu),   u = L^-1 P b:
+  // one forward and one backward substitution, whatever the number of constraints.
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  const auto W = W_.leftCols(r);
   ReducedSolution sol;
-  Eigen::VectorXd x = Eigen::VectorXd::Zero(d_);
-  if (b != nullptr) x = factor_->Solve(*b);
   const auto apply_R = [&](const Eigen::VectorXd& v) {
     Eigen::VectorXd out(r);
     for (int64_t i = 0; i < r; ++i) out[i] = rows_[i / p_][i % p_].Dot(v.data());
@@ -256,17 +239,33 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b) const {
     }
     return out;
   };
+  // [dx; dnu] for right-hand sides (f, g) of the saddle-point system with A replaced by A_hat.
+  const auto solve_kkt = [&](const Eigen::VectorXd* f, const Eigen::VectorXd& g,
+                             Eigen::VectorXd* dx, Eigen::VectorXd* dnu) {
+    Eigen::VectorXd u = Eigen::VectorXd::Zero(d_);
+    if (f != nullptr) {
+      u = factor_->PermuteIn(*f);
+      factor_->ForwardInPlace(u);
+    }
+    if (r > 0) {
+      Eigen::VectorXd h = -g;
+      if (f != nullptr) h.noalias() += W.transpose() * u;
+      *dnu = SolveSchur(h);
+      u.noalias() -= W * *dnu;
+    } else {
+      dnu->setZero(0);
+    }
+    factor_->BackwardInPlace(u);
+    *dx = factor_->PermuteOut(u);
+  };
   const Eigen::VectorXd t = t_.head(r);
   const Eigen::VectorXd e = e_.head(r);
-  Eigen::VectorXd nu = Eigen::VectorXd::Zero(r);
-  if (r > 0) {
-    nu = SolveSchur(apply_R(x) - t);
-    x.noalias() -= Z_.leftCols(r) * nu;
-  }
+  Eigen::VectorXd x, nu;
+  solve_kkt(b, t, &x, &nu);
   const double tiny = std::numeric_limits<double>::min();
   for (int32_t step = 0;; ++step) {
     // Residuals of the true system and the normwise backward error.
-    const Eigen::VectorXd Ax = (*A_) * x;
+    const Eigen::VectorXd Ax = A_->Multiply(x);
     const Eigen::VectorXd Rtnu = apply_Rt(nu);
     const Eigen::VectorXd Rx = apply_R(x);
     Eigen::VectorXd r1 = -Ax - Rtnu;
@@ -282,13 +281,10 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b) const {
     sol.backward_error = eta;
     sol.refinement_steps = step;
     if (eta <= options_.tolerance || step >= options_.max_refinement_steps) break;
-    Eigen::VectorXd y = factor_->Solve(r1);
-    if (r > 0) {
-      const Eigen::VectorXd dnu = SolveSchur(apply_R(y) - r2);
-      y.noalias() -= Z_.leftCols(r) * dnu;
-      nu += dnu;
-    }
-    x += y;
+    Eigen::VectorXd dx, dnu;
+    solve_kkt(&r1, r2, &dx, &dnu);
+    x += dx;
+    if (r > 0) nu += dnu;
   }
   sol.coefficients = std::move(x);
   return sol;

@@ -44,20 +44,21 @@ absl::StatusOr<SupernodalFactor> FactorizeRegularized(
 // (p = rows_per_group rows per constraint, the rows of U at its face), E = diag(e) with
 // e = 1 / (mu_C w) on a soft constraint's rows and 0 on a hard one's. For soft rows, nu = the
 // scaled residual; this is exactly the minimizer of x^T A x - 2 b^T x + sum_soft (R_i x -
-// t_i)^2 / e_i subject to R_h x = t_h. With Z = F^-1 R^T (d x r, kept per constraint) and
-// H = R Z + E (r x r):
-//   x0 = F^-1 b,  H nu = R x0 - t,  x = x0 - Z nu,
+// t_i)^2 / e_i subject to R_h x = t_h. With F = P^T L L^T P, W = L^-1 P R^T (d x r, kept per
+// constraint; R's rows are sparse, so each column costs a forward substitution over the
+// elimination-tree paths of its nonzeros only) and H = R F^-1 R^T + E = W^T W + E (r x r):
+//   u = L^-1 P b,  H nu = W^T u - t,  x = P^T L^-T (u - W nu),
 // followed by iterative refinement against the true A (residuals are cheap sparse products, each
-// correction one solve with F). Adding a constraint costs p solves with F plus O(r p nnz(row))
-// for H's new entries; every change refactorizes H (O(r^3), r = p * #constraints, small).
+// correction one forward and one backward substitution). Adding a constraint costs p sparse
+// forward substitutions plus O(d r p) for H's new entries; every solve one backward substitution
+// (and a forward one when b != 0); every change refactorizes H (O(r^3), r = p * #constraints).
 class KktSolver {
  public:
   KktSolver(int64_t dim, int32_t rows_per_group, const ReducedSolveOptions& options);
 
   // The true matrix (for residuals) and the factorization used for solves; both must stay alive
-  // and unchanged until the next call. Recomputes Z and R Z for all constraints (one multi-RHS
-  // solve).
-  void SetMatrix(const Eigen::SparseMatrix<double>* A, const SupernodalFactor* factor);
+  // and unchanged until the next call. Recomputes W and K for all constraints.
+  void SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor);
 
   int32_t num_groups() const { return num_groups_; }
   // Appends a constraint (rows: p sparse rows; target: p values; e >= 0, 0 for hard). Before the
@@ -85,7 +86,8 @@ class KktSolver {
 
  private:
   void EnsureCapacity(int64_t rows);
-  // Z columns and H entries of group g against all current groups.
+  // W columns of group g, then its entries of K against all current groups.
+  void ComputeGroupColumns(int32_t g);
   void ComputeGroup(int32_t g);
   // H^-1 v (v: r values).
   Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;
@@ -93,15 +95,15 @@ class KktSolver {
   int64_t d_;
   int32_t p_;
   ReducedSolveOptions options_;
-  const Eigen::SparseMatrix<double>* A_ = nullptr;
+  const SupernodalMatrix* A_ = nullptr;
   const SupernodalFactor* factor_ = nullptr;
   int32_t num_groups_ = 0;
   std::vector<std::vector<SparseRow>> rows_;  // per group, p rows
   std::vector<char> hard_;                    // per group
   Eigen::VectorXd t_;                         // per row (capacity)
   Eigen::VectorXd e_;                         // per row (capacity)
-  Eigen::MatrixXd Z_;                         // d x capacity
-  Eigen::MatrixXd K_;                         // capacity x capacity: R Z
+  Eigen::MatrixXd W_;                         // d x capacity: L^-1 P R^T (permuted numbering)
+  Eigen::MatrixXd K_;                         // capacity x capacity: R F^-1 R^T = W^T W
   // Factorization of the scaled, permuted H: order_[i] = row of H at position i (hard first),
   // scale_ = 1 / sqrt(diag(H)).
   std::vector<int64_t> order_;

@@ -125,13 +125,14 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   double tau = 0;
   if (IsCancelled(options.cancel)) return cancelled_error;
   ASSIGN_OR_RETURN(SupernodalFactor factor, FactorizeRegularized(symbolic, A, options, &tau));
+  ASSIGN_OR_RETURN(SupernodalMatrix A_panels, SupernodalMatrix::Create(symbolic, A));
 
   KktSolver kkt(d, system.dofs_per_face(), options);
   for (const HardConstraint& c : problem.hard) {
     kkt.Append(BasisRowsOfFace(system, c.face), c.value, 0.0, /*hard=*/true);
   }
   if (IsCancelled(options.cancel)) return cancelled_error;
-  kkt.SetMatrix(&A, &factor);
+  kkt.SetMatrix(&A_panels, &factor);
   if (IsCancelled(options.cancel)) return cancelled_error;
   RETURN_IF_ERROR(kkt.FactorizeSchur());
   if (IsCancelled(options.cancel)) return cancelled_error;

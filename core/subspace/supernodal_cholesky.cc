@@ -219,8 +219,9 @@ absl::StatusOr<std::shared_ptr<const SupernodalSymbolic>> SupernodalSymbolic::An
   sym->pattern_inner_.assign(inner, inner + pattern.nonZeros());
   const int* Lperm = static_cast<const int*>(L->Perm);
   sym->perm_.assign(Lperm, Lperm + n);
-  std::vector<int32_t> iperm(n);
-  for (int64_t k = 0; k < n; ++k) iperm[sym->perm_[k]] = static_cast<int32_t>(k);
+  sym->iperm_.resize(n);
+  for (int64_t k = 0; k < n; ++k) sym->iperm_[sym->perm_[k]] = static_cast<int32_t>(k);
+  const std::vector<int32_t>& iperm = sym->iperm_;
 
   const int64_t nsuper = static_cast<int64_t>(L->nsuper);
   const int* Lsuper = static_cast<const int*>(L->super);
@@ -231,10 +232,11 @@ absl::StatusOr<std::shared_ptr<const SupernodalSymbolic>> SupernodalSymbolic::An
   for (int64_t s = 0; s <= nsuper; ++s) sym->rows_begin_[s] = Lpi[s];
   sym->rows_.assign(Ls, Ls + Lpi[nsuper]);
 
-  std::vector<int32_t> col_to_super(n);
+  sym->col_super_.resize(n);
   for (int64_t s = 0; s < nsuper; ++s) {
-    for (int c = Lsuper[s]; c < Lsuper[s + 1]; ++c) col_to_super[c] = static_cast<int32_t>(s);
+    for (int c = Lsuper[s]; c < Lsuper[s + 1]; ++c) sym->col_super_[c] = static_cast<int32_t>(s);
   }
+  const std::vector<int32_t>& col_to_super = sym->col_super_;
   // Structure checks (the multifrontal assembly relies on them) and the elimination tree.
   sym->parent_.assign(nsuper, -1);
   for (int64_t s = 0; s < nsuper; ++s) {
@@ -351,9 +353,10 @@ absl::StatusOr<std::shared_ptr<const SupernodalSymbolic>> SupernodalSymbolic::An
 
 int64_t SupernodalSymbolic::memory_bytes() const {
   return static_cast<int64_t>(
-      4 * (pattern_outer_.size() + pattern_inner_.size() + perm_.size() + super_begin_.size() +
-           rows_.size() + relative_map_.size() + parent_.size() + children_begin_.size() +
-           children_.size() + roots_.size() + first_descendant_.size()) +
+      4 * (pattern_outer_.size() + pattern_inner_.size() + perm_.size() + iperm_.size() +
+           col_super_.size() + super_begin_.size() + rows_.size() + relative_map_.size() +
+           parent_.size() + children_begin_.size() + children_.size() + roots_.size() +
+           first_descendant_.size()) +
       8 * (rows_begin_.size() + subtree_flops_.size() + panel_begin_.size() +
            assembly_begin_.size() + assembly_value_.size() + assembly_offset_.size()));
 }
@@ -500,27 +503,33 @@ absl::Status SupernodalFactor::Refactorize(absl::Span<const double> values,
 }
 
 template <typename Block>
-void SupernodalFactor::Substitute(Block& X) const {
+void SupernodalFactor::ForwardSupernode(int64_t s, Block& X, Block& tmp) const {
   const SupernodalSymbolic& sym = *symbolic_;
-  const int64_t nsuper = sym.num_supernodes();
-  Block tmp;
-  // Forward: L y = P b.
-  for (int64_t s = 0; s < nsuper; ++s) {
-    const int64_t c0 = sym.super_begin_[s];
-    const int64_t nc = sym.super_begin_[s + 1] - c0;
-    const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
-    const int64_t m = nr - nc;
-    Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
-    auto Xs = X.middleRows(c0, nc);
-    P.topRows(nc).template triangularView<Eigen::Lower>().solveInPlace(Xs);
-    if (m > 0) {
-      tmp.noalias() = P.bottomRows(m) * Xs;
-      const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
-      for (int64_t k = 0; k < m; ++k) X.row(rows[k]) -= tmp.row(k);
-    }
+  const int64_t c0 = sym.super_begin_[s];
+  const int64_t nc = sym.super_begin_[s + 1] - c0;
+  const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
+  const int64_t m = nr - nc;
+  Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
+  auto Xs = X.middleRows(c0, nc);
+  P.topRows(nc).template triangularView<Eigen::Lower>().solveInPlace(Xs);
+  if (m > 0) {
+    tmp.noalias() = P.bottomRows(m) * Xs;
+    const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
+    for (int64_t k = 0; k < m; ++k) X.row(rows[k]) -= tmp.row(k);
   }
-  // Backward: L^T x = y.
-  for (int64_t s = nsuper - 1; s >= 0; --s) {
+}
+
+template <typename Block>
+void SupernodalFactor::Forward(Block& X) const {
+  Block tmp;
+  for (int64_t s = 0; s < symbolic_->num_supernodes(); ++s) ForwardSupernode(s, X, tmp);
+}
+
+template <typename Block>
+void SupernodalFactor::Backward(Block& X) const {
+  const SupernodalSymbolic& sym = *symbolic_;
+  Block tmp;
+  for (int64_t s = sym.num_supernodes() - 1; s >= 0; --s) {
     const int64_t c0 = sym.super_begin_[s];
     const int64_t nc = sym.super_begin_[s + 1] - c0;
     const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
@@ -535,6 +544,68 @@ void SupernodalFactor::Substitute(Block& X) const {
     }
     P.topRows(nc).transpose().template triangularView<Eigen::Upper>().solveInPlace(Xs);
   }
+}
+
+template <typename Block>
+void SupernodalFactor::Substitute(Block& X) const {
+  Forward(X);
+  Backward(X);
+}
+
+void SupernodalFactor::ForwardInPlace(Eigen::Ref<Eigen::VectorXd> y) const {
+  Eigen::VectorXd x = y;
+  Forward(x);
+  y = x;
+}
+
+void SupernodalFactor::BackwardInPlace(Eigen::Ref<Eigen::VectorXd> y) const {
+  Eigen::VectorXd x = y;
+  Backward(x);
+  y = x;
+}
+
+Eigen::VectorXd SupernodalFactor::PermuteIn(const Eigen::VectorXd& b) const {
+  const SupernodalSymbolic& sym = *symbolic_;
+  Eigen::VectorXd y(sym.n_);
+  for (int64_t k = 0; k < sym.n_; ++k) y[k] = b[sym.perm_[k]];
+  return y;
+}
+
+Eigen::VectorXd SupernodalFactor::PermuteOut(const Eigen::VectorXd& y) const {
+  const SupernodalSymbolic& sym = *symbolic_;
+  Eigen::VectorXd b(sym.n_);
+  for (int64_t k = 0; k < sym.n_; ++k) b[sym.perm_[k]] = y[k];
+  return b;
+}
+
+int64_t SupernodalFactor::ForwardSparse(absl::Span<const int32_t> rows,
+                                        absl::Span<const double> vals,
+                                        Eigen::Ref<Eigen::VectorXd> y) const {
+  const SupernodalSymbolic& sym = *symbolic_;
+  const int64_t nsuper = sym.num_supernodes();
+  // The reach of the nonzeros: the supernodes on their paths to the roots of the supernodal
+  // elimination tree. A parent's index exceeds its children's, so ascending order is a
+  // topological order for the forward substitution.
+  std::vector<int32_t> reach;
+  std::vector<char> marked(nsuper, 0);
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(sym.n_);
+  for (size_t q = 0; q < rows.size(); ++q) {
+    const int32_t k = sym.iperm_[rows[q]];
+    x[k] += vals[q];
+    for (int32_t s = sym.col_super_[k]; s >= 0 && !marked[s]; s = sym.parent_[s]) {
+      marked[s] = 1;
+      reach.push_back(s);
+    }
+  }
+  std::sort(reach.begin(), reach.end());
+  Eigen::VectorXd tmp;
+  int64_t visited_rows = 0;
+  for (const int32_t s : reach) {
+    ForwardSupernode(s, x, tmp);
+    visited_rows += sym.rows_begin_[s + 1] - sym.rows_begin_[s];
+  }
+  y = x;
+  return visited_rows;
 }
 
 void SupernodalFactor::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {
@@ -564,6 +635,70 @@ Eigen::VectorXd SupernodalFactor::Solve(const Eigen::VectorXd& b) const {
   Eigen::VectorXd x = b;
   SolveInPlace(x);
   return x;
+}
+
+absl::StatusOr<SupernodalMatrix> SupernodalMatrix::Create(
+    std::shared_ptr<const SupernodalSymbolic> symbolic, absl::Span<const double> values) {
+  if (symbolic == nullptr) return absl::InvalidArgumentError("SupernodalMatrix: no analysis");
+  const SupernodalSymbolic& sym = *symbolic;
+  if (static_cast<int64_t>(values.size()) != sym.pattern_nonzeros()) {
+    return absl::InvalidArgumentError(absl::StrCat("SupernodalMatrix: ", values.size(),
+                                                   " values for a pattern with ",
+                                                   sym.pattern_nonzeros(), " entries"));
+  }
+  SupernodalMatrix out;
+  out.panels_.assign(static_cast<size_t>(sym.panel_begin_.back()), 0.0);
+  // The factorization's assembly map: offsets in the first nc columns of an nr x nr front are
+  // offsets in the nr x nc panel.
+  for (int64_t s = 0; s < sym.num_supernodes(); ++s) {
+    double* panel = out.panels_.data() + sym.panel_begin_[s];
+    for (int64_t k = sym.assembly_begin_[s]; k < sym.assembly_begin_[s + 1]; ++k) {
+      panel[sym.assembly_offset_[k]] += values[sym.assembly_value_[k]];
+    }
+  }
+  out.symbolic_ = std::move(symbolic);
+  return out;
+}
+
+absl::StatusOr<SupernodalMatrix> SupernodalMatrix::Create(
+    std::shared_ptr<const SupernodalSymbolic> symbolic, const Eigen::SparseMatrix<double>& A) {
+  if (symbolic == nullptr) return absl::InvalidArgumentError("SupernodalMatrix: no analysis");
+  if (!symbolic->SamePattern(A)) {
+    return absl::InvalidArgumentError(
+        "SupernodalMatrix: matrix does not have the analyzed pattern");
+  }
+  return Create(std::move(symbolic), absl::MakeConstSpan(A.valuePtr(), A.nonZeros()));
+}
+
+Eigen::VectorXd SupernodalMatrix::Multiply(const Eigen::VectorXd& x) const {
+  const SupernodalSymbolic& sym = *symbolic_;
+  const int64_t n = sym.n_;
+  Eigen::VectorXd xp(n);
+  for (int64_t k = 0; k < n; ++k) xp[k] = x[sym.perm_[k]];
+  Eigen::VectorXd yp = Eigen::VectorXd::Zero(n);
+  Eigen::VectorXd xr, yr;
+  for (int64_t s = 0; s < sym.num_supernodes(); ++s) {
+    const int64_t c0 = sym.super_begin_[s];
+    const int64_t nc = sym.super_begin_[s + 1] - c0;
+    const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
+    const int64_t m = nr - nc;
+    Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
+    yp.segment(c0, nc).noalias() +=
+        P.topRows(nc).selfadjointView<Eigen::Lower>() * xp.segment(c0, nc);
+    if (m == 0) continue;
+    // The off-diagonal block B (m x nc) contributes B^T x_rows to this supernode's rows and
+    // B x_cols to the rows below.
+    const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
+    xr.resize(m);
+    for (int64_t k = 0; k < m; ++k) xr[k] = xp[rows[k]];
+    const auto B = P.bottomRows(m);
+    yp.segment(c0, nc).noalias() += B.transpose() * xr;
+    yr.noalias() = B * xp.segment(c0, nc);
+    for (int64_t k = 0; k < m; ++k) yp[rows[k]] += yr[k];
+  }
+  Eigen::VectorXd y(n);
+  for (int64_t k = 0; k < n; ++k) y[sym.perm_[k]] = yp[k];
+  return y;
 }
 
 double SupernodalFactor::LogDeterminant() const {

@@ -59,12 +59,15 @@ class SupernodalSymbolic {
 
  private:
   friend class SupernodalFactor;
+  friend class SupernodalMatrix;
   SupernodalSymbolic() = default;
 
   int64_t n_ = 0;
   std::vector<int32_t> pattern_outer_;  // n + 1, copy of the analyzed pattern's column pointers
   std::vector<int32_t> pattern_inner_;  // its row indices
   std::vector<int32_t> perm_;           // perm_[new] = old (fill-reducing permutation)
+  std::vector<int32_t> iperm_;          // iperm_[old] = new
+  std::vector<int32_t> col_super_;      // supernode of each permuted column
   // Supernode s owns the permuted columns [super_begin_[s], super_begin_[s + 1]); its rows are
   // rows_[rows_begin_[s] .. rows_begin_[s + 1]), ascending, starting with its own columns.
   std::vector<int32_t> super_begin_;
@@ -123,6 +126,20 @@ class SupernodalFactor {
   void SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const;
   Eigen::VectorXd Solve(const Eigen::VectorXd& b) const;
 
+  // The two halves of a solve, in the permuted numbering (P A P^T = L L^T, so
+  // A^-1 b = PermuteOut(L^-T L^-1 PermuteIn(b))), for callers that keep L^-1-transformed vectors:
+  // with W = L^-1 P R^T, R A^-1 R^T = W^T W and A^-1 R^T nu = P^T L^-T (W nu).
+  Eigen::VectorXd PermuteIn(const Eigen::VectorXd& b) const;   // P b
+  Eigen::VectorXd PermuteOut(const Eigen::VectorXd& y) const;  // P^T y
+  void ForwardInPlace(Eigen::Ref<Eigen::VectorXd> y) const;    // y <- L^-1 y
+  void BackwardInPlace(Eigen::Ref<Eigen::VectorXd> y) const;   // y <- L^-T y
+  // y = L^-1 P b for a sparse b: vals[q] at (original) row rows[q], repeated rows summed; rows
+  // must be in [0, n). Visits only the supernodes on the elimination-tree paths from those rows
+  // to the roots (L^-1 P b is zero elsewhere), so a few nonzeros cost a fraction of a full
+  // substitution. Returns the number of rows of L visited (the work done). y: n values, written.
+  int64_t ForwardSparse(absl::Span<const int32_t> rows, absl::Span<const double> vals,
+                        Eigen::Ref<Eigen::VectorXd> y) const;
+
   bool is_valid() const { return valid_; }
   int64_t rows() const { return symbolic_->rows(); }
   const SupernodalSymbolic& symbolic() const { return *symbolic_; }
@@ -135,10 +152,43 @@ class SupernodalFactor {
   // which Eigen uses matrix-vector kernels, or a row-major block of right-hand sides.
   template <typename Block>
   void Substitute(Block& X) const;
+  template <typename Block>
+  void Forward(Block& X) const;
+  template <typename Block>
+  void Backward(Block& X) const;
+  template <typename Block>
+  void ForwardSupernode(int64_t s, Block& X, Block& tmp) const;
 
   std::shared_ptr<const SupernodalSymbolic> symbolic_;
   std::vector<double> panels_;  // L: per supernode nr x nc column-major (upper part unused)
   bool valid_ = false;
+};
+
+// A symmetric matrix with an analyzed pattern, its lower triangle kept in the supernodal panel
+// layout of the factor (zeros where L fills in). Products y = A x run dense matrix-vector kernels
+// panel by panel: for the dense-ish reduced matrices that is several times faster than a
+// compressed-column product, which gathers or scatters entry by entry (it serves the residuals
+// of KktSolver's iterative refinement, computed after every design edit). Immutable; Multiply()
+// is safe to call concurrently.
+class SupernodalMatrix {
+ public:
+  // `values` as for SupernodalFactor::Factorize (the analyzed pattern's order, both triangles;
+  // only the lower triangle in the permuted order is read). InvalidArgument for a wrong length.
+  static absl::StatusOr<SupernodalMatrix> Create(std::shared_ptr<const SupernodalSymbolic> symbolic,
+                                                 absl::Span<const double> values);
+  // `A` must have the analyzed pattern (InvalidArgument otherwise).
+  static absl::StatusOr<SupernodalMatrix> Create(std::shared_ptr<const SupernodalSymbolic> symbolic,
+                                                 const Eigen::SparseMatrix<double>& A);
+
+  int64_t rows() const { return symbolic_->rows(); }
+  // A x (x: n values, original numbering).
+  Eigen::VectorXd Multiply(const Eigen::VectorXd& x) const;
+
+ private:
+  SupernodalMatrix() = default;
+
+  std::shared_ptr<const SupernodalSymbolic> symbolic_;
+  std::vector<double> panels_;  // per supernode nr x nc column-major, lower triangle of P A P^T
 };
 
 }  // namespace fieldspace

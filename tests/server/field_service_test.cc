@@ -1071,6 +1071,40 @@ TEST_F(ServiceTest, EigenfieldsApproximateTheSphereSpectrumFromAbove) {
   EXPECT_EQ(stub()->Eigenfields(&c, r, &resp).error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
+TEST_F(ServiceTest, ConcurrentSessionsWithEqualWeightsShareOneFactorization) {
+  // Two open sessions on one basis with the same (mu_s, mu_b): the second open finds the first
+  // one's factorization (no refactorization), and equal edits give equal answers.
+  grpc::ClientContext c1, c2;
+  auto s1 = stub()->Design(&c1);
+  auto s2 = stub()->Design(&c2);
+  v1::DesignUpdate u1, u2;
+  ASSERT_TRUE(s1->Write(Open(*vector_id_, 1.0, 0.01, 1.0)) && s1->Read(&u1));
+  EXPECT_TRUE(u1.timings().refactorized());
+  ASSERT_TRUE(s2->Write(Open(*vector_id_, 1.0, 0.01, 7.0)) && s2->Read(&u2));  // mu_c differs
+  EXPECT_FALSE(u2.timings().refactorized());
+  const v1::Constraint c = MakeConstraint(20, {0.3, -0.4}, v1::FIELD_ENCODING_DOF, true);
+  ASSERT_TRUE(s1->Write(Add(1, c)) && s1->Read(&u1));
+  ASSERT_TRUE(s2->Write(Add(1, c)) && s2->Read(&u2));
+  ASSERT_EQ(u1.coefficients_size(), u2.coefficients_size());
+  ASSERT_GT(MaxAbs(u1.coefficients()), 0);
+  for (int i = 0; i < u1.coefficients_size(); ++i) {
+    EXPECT_EQ(u1.coefficients(i), u2.coefficients(i)) << i;  // one hard constraint: mu_c unused
+  }
+  // A weight change to another mu_b factorizes; a session without a partner would too.
+  v1::DesignRequest w;
+  w.mutable_set_weights()->set_mu_s(1.0);
+  w.mutable_set_weights()->set_mu_b(0.5);
+  w.mutable_set_weights()->set_mu_c(1.0);
+  ASSERT_TRUE(s1->Write(w) && s1->Read(&u1));
+  EXPECT_TRUE(u1.timings().refactorized());
+  ASSERT_TRUE(s2->Write(w) && s2->Read(&u2));
+  EXPECT_FALSE(u2.timings().refactorized());
+  for (auto* s : {s1.get(), s2.get()}) {
+    s->WritesDone();
+    EXPECT_TRUE(s->Finish().ok());
+  }
+}
+
 TEST_F(ServiceTest, DesignSessionMatchesSolveAndNeverRefactorizesOnEdits) {
   for (const std::string* id : {vector_id_, nfield_id_}) {
     SCOPED_TRACE(*id);

@@ -220,6 +220,68 @@ TEST_P(DesignSessionTest, ErrorsLeaveTheSessionUnchanged) {
             absl::StatusCode::kInvalidArgument);
 }
 
+TEST_P(DesignSessionTest, SessionsWithEqualEnergyWeightsShareOneFactorization) {
+  auto cache = std::make_shared<EnergyFactorCache>();
+  DesignSessionOptions options;
+  options.energy_cache = cache;
+  auto a = DesignSession::Create(sys_, {1.0, 0.05, 4.0}, options);
+  auto b = DesignSession::Create(sys_, {1.0, 0.05, 0.5}, options);  // only mu_C differs
+  auto plain = DesignSession::Create(sys_, {1.0, 0.05, 0.5});       // no cache
+  ASSERT_TRUE(a.ok() && b.ok() && plain.ok());
+  EXPECT_TRUE((*a)->last_factorized());
+  EXPECT_FALSE((*b)->last_factorized());
+  EXPECT_TRUE((*plain)->last_factorized());
+  EXPECT_EQ(cache->live_entries(), 1);
+  // The shared factorization gives what a session's own gives.
+  std::mt19937_64 rng(7);
+  for (int64_t id = 0; id < 6; ++id) {
+    const FieldConstraint c = RandomConstraint(rng);
+    const ConstraintKind kind = id % 3 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft;
+    const absl::Status st_b = (*b)->AddConstraint(id, kind, c);
+    EXPECT_EQ(st_b, (*plain)->AddConstraint(id, kind, c));
+    EXPECT_TRUE((*a)->AddConstraint(id, kind, c).ok() == st_b.ok());
+  }
+  EXPECT_LT(RelativeDifference((*b)->coefficients(), (*plain)->coefficients()), 1e-10);
+  // A new mu_B factorizes once; the second session moving there shares it, and the old entry
+  // goes when nobody holds it.
+  ASSERT_TRUE((*b)->SetWeights({1.0, 0.2, 0.5}).ok());
+  EXPECT_TRUE((*b)->last_factorized());
+  EXPECT_EQ(cache->live_entries(), 2);
+  ASSERT_TRUE((*a)->SetWeights({1.0, 0.2, 4.0}).ok());
+  EXPECT_FALSE((*a)->last_factorized());
+  EXPECT_EQ(cache->live_entries(), 1);
+  ASSERT_TRUE((*a)->SetWeights({1.0, 0.2, 2.0}).ok());  // mu_C only: no factorization at all
+  EXPECT_FALSE((*a)->last_factorized());
+  ExpectMatchesFreshSolve(**a);
+  ExpectMatchesFreshSolve(**b);
+  a->reset();
+  b->reset();
+  EXPECT_EQ(cache->live_entries(), 0);
+}
+
+TEST_P(DesignSessionTest, ConcurrentOpensWithEqualWeightsFactorizeOnce) {
+  auto cache = std::make_shared<EnergyFactorCache>();
+  DesignSessionOptions options;
+  options.energy_cache = cache;
+  constexpr int kThreads = 6;
+  std::vector<std::unique_ptr<DesignSession>> sessions(kThreads);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kThreads; ++t) {
+    threads.emplace_back([&, t] {
+      auto s = DesignSession::Create(sys_, {1.0, 0.01, 1.0 + t}, options);
+      if (s.ok()) sessions[t] = *std::move(s);
+    });
+  }
+  for (auto& t : threads) t.join();
+  int factorized = 0;
+  for (const auto& s : sessions) {
+    ASSERT_NE(s, nullptr);
+    factorized += s->last_factorized() ? 1 : 0;
+  }
+  EXPECT_EQ(factorized, 1);
+  EXPECT_EQ(cache->live_entries(), 1);
+}
+
 TEST_P(DesignSessionTest, ConcurrentSessionsShareTheSystem) {
   // Four sessions on four threads replay the same edits; results equal the sequential ones.
   const auto run = [&](std::vector<Eigen::VectorXd>* out) {

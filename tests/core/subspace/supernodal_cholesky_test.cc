@@ -97,6 +97,101 @@ TEST(SupernodalCholeskyTest, SolvesGeometricSystemsLikeDenseCholesky) {
   }
 }
 
+// A block-diagonal matrix (two independent blocks: a forest with several roots).
+Eigen::SparseMatrix<double> TwoBlocks(const Eigen::SparseMatrix<double>& A1,
+                                      const Eigen::SparseMatrix<double>& A2) {
+  const int64_t n1 = A1.rows(), n = n1 + A2.rows();
+  std::vector<Eigen::Triplet<double>> t;
+  for (int j = 0; j < A1.outerSize(); ++j) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(A1, j); it; ++it) {
+      t.emplace_back(it.row(), it.col(), it.value());
+    }
+  }
+  for (int j = 0; j < A2.outerSize(); ++j) {
+    for (Eigen::SparseMatrix<double>::InnerIterator it(A2, j); it; ++it) {
+      t.emplace_back(n1 + it.row(), n1 + it.col(), it.value());
+    }
+  }
+  Eigen::SparseMatrix<double> A(n, n);
+  A.setFromTriplets(t.begin(), t.end());
+  A.makeCompressed();
+  return A;
+}
+
+TEST(SupernodalCholeskyTest, HalfSolvesAndSparseForwardSubstitution) {
+  const Eigen::SparseMatrix<double> A1 = GeometricSpd(900, 0.2, 5);
+  const Eigen::SparseMatrix<double> A = TwoBlocks(A1, GridSpd(12));
+  const int64_t n = A.rows(), n1 = A1.rows();
+  auto sym = SupernodalSymbolic::Analyze(A);
+  ASSERT_TRUE(sym.ok());
+  auto f = SupernodalFactor::Factorize(*sym, A);
+  ASSERT_TRUE(f.ok());
+  const Eigen::LLT<Eigen::MatrixXd> dense{Eigen::MatrixXd(A)};
+  // Forward then backward substitution, with the permutations, is a solve.
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(n);
+  Eigen::VectorXd y = f->PermuteIn(b);
+  f->ForwardInPlace(y);
+  // |L^-1 P b|^2 = b^T A^-1 b, whatever the ordering.
+  const double energy = b.dot(dense.solve(b));
+  EXPECT_NEAR(y.squaredNorm(), energy, 1e-12 * energy);
+  f->BackwardInPlace(y);
+  const Eigen::VectorXd x = f->PermuteOut(y);
+  EXPECT_LT((x - dense.solve(b)).norm() / x.norm(), 1e-12);
+  EXPECT_EQ(f->PermuteIn(f->PermuteOut(b)), b);
+
+  // A sparse right-hand side (a repeated row sums): the same forward substitution, visiting
+  // only part of L, and W^T W = R A^-1 R^T for two such rows.
+  const std::vector<int32_t> rows1 = {3, 400, 3, 17}, rows2 = {401, 1200, 5};
+  const std::vector<double> vals1 = {0.5, -1.0, 0.25, 2.0}, vals2 = {1.0, 0.3, -0.7};
+  Eigen::VectorXd dense1 = Eigen::VectorXd::Zero(n), dense2 = Eigen::VectorXd::Zero(n);
+  for (size_t q = 0; q < rows1.size(); ++q) dense1[rows1[q]] += vals1[q];
+  for (size_t q = 0; q < rows2.size(); ++q) dense2[rows2[q]] += vals2[q];
+  Eigen::VectorXd w1(n), w2(n);
+  const int64_t visited = f->ForwardSparse(rows1, vals1, w1);
+  f->ForwardSparse(rows2, vals2, w2);
+  Eigen::VectorXd reference = f->PermuteIn(dense1);
+  f->ForwardInPlace(reference);
+  EXPECT_LT((w1 - reference).norm(), 1e-14 * reference.norm());
+  EXPECT_NEAR(w1.dot(w2), dense1.dot(dense.solve(dense2)), 1e-12 * w1.norm() * w2.norm());
+  // Rows of the first block never reach the second block's supernodes.
+  EXPECT_EQ(f->PermuteOut(w1).tail(n - n1).cwiseAbs().maxCoeff(), 0.0);
+  int64_t all_rows = 0;
+  {
+    std::vector<int32_t> every(n);
+    for (int64_t i = 0; i < n; ++i) every[i] = static_cast<int32_t>(i);
+    Eigen::VectorXd w(n);
+    all_rows = f->ForwardSparse(every, std::vector<double>(n, 1.0), w);
+  }
+  EXPECT_GT(visited, 0);
+  EXPECT_LT(visited, all_rows);
+}
+
+TEST(SupernodalCholeskyTest, SupernodalMatrixMultipliesLikeTheSparseMatrix) {
+  for (const Eigen::SparseMatrix<double>& A :
+       {GeometricSpd(1, 2.0, 1), GeometricSpd(700, 0.25, 2), GridSpd(30),
+        TwoBlocks(GeometricSpd(80, 0.5, 3), GridSpd(7))}) {
+    auto sym = SupernodalSymbolic::Analyze(A);
+    ASSERT_TRUE(sym.ok());
+    auto M = SupernodalMatrix::Create(*sym, A);
+    ASSERT_TRUE(M.ok()) << M.status();
+    EXPECT_EQ(M->rows(), A.rows());
+    for (int rep = 0; rep < 3; ++rep) {
+      const Eigen::VectorXd x = Eigen::VectorXd::Random(A.rows());
+      const Eigen::VectorXd expected = A * x;
+      EXPECT_LT((M->Multiply(x) - expected).norm(), 1e-14 * expected.norm() * std::sqrt(A.rows()));
+    }
+  }
+  const Eigen::SparseMatrix<double> A = GridSpd(5);
+  auto sym = SupernodalSymbolic::Analyze(A);
+  ASSERT_TRUE(sym.ok());
+  EXPECT_EQ(SupernodalMatrix::Create(*sym, std::vector<double>(3, 1.0)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(SupernodalMatrix::Create(*sym, GridSpd(4)).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(SupernodalMatrix::Create(nullptr, A).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST(SupernodalCholeskyTest, GridAndThoroughOrderingAgree) {
   const Eigen::SparseMatrix<double> A = GridSpd(40);
   SupernodalAnalyzeOptions thorough;
