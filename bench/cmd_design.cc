@@ -115,7 +115,7 @@ int RunDesign(int argc, char** argv) {
   std::mt19937_64 rng(static_cast<uint64_t>(*seed));
   const int32_t p = sys.dofs_per_face();
   const int32_t num_faces = sys.num_faces();
-  std::vector<double> edit_ms, weight_ms, lift_ms;
+  std::vector<double> edit_ms, weight_ms, lift_ms, backward_errors;
   std::map<std::string, std::vector<double>> edit_ms_by_kind;
   std::vector<int64_t> live;
   int64_t next_id = 0, rejected = 0, refinement_steps = 0;
@@ -165,6 +165,7 @@ int RunDesign(int argc, char** argv) {
     edit_ms.push_back(watch.Seconds() * 1e3);
     edit_ms_by_kind[kind_name].push_back(edit_ms.back());
     refinement_steps += s.last_refinement_steps();
+    if (st.ok()) backward_errors.push_back(s.last_backward_error());
     if (!st.ok()) {
       // A hard constraint that duplicates another is rejected (FailedPrecondition) by design.
       if (!absl::IsFailedPrecondition(st)) return ReportError(st);
@@ -230,6 +231,11 @@ int RunDesign(int argc, char** argv) {
       .Int("final_constraints", s.num_constraints())
       .Double("mean_refinement_steps",
               edit_ms.empty() ? 0.0 : static_cast<double>(refinement_steps) / edit_ms.size())
+      .BeginObject("backward_error")  // of each edit's solution against the true system
+      .Double("p50", Percentile(backward_errors, 0.5))
+      .Double("p99", Percentile(backward_errors, 0.99))
+      .Double("max", Percentile(backward_errors, 1.0))
+      .EndObject()
       .Int("dim", sys.dimension())
       .Int("faces", num_faces)
       .Int("nnz_u", sys.basis().U.nonZeros())

@@ -182,8 +182,10 @@ struct OpenSessionResult {
   std::unique_ptr<InteractiveSession> session;
   InteractiveSession::EditResult timings;
 };
+// verify_interval: DesignSessionOptions::verify_interval.
 absl::StatusOr<OpenSessionResult> OpenDesignSession(std::shared_ptr<const ServedBasis> basis,
-                                                    const ModelWeights& weights);
+                                                    const ModelWeights& weights,
+                                                    int32_t verify_interval = 1);
 
 // Validates weights: finite, >= 0, mu_s + mu_b > 0 (otherwise the energy does not determine the
 // field away from the constraints). Shared by Solve and Design (which also needs mu_c > 0).

@@ -192,12 +192,14 @@ absl::StatusOr<ReducedEigenfieldsResult> ReducedEigenfields(const ServedBasis& b
 }
 
 absl::StatusOr<OpenSessionResult> OpenDesignSession(std::shared_ptr<const ServedBasis> basis,
-                                                    const ModelWeights& weights) {
+                                                    const ModelWeights& weights,
+                                                    int32_t verify_interval) {
   ASSIGN_OR_RETURN(const ReducedSystem* system, SystemOf(*basis));
   (void)system;
   const auto start = Clock::now();
   DesignSessionOptions options;
   options.energy_cache = basis->model->energy_cache();
+  options.verify_interval = verify_interval;
   ASSIGN_OR_RETURN(
       std::unique_ptr<DesignSession> session,
       DesignSession::Create(basis->model->system(),

@@ -29,7 +29,8 @@ struct FieldServerOptions {
   int64_t max_message_mb = 64;
   int64_t max_upload_mb = 2048;
   int32_t max_dimension = 8192;
-  std::string auth_token;  // required from clients when not empty
+  int32_t design_verify_interval = 16;  // see DesignSessionOptions::verify_interval
+  std::string auth_token;               // required from clients when not empty
   // Listening on a non-loopback address needs an auth token, or this explicit opt-out.
   bool insecure = false;
   int32_t debug_save_pause_ms = 0;  // testing only (see StoreOptions)

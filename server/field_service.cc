@@ -943,7 +943,9 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
       const ModelWeights weights = WeightsFromProto(r.open().weights());
       RETURN_IF_ERROR(ValidateWeights(weights));
       RETURN_IF_ERROR(SetWatch(r.open().watch_faces(), r.open().watch_encoding()));
-      ASSIGN_OR_RETURN(OpenSessionResult opened, OpenDesignSession(basis_, weights));
+      ASSIGN_OR_RETURN(
+          OpenSessionResult opened,
+          OpenDesignSession(basis_, weights, service_->options().design_verify_interval));
       session_ = std::move(opened.session);
       result = opened.timings;
     } else {

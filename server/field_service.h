@@ -21,6 +21,9 @@ struct ServiceOptions {
   std::string data_root;   // LoadMesh reads only below it; empty disables LoadMesh
   int64_t max_upload_bytes = int64_t{2} << 30;
   int64_t max_message_bytes = int64_t{64} << 20;  // responses larger than this are refused
+  // Design sessions check every k-th edit's solution against the true system (and the risky
+  // ones always): DesignSessionOptions::verify_interval.
+  int32_t design_verify_interval = 16;
 };
 
 // A long-lived stream that must be ended when the server drains (design sessions).

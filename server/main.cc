@@ -2,7 +2,8 @@
 //
 //   fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]
 //               [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]
-//               [--max-dimension N] [--auth-token-file FILE] [--insecure] [--drain-seconds S]
+//               [--max-dimension N] [--design-verify-every K] [--auth-token-file FILE]
+//               [--insecure] [--drain-seconds S]
 //               [--demo]
 //
 // Prints "listening on HOST:PORT" as the first line on stdout once serving (port 0 picks a free
@@ -30,7 +31,8 @@ namespace {
 constexpr char kUsage[] =
     "usage: fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]\n"
     "                   [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]\n"
-    "                   [--max-dimension N] [--auth-token-file FILE] [--insecure]\n"
+    "                   [--max-dimension N] [--design-verify-every K]\n"
+    "                   [--auth-token-file FILE] [--insecure]\n"
     "                   [--drain-seconds S] [--demo]\n"
     "\n"
     "  --listen HOST:PORT      address to serve on (default 127.0.0.1:50051; port 0 = any free\n"
@@ -42,6 +44,8 @@ constexpr char kUsage[] =
     "  --max-message-mb N      largest gRPC message either way (64)\n"
     "  --max-upload-mb N       largest mesh upload (2048)\n"
     "  --max-dimension N       largest basis dimension d (8192)\n"
+    "  --design-verify-every K check every K-th design edit's solution against the true\n"
+    "                          system, and risky ones always (16; 1: every edit)\n"
     "  --auth-token-file FILE  clients must send 'authorization: Bearer <token>'\n"
     "  --insecure              allow a non-loopback address without a token\n"
     "  --drain-seconds S       how long shutdown waits for in-flight RPCs (10)\n"
@@ -72,6 +76,7 @@ int main(int argc, char** argv) {
   std::map<std::string, int32_t*> int32_flags = {
       {"--threads", &options.threads},
       {"--max-dimension", &options.max_dimension},
+      {"--design-verify-every", &options.design_verify_interval},
       {"--debug-save-pause-ms", &options.debug_save_pause_ms}};
   for (int i = 1; i < argc; ++i) {
     std::string arg = argv[i];

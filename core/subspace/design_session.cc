@@ -90,6 +90,9 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
   if (system == nullptr) return absl::InvalidArgumentError("DesignSession: no reduced system");
   RETURN_IF_ERROR(ValidateWeights(weights));
   RETURN_IF_ERROR(ValidateSolveOptions(options.solve));
+  if (options.verify_interval < 1) {
+    return absl::InvalidArgumentError("DesignSession: verify_interval must be >= 1");
+  }
   std::unique_ptr<DesignSession> session(new DesignSession(std::move(system), options));
   ASSIGN_OR_RETURN(session->energy_, session->Energy(weights));
   session->weights_ = weights;
@@ -114,7 +117,19 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> DesignSession::Energy
 }
 
 void DesignSession::Resolve() {
-  ReducedSolution sol = kkt_->Solve(nullptr);
+  ++solves_since_check_;
+  const bool verify = options_.verify_interval <= 1 || !verified_since_factorization_ ||
+                      last_check_close_ || kkt_->schur_min_pivot() < 1e-6 ||
+                      solves_since_check_ >= options_.verify_interval;
+  ReducedSolution sol = kkt_->Solve(nullptr, verify);
+  if (verify) {
+    verified_since_factorization_ = true;
+    // The default diagonal shift (1e-13) alone gives backward errors of ~5e-14: a margin of 4
+    // below the default tolerance separates that from a drifting solve.
+    last_check_close_ =
+        sol.refinement_steps > 0 || !(sol.backward_error <= options_.solve.tolerance / 4);
+    solves_since_check_ = 0;
+  }
   coefficients_ = std::move(sol.coefficients);
   last_backward_error_ = sol.backward_error;
   last_refinement_steps_ = sol.refinement_steps;
@@ -219,6 +234,7 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
     ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> energy, Energy(weights));
     energy_ = std::move(energy);
     kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
+    verified_since_factorization_ = false;
   }
   weights_ = weights;
   for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
@@ -231,6 +247,7 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
     if (energy_changed) {
       energy_ = std::move(old_energy);
       kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
+      verified_since_factorization_ = false;
     }
     for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
       if (records_[slot].kind == ConstraintKind::kSoft) {

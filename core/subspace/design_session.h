@@ -77,6 +77,15 @@ class EnergyFactorCache {
 
 struct DesignSessionOptions {
   ReducedSolveOptions solve;
+  // How often an edit's solution is checked against the true energy matrix (its backward error,
+  // and iterative refinement when that exceeds solve.tolerance). The check (a product with A plus
+  // sparse products) costs about as much as the edit's solve. 1: every solve. k > 1: the first
+  // solve after every factorization of A, every solve while the last check needed refinement or
+  // was within 4x of the tolerance, every solve while the constraints are nearly dependent
+  // (smallest pivot of the scaled Schur complement below 1e-6), and otherwise every k-th solve.
+  // The checks that pass show that the factorization solves to the tolerance; the solves in
+  // between use the same factorization and well-conditioned constraints.
+  int32_t verify_interval = 1;
   // Where energy factorizations come from; null: the session factorizes its own.
   std::shared_ptr<EnergyFactorCache> energy_cache;
 };
@@ -147,6 +156,7 @@ class DesignSession {
   const ReducedSystem& system() const { return *system_; }
   // Of the last solve: backward error and refinement steps; of the factorization: the diagonal
   // shift that was needed.
+  // NaN when the last solve was not checked (verify_interval).
   double last_backward_error() const { return last_backward_error_; }
   int32_t last_refinement_steps() const { return last_refinement_steps_; }
   double regularization() const { return energy_->regularization; }
@@ -176,6 +186,10 @@ class DesignSession {
   double last_backward_error_ = 0;
   int32_t last_refinement_steps_ = 0;
   bool last_factorized_ = false;
+  // Verification state (see DesignSessionOptions::verify_interval).
+  bool verified_since_factorization_ = false;
+  bool last_check_close_ = false;
+  int32_t solves_since_check_ = 0;
 };
 
 }  // namespace fieldspace

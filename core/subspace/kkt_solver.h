@@ -81,8 +81,12 @@ class KktSolver {
   absl::Status FactorizeSchur();
 
   // The solution x (d) for right-hand side b (nullptr: b = 0). Precondition: FactorizeSchur()
-  // succeeded since the last change.
-  ReducedSolution Solve(const Eigen::VectorXd* b) const;
+  // succeeded since the last change. verify = false skips the residual of the true system (and
+  // with it any refinement): backward_error is then NaN.
+  ReducedSolution Solve(const Eigen::VectorXd* b, bool verify = true) const;
+  // The smallest pivot of the last factorization of the scaled H (unit diagonal, so in (0, 1]):
+  // near 0 when constraints are nearly dependent in the subspace. 1 without constraints.
+  double schur_min_pivot() const { return schur_min_pivot_; }
 
  private:
   void EnsureCapacity(int64_t rows);
@@ -110,6 +114,7 @@ class KktSolver {
   Eigen::VectorXd scale_;
   Eigen::LLT<Eigen::MatrixXd> schur_;
   bool schur_valid_ = false;
+  double schur_min_pivot_ = 1.0;
 };
 
 }  // namespace fieldspace

@@ -77,7 +77,9 @@ absl::Status ValidateSolveOptions(const ReducedSolveOptions& options);
 
 struct ReducedSolution {
   Eigen::VectorXd coefficients;  // d: the minimizer x in the subspace
-  double backward_error = 0;     // of the final iterate (see ReducedSolveOptions::tolerance)
+  // Of the final iterate (see ReducedSolveOptions::tolerance); NaN when the solve was not checked
+  // against the true system (DesignSessionOptions::verify_interval).
+  double backward_error = 0;
   int32_t refinement_steps = 0;
   double regularization = 0;  // the diagonal shift the factorization needed
 };

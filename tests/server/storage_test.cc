@@ -332,6 +332,11 @@ TEST(FieldServerTest, RefusesNonLoopbackWithoutTokenAndBadOptions) {
   options.listen = "127.0.0.1:0";
   options.store_dir = "";
   EXPECT_EQ(FieldServer::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.store_dir = (fs::temp_directory_path() / "fs_refuse_test").string();
+  options.design_verify_interval = 0;
+  auto bad_interval = FieldServer::Start(options);
+  EXPECT_EQ(bad_interval.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(bad_interval.status().message(), HasSubstr("--design-verify-every"));
   fs::remove_all(fs::temp_directory_path() / "fs_refuse_test");
 }
 

@@ -259,6 +259,42 @@ TEST_P(DesignSessionTest, SessionsWithEqualEnergyWeightsShareOneFactorization) {
   EXPECT_EQ(cache->live_entries(), 0);
 }
 
+TEST_P(DesignSessionTest, VerifyIntervalChecksSomeSolvesAndKeepsThemExact) {
+  DesignSessionOptions options;
+  options.verify_interval = 4;
+  auto session = DesignSession::Create(sys_, {1.0, 0.05, 4.0}, options);
+  ASSERT_TRUE(session.ok()) << session.status();
+  DesignSession& s = **session;
+  // The first solve on a new factorization is always checked.
+  EXPECT_FALSE(std::isnan(s.last_backward_error()));
+  std::mt19937_64 rng(11);
+  int checked = 0;
+  constexpr int kEdits = 40;
+  std::vector<int64_t> added;
+  for (int64_t id = 0; id < kEdits; ++id) {
+    if (id >= 8 && id % 2 == 0) {
+      ASSERT_TRUE(s.MoveConstraint(added[rng() % added.size()], RandomConstraint(rng)).ok());
+    } else {
+      ASSERT_TRUE(s.AddConstraint(id, ConstraintKind::kSoft, RandomConstraint(rng)).ok());
+      added.push_back(id);
+    }
+    if (!std::isnan(s.last_backward_error())) {
+      ++checked;
+      EXPECT_LE(s.last_backward_error(), 1e-12);
+    }
+    if (id % 5 == 0) ExpectMatchesFreshSolve(s);  // checked or not, the solution is exact
+  }
+  EXPECT_GE(checked, kEdits / 4);
+  EXPECT_LT(checked, kEdits);
+  // A new factorization: its first solve is checked again.
+  ASSERT_TRUE(s.SetWeights({1.0, 0.3, 4.0}).ok());
+  EXPECT_FALSE(std::isnan(s.last_backward_error()));
+  ExpectMatchesFreshSolve(s);
+  options.verify_interval = 0;
+  EXPECT_EQ(DesignSession::Create(sys_, {1.0, 0.05, 4.0}, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST_P(DesignSessionTest, ConcurrentOpensWithEqualWeightsFactorizeOnce) {
   auto cache = std::make_shared<EnergyFactorCache>();
   DesignSessionOptions options;
