@@ -14,8 +14,6 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
     const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options) {
   RETURN_IF_ERROR(ValidateWeights(weights));
   auto out = std::make_shared<EnergyFactorization>();
-  out->mu_s = weights.harmonic;
-  out->mu_b = weights.biharmonic;
   Eigen::SparseMatrix<double> A = system.stiffness();
   const double* s = system.stiffness().valuePtr();
   const double* b = system.bilaplacian().valuePtr();
@@ -117,10 +115,12 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> DesignSession::Energy
 }
 
 void DesignSession::Resolve() {
+  // Below this pivot of the scaled Schur complement the constraints are nearly dependent.
+  constexpr double kNearlyDependentPivot = 1e-6;
   ++solves_since_check_;
-  const bool verify = options_.verify_interval <= 1 || !verified_since_factorization_ ||
-                      last_check_close_ || kkt_->schur_min_pivot() < 1e-6 ||
-                      solves_since_check_ >= options_.verify_interval;
+  const bool verify = solves_since_check_ >= options_.verify_interval ||
+                      !verified_since_factorization_ || last_check_close_ ||
+                      kkt_->schur_min_pivot() < kNearlyDependentPivot;
   ReducedSolution sol = kkt_->Solve(nullptr, verify);
   if (verify) {
     verified_since_factorization_ = true;

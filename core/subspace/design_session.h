@@ -30,8 +30,6 @@ struct ConstraintInfo {
 // The energy matrix A = U^T (mu_S S + mu_B B) U of one reduced system for one (mu_S, mu_B), and
 // its (possibly regularized) factorization. Immutable; shared by sessions.
 struct EnergyFactorization {
-  double mu_s = 0;
-  double mu_b = 0;
   std::unique_ptr<SupernodalMatrix> A;  // d x d, on the system's shared pattern
   std::unique_ptr<SupernodalFactor> factor;
   double regularization = 0;  // the diagonal shift that was needed

@@ -255,7 +255,7 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
       *dnu = SolveSchur(h);
       u.noalias() -= W * *dnu;
     } else {
-      dnu->setZero(0);
+      dnu->resize(0);
     }
     factor_->BackwardInPlace(u);
     *dx = factor_->PermuteOut(u);
@@ -291,7 +291,7 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
     Eigen::VectorXd dx, dnu;
     solve_kkt(&r1, r2, &dx, &dnu);
     x += dx;
-    if (r > 0) nu += dnu;
+    nu += dnu;
   }
   sol.coefficients = std::move(x);
   return sol;

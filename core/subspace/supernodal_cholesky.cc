@@ -351,6 +351,29 @@ absl::StatusOr<std::shared_ptr<const SupernodalSymbolic>> SupernodalSymbolic::An
   return std::shared_ptr<const SupernodalSymbolic>(std::move(sym));
 }
 
+SupernodalSymbolic::Supernode SupernodalSymbolic::supernode(int64_t s) const {
+  Supernode out;
+  out.c0 = super_begin_[s];
+  out.nc = super_begin_[s + 1] - out.c0;
+  out.nr = rows_begin_[s + 1] - rows_begin_[s];
+  out.m = out.nr - out.nc;
+  out.below = rows_.data() + rows_begin_[s] + out.nc;
+  out.panel = panel_begin_[s];
+  return out;
+}
+
+Eigen::VectorXd SupernodalSymbolic::ToPermuted(const Eigen::VectorXd& b) const {
+  Eigen::VectorXd y(n_);
+  for (int64_t k = 0; k < n_; ++k) y[k] = b[perm_[k]];
+  return y;
+}
+
+Eigen::VectorXd SupernodalSymbolic::FromPermuted(const Eigen::VectorXd& y) const {
+  Eigen::VectorXd b(n_);
+  for (int64_t k = 0; k < n_; ++k) b[perm_[k]] = y[k];
+  return b;
+}
+
 int64_t SupernodalSymbolic::memory_bytes() const {
   return static_cast<int64_t>(
       4 * (pattern_outer_.size() + pattern_inner_.size() + perm_.size() + iperm_.size() +
@@ -426,10 +449,7 @@ absl::Status SupernodalFactor::Refactorize(absl::Span<const double> values,
       cancelled.store(true);
       return;
     }
-    const int64_t c0 = sym.super_begin_[s];
-    const int64_t nc = sym.super_begin_[s + 1] - c0;
-    const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
-    const int64_t m = nr - nc;
+    const auto [c0, nc, nr, m, below, panel] = sym.supernode(s);
     // The front is allocated per call (not thread-local): a thread waiting inside a nested
     // parallel loop may run another front's task meanwhile.
     std::vector<double> front(static_cast<size_t>(nr * nr), 0.0);
@@ -458,7 +478,7 @@ absl::Status SupernodalFactor::Refactorize(absl::Span<const double> values,
       if (!failed.exchange(true)) failed_column = c0 + bad;
       return;
     }
-    std::memcpy(panels_.data() + sym.panel_begin_[s], front.data(),
+    std::memcpy(panels_.data() + panel, front.data(),
                 sizeof(double) * static_cast<size_t>(nr * nc));
     if (m > 0) {
       std::vector<double>& U = updates[s];
@@ -504,18 +524,13 @@ absl::Status SupernodalFactor::Refactorize(absl::Span<const double> values,
 
 template <typename Block>
 void SupernodalFactor::ForwardSupernode(int64_t s, Block& X, Block& tmp) const {
-  const SupernodalSymbolic& sym = *symbolic_;
-  const int64_t c0 = sym.super_begin_[s];
-  const int64_t nc = sym.super_begin_[s + 1] - c0;
-  const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
-  const int64_t m = nr - nc;
-  Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
+  const auto [c0, nc, nr, m, below, panel] = symbolic_->supernode(s);
+  Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + panel, nr, nc);
   auto Xs = X.middleRows(c0, nc);
   P.topRows(nc).template triangularView<Eigen::Lower>().solveInPlace(Xs);
   if (m > 0) {
     tmp.noalias() = P.bottomRows(m) * Xs;
-    const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
-    for (int64_t k = 0; k < m; ++k) X.row(rows[k]) -= tmp.row(k);
+    for (int64_t k = 0; k < m; ++k) X.row(below[k]) -= tmp.row(k);
   }
 }
 
@@ -527,19 +542,14 @@ void SupernodalFactor::Forward(Block& X) const {
 
 template <typename Block>
 void SupernodalFactor::Backward(Block& X) const {
-  const SupernodalSymbolic& sym = *symbolic_;
   Block tmp;
-  for (int64_t s = sym.num_supernodes() - 1; s >= 0; --s) {
-    const int64_t c0 = sym.super_begin_[s];
-    const int64_t nc = sym.super_begin_[s + 1] - c0;
-    const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
-    const int64_t m = nr - nc;
-    Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
+  for (int64_t s = symbolic_->num_supernodes() - 1; s >= 0; --s) {
+    const auto [c0, nc, nr, m, below, panel] = symbolic_->supernode(s);
+    Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + panel, nr, nc);
     auto Xs = X.middleRows(c0, nc);
     if (m > 0) {
       tmp.resize(m, X.cols());
-      const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
-      for (int64_t k = 0; k < m; ++k) tmp.row(k) = X.row(rows[k]);
+      for (int64_t k = 0; k < m; ++k) tmp.row(k) = X.row(below[k]);
       Xs.noalias() -= P.bottomRows(m).transpose() * tmp;
     }
     P.topRows(nc).transpose().template triangularView<Eigen::Upper>().solveInPlace(Xs);
@@ -565,17 +575,11 @@ void SupernodalFactor::BackwardInPlace(Eigen::Ref<Eigen::VectorXd> y) const {
 }
 
 Eigen::VectorXd SupernodalFactor::PermuteIn(const Eigen::VectorXd& b) const {
-  const SupernodalSymbolic& sym = *symbolic_;
-  Eigen::VectorXd y(sym.n_);
-  for (int64_t k = 0; k < sym.n_; ++k) y[k] = b[sym.perm_[k]];
-  return y;
+  return symbolic_->ToPermuted(b);
 }
 
 Eigen::VectorXd SupernodalFactor::PermuteOut(const Eigen::VectorXd& y) const {
-  const SupernodalSymbolic& sym = *symbolic_;
-  Eigen::VectorXd b(sym.n_);
-  for (int64_t k = 0; k < sym.n_; ++k) b[sym.perm_[k]] = y[k];
-  return b;
+  return symbolic_->FromPermuted(y);
 }
 
 int64_t SupernodalFactor::ForwardSparse(absl::Span<const int32_t> rows,
@@ -672,23 +676,17 @@ absl::StatusOr<SupernodalMatrix> SupernodalMatrix::Create(
 
 Eigen::VectorXd SupernodalMatrix::Multiply(const Eigen::VectorXd& x) const {
   const SupernodalSymbolic& sym = *symbolic_;
-  const int64_t n = sym.n_;
-  Eigen::VectorXd xp(n);
-  for (int64_t k = 0; k < n; ++k) xp[k] = x[sym.perm_[k]];
-  Eigen::VectorXd yp = Eigen::VectorXd::Zero(n);
+  const Eigen::VectorXd xp = sym.ToPermuted(x);
+  Eigen::VectorXd yp = Eigen::VectorXd::Zero(sym.n_);
   Eigen::VectorXd xr, yr;
   for (int64_t s = 0; s < sym.num_supernodes(); ++s) {
-    const int64_t c0 = sym.super_begin_[s];
-    const int64_t nc = sym.super_begin_[s + 1] - c0;
-    const int64_t nr = sym.rows_begin_[s + 1] - sym.rows_begin_[s];
-    const int64_t m = nr - nc;
-    Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + sym.panel_begin_[s], nr, nc);
+    const auto [c0, nc, nr, m, rows, panel] = sym.supernode(s);
+    Eigen::Map<const Eigen::MatrixXd> P(panels_.data() + panel, nr, nc);
     yp.segment(c0, nc).noalias() +=
         P.topRows(nc).selfadjointView<Eigen::Lower>() * xp.segment(c0, nc);
     if (m == 0) continue;
     // The off-diagonal block B (m x nc) contributes B^T x_rows to this supernode's rows and
     // B x_cols to the rows below.
-    const int32_t* rows = sym.rows_.data() + sym.rows_begin_[s] + nc;
     xr.resize(m);
     for (int64_t k = 0; k < m; ++k) xr[k] = xp[rows[k]];
     const auto B = P.bottomRows(m);
@@ -696,9 +694,7 @@ Eigen::VectorXd SupernodalMatrix::Multiply(const Eigen::VectorXd& x) const {
     yr.noalias() = B * xp.segment(c0, nc);
     for (int64_t k = 0; k < m; ++k) yp[rows[k]] += yr[k];
   }
-  Eigen::VectorXd y(n);
-  for (int64_t k = 0; k < n; ++k) y[sym.perm_[k]] = yp[k];
-  return y;
+  return sym.FromPermuted(yp);
 }
 
 double SupernodalFactor::LogDeterminant() const {

@@ -62,6 +62,18 @@ class SupernodalSymbolic {
   friend class SupernodalMatrix;
   SupernodalSymbolic() = default;
 
+  // Supernode s: the permuted columns [c0, c0 + nc); nr rows, the nc diagonal ones first, then
+  // the m = nr - nc rows below[0 .. m); its nr x nc column-major panel starts at offset `panel`.
+  struct Supernode {
+    int64_t c0, nc, nr, m;
+    const int32_t* below;
+    int64_t panel;
+  };
+  Supernode supernode(int64_t s) const;
+  // P b and P^T y (n values each).
+  Eigen::VectorXd ToPermuted(const Eigen::VectorXd& b) const;
+  Eigen::VectorXd FromPermuted(const Eigen::VectorXd& y) const;
+
   int64_t n_ = 0;
   std::vector<int32_t> pattern_outer_;  // n + 1, copy of the analyzed pattern's column pointers
   std::vector<int32_t> pattern_inner_;  // its row indices

@@ -224,23 +224,7 @@ TEST(SupernodalCholeskyTest, ParallelAndSequentialFactorsAgree) {
 }
 
 TEST(SupernodalCholeskyTest, BlockDiagonalMatrixHasSeveralRoots) {
-  const Eigen::SparseMatrix<double> A1 = GeometricSpd(60, 0.5, 1);
-  const Eigen::SparseMatrix<double> A2 = GridSpd(9);
-  const int64_t n1 = A1.rows(), n = n1 + A2.rows();
-  std::vector<Eigen::Triplet<double>> t;
-  for (int j = 0; j < A1.outerSize(); ++j) {
-    for (Eigen::SparseMatrix<double>::InnerIterator it(A1, j); it; ++it) {
-      t.emplace_back(it.row(), it.col(), it.value());
-    }
-  }
-  for (int j = 0; j < A2.outerSize(); ++j) {
-    for (Eigen::SparseMatrix<double>::InnerIterator it(A2, j); it; ++it) {
-      t.emplace_back(n1 + it.row(), n1 + it.col(), it.value());
-    }
-  }
-  Eigen::SparseMatrix<double> A(n, n);
-  A.setFromTriplets(t.begin(), t.end());
-  A.makeCompressed();
+  const Eigen::SparseMatrix<double> A = TwoBlocks(GeometricSpd(60, 0.5, 1), GridSpd(9));
   auto sym = SupernodalSymbolic::Analyze(A);
   ASSERT_TRUE(sym.ok());
   auto f = SupernodalFactor::Factorize(*sym, A);
