@@ -1,5 +1,12 @@
 #include "server/field_server.h"
 
+#include <netdb.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
+#include <string>
 #include <thread>
 #include <utility>
 
@@ -7,6 +14,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "core/common/status_macros.h"
+#include "grpc/grpc.h"
 #include "grpc/health/v1/health.pb.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
@@ -33,6 +41,32 @@ bool SplitHostPort(const std::string& listen, std::string* host, int* port) {
     *host = host->substr(1, host->size() - 2);
   }
   return absl::SimpleAtoi(listen.substr(colon + 1), port) && *port >= 0 && *port <= 65535;
+}
+
+// Why binding HOST:PORT failed, as far as a probe can tell (gRPC only logs it).
+std::string ListenFailureReason(const std::string& host, int port) {
+  if (port == 0) return "";
+  addrinfo hints{};
+  hints.ai_socktype = SOCK_STREAM;
+  hints.ai_flags = AI_PASSIVE;
+  addrinfo* found = nullptr;
+  if (::getaddrinfo(host.c_str(), std::to_string(port).c_str(), &hints, &found) != 0) {
+    return absl::StrCat(": cannot resolve '", host, "'");
+  }
+  std::string reason;
+  for (addrinfo* a = found; a != nullptr && reason.empty(); a = a->ai_next) {
+    const int fd = ::socket(a->ai_family, a->ai_socktype | SOCK_CLOEXEC, a->ai_protocol);
+    if (fd < 0) continue;
+    const int one = 1;
+    ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));  // as gRPC does
+    if (::bind(fd, a->ai_addr, a->ai_addrlen) != 0) {
+      reason = errno == EADDRINUSE ? ": address already in use"
+                                   : absl::StrCat(": ", std::strerror(errno));
+    }
+    ::close(fd);
+  }
+  ::freeaddrinfo(found);
+  return reason;
 }
 
 }  // namespace
@@ -76,6 +110,10 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   s->tbb_limit_ = std::make_shared<tbb::global_control>(
       tbb::global_control::max_allowed_parallelism, static_cast<size_t>(threads));
 
+  // The lock comes first: Store::Open removes temporary files, which would be another daemon's
+  // saves in progress.
+  ASSIGN_OR_RETURN(StoreLock lock, StoreLock::Acquire(options.store_dir, options.store_lock));
+  s->store_lock_.emplace(std::move(lock));
   StoreOptions store_options;
   store_options.save_pause_ms = options.debug_save_pause_ms;
   ASSIGN_OR_RETURN(s->store_, Store::Open(options.store_dir, store_options));
@@ -105,6 +143,9 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
 
   grpc::ServerBuilder builder;
+  // gRPC sets SO_REUSEPORT by default: a second daemon on the same port would then start
+  // silently and take half of the connections.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
   builder.RegisterService(s->service_.get());
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_mb << 20));
@@ -112,7 +153,8 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   s->server_ = builder.BuildAndStart();
   if (s->server_ == nullptr || s->port_ == 0) {
     s->pool_->Shutdown();
-    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen));
+    return absl::UnavailableError(absl::StrCat("cannot listen on ", options.listen,
+                                               ListenFailureReason(host, requested_port)));
   }
   if (grpc::HealthCheckServiceInterface* health = s->server_->GetHealthCheckService()) {
     health->SetServingStatus(true);

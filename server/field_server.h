@@ -5,9 +5,11 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "server/store_lock.h"
 
 namespace grpc {
 class Server;
@@ -34,15 +36,19 @@ struct FieldServerOptions {
   // Listening on a non-loopback address needs an auth token, or this explicit opt-out.
   bool insecure = false;
   int32_t debug_save_pause_ms = 0;  // testing only (see StoreOptions)
+  // Whether other daemons may use the same store (see StoreLock).
+  StoreLockMode store_lock = StoreLockMode::kExclusive;
 };
 
 // The daemon: store + registry + compute pool + gRPC server with FieldSpace, server reflection and
 // grpc.health.v1.Health.
 class FieldServer {
  public:
-  // Opens the store, binds, starts serving. InvalidArgument for bad options, FailedPrecondition
-  // for a non-loopback address without a token or --insecure, Unavailable if the address cannot
-  // be bound.
+  // Locks and opens the store, binds, starts serving. InvalidArgument for bad options,
+  // FailedPrecondition for a non-loopback address without a token or --insecure or for a store
+  // that another daemon holds (the message names its pid), Unavailable if the address cannot be
+  // bound ("address already in use" when another process listens on it: the port is never
+  // shared, SO_REUSEPORT is off).
   static absl::StatusOr<std::unique_ptr<FieldServer>> Start(const FieldServerOptions& options);
 
   // Shutdown(default drain).
@@ -67,6 +73,7 @@ class FieldServer {
   FieldServerOptions options_;
   int port_ = 0;
   std::string address_;
+  std::optional<StoreLock> store_lock_;
   std::unique_ptr<Store> store_;
   std::unique_ptr<ComputePool> pool_;
   std::unique_ptr<Registry> registry_;

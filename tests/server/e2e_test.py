@@ -133,6 +133,13 @@ def main():
         cli = Cli(args.client, d.address)
         log("daemon at %s" % d.address)
         check(cli.json("health") == {"status": "SERVING"}, "health")
+        # One daemon per port, one daemon per store: the second one exits at once, saying why.
+        rc, _, err = run([args.daemon, "--listen", d.address, "--store",
+                          os.path.join(work, "other_store")], timeout=60)
+        check(rc != 0 and "address already in use" in err, "same port: rc %d, %r" % (rc, err))
+        rc, _, err = run([args.daemon, "--listen", "127.0.0.1:0", "--store", store], timeout=60)
+        check(rc != 0 and ("pid %d" % d.proc.pid) in err, "same store: rc %d, %r" % (rc, err))
+        check(cli.json("health") == {"status": "SERVING"}, "the first daemon is unaffected")
         torus_path = os.path.join(data, "torus.obj")
         mesh = cli.json("upload", torus_path)
         check(re.fullmatch(r"m-[0-9a-f]{16}", mesh["id"]) is not None, "mesh id %s" % mesh["id"])
