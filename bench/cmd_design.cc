@@ -95,7 +95,7 @@ int RunDesign(int argc, char** argv) {
     const Eigen::SparseMatrix<double>& B = sys.bilaplacian();
     std::vector<double> values(S.nonZeros());
     for (int64_t q = 0; q < S.nonZeros(); ++q) {
-      values[q] = initial.harmonic * S.valuePtr()[q] + initial.biharmonic * B.valuePtr()[q];
+      values[q] = initial.mu_s * S.valuePtr()[q] + initial.mu_b * B.valuePtr()[q];
     }
     SupernodalFactorOptions fo;
     fo.diagonal_shift = 1e-13;
@@ -137,17 +137,16 @@ int RunDesign(int argc, char** argv) {
       FieldConstraint c;
       c.face = static_cast<int32_t>(rng() % num_faces);
       c.value = RandomUnit(rng, p);
-      const ConstraintKind kind =
-          Uniform(rng) < 0.3 ? ConstraintKind::kHard : ConstraintKind::kSoft;
-      kind_name = kind == ConstraintKind::kHard ? "add_hard" : "add_soft";
-      st = s.AddConstraint(next_id, kind, c);
+      c.kind = Uniform(rng) < 0.3 ? ConstraintKind::kHard : ConstraintKind::kSoft;
+      kind_name = c.hard() ? "add_hard" : "add_soft";
+      st = s.AddConstraint(next_id, c);
       if (st.ok()) live.push_back(next_id);
       ++next_id;
     } else if (r < 0.8) {
       const int64_t id = live[rng() % live.size()];
       auto current = s.GetConstraint(id);
       if (!current.ok()) return ReportError(current.status());
-      FieldConstraint c = current->constraint;
+      FieldConstraint c = *current;
       kind_name = "move_value";
       if (Uniform(rng) < 0.5) {
         c.face = static_cast<int32_t>(rng() % num_faces);
@@ -184,9 +183,10 @@ int RunDesign(int argc, char** argv) {
   const bool full_biharmonic = args->Has("full-biharmonic");
   if (!args->Has("no-full")) {
     ModelProblem problem = s.problem();
-    for (const HardConstraint& h : problem.hard) problem.soft.push_back({h.face, h.value, 1.0});
-    problem.hard.clear();
-    if (!full_biharmonic) problem.mu_b = 0;
+    for (FieldConstraint& c : problem.constraints) {
+      if (c.hard()) c = {c.face, c.value, 1.0, ConstraintKind::kSoft};
+    }
+    if (!full_biharmonic) problem.weights.mu_b = 0;
     auto full = AssembleModelSystem(sub->op, problem);
     if (!full.ok()) return ReportError(full.status());
     Stopwatch fw;

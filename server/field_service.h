@@ -26,13 +26,24 @@ struct ServiceOptions {
   int32_t design_verify_interval = 16;
 };
 
-// A long-lived stream that must be ended when the server drains (design sessions).
-class DrainableStream {
+// Reference counting for reactors that other threads may touch after gRPC is done with them:
+// gRPC's own reference is dropped in OnDone.
+class RefCounted {
  public:
-  virtual ~DrainableStream() = default;
+  virtual ~RefCounted() = default;
+  void AddRef() { refs_.fetch_add(1); }
+  void DropRef() {
+    if (refs_.fetch_sub(1) == 1) delete this;
+  }
+
+ private:
+  std::atomic<int> refs_{1};
+};
+
+// A long-lived stream that must be ended when the server drains (design sessions).
+class DrainableStream : public RefCounted {
+ public:
   virtual void Drain() = 0;
-  virtual void Ref() = 0;
-  virtual void Unref() = 0;
 };
 
 // fieldspace.v1.FieldSpace on the callback API. Stateless apart from the set of open streams: it

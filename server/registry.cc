@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "core/basis/basis_io.h"
 #include "core/common/status_macros.h"
 #include "server/hash.h"
 
@@ -202,7 +203,7 @@ absl::StatusOr<MeshRecord> Registry::AddMesh(MeshArrays arrays, const std::strin
   // so that a listed mesh always survives a restart.
   RETURN_IF_ERROR(store_->SaveMesh(record, mesh.vertices(), mesh.faces()));
   auto shared = std::make_shared<const TriangleMesh>(std::move(mesh));
-  const int64_t bytes = MeshBytes(*shared);
+  const int64_t bytes = shared->MemoryBytes();
   std::lock_guard<std::mutex> lock(mu_);
   auto [it, inserted] = meshes_.try_emplace(record.id);
   MeshEntry& e = it->second;
@@ -321,7 +322,7 @@ absl::StatusOr<std::shared_ptr<const TriangleMesh>> Registry::GetMesh(const std:
   auto shared = std::make_shared<const TriangleMesh>(*std::move(mesh));
   if (it != meshes_.end()) {
     it->second.loaded = shared;
-    it->second.bytes = MeshBytes(*shared);
+    it->second.bytes = shared->MemoryBytes();
     it->second.last_used = ++clock_;
     memory_in_use_ += it->second.bytes;
     EvictLocked();
@@ -439,31 +440,27 @@ void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest reque
     ASSIGN_OR_RETURN(std::shared_ptr<const TriangleMesh> mesh, GetMesh(record.key.mesh_id));
     ASSIGN_OR_RETURN(BuiltBasis built,
                      BuildBasisForKey(*mesh, record.key, request.face_weights, context));
-    std::shared_ptr<const Basis> basis = std::move(built.basis);
+    const Basis& basis = *built.basis;
     if (job->cancel_flag()->load()) return absl::CancelledError("build cancelled");
     job->SetStage(BuildStage::kPrecompute, 0);
-    ASSIGN_OR_RETURN(std::shared_ptr<const SubspaceModel> model,
-                     PrepareModel(*mesh, basis, built.op.get(), context));
+    ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> served,
+                     ServeBasis(record, mesh, built.basis, built.op.get(), context));
     built.op.reset();  // S is no longer needed: free it before saving
     if (job->cancel_flag()->load()) return absl::CancelledError("build cancelled");
     job->SetStage(BuildStage::kSaving, 0);
-    record.columns = basis->dimension();
-    record.num_regions = basis->num_regions();
-    record.dofs = static_cast<int32_t>(basis->U.rows());
-    record.radius = basis->radius;
-    record.nnz = basis->U.nonZeros();
+    record.columns = basis.dimension();
+    record.num_regions = basis.num_regions();
+    record.dofs = static_cast<int32_t>(basis.U.rows());
+    record.radius = basis.radius;
+    record.nnz = basis.U.nonZeros();
     record.created_unix_ms = NowUnixMs();
     record.build_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    ASSIGN_OR_RETURN(std::string payload, SerializeBasis(*basis, record.key.mesh_id));
+    ASSIGN_OR_RETURN(std::string payload, EncodeBasis(basis, record.key.mesh_id));
     RETURN_IF_ERROR(store_->SaveBasis(record, {payload}));
-    auto loaded = std::make_shared<ServedBasis>();
-    loaded->record = record;
-    loaded->mesh = std::move(mesh);
-    loaded->basis = std::move(basis);
-    loaded->model = std::move(model);
-    loaded->memory_bytes = BasisBytes(*loaded->basis) + ModelBytes(*loaded->model);
-    return std::shared_ptr<const ServedBasis>(std::move(loaded));
+    auto published = std::make_shared<ServedBasis>(*served);
+    published->record = record;  // with the figures known only now
+    return std::shared_ptr<const ServedBasis>(std::move(published));
   };
   absl::StatusOr<std::shared_ptr<const ServedBasis>> result;
   try {
@@ -624,7 +621,7 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std:
 
 absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std::string& id) {
   ASSIGN_OR_RETURN(Store::LoadedBasisFile file, store_->LoadBasis(id));
-  absl::StatusOr<DeserializedBasis> decoded = DeserializeBasis(file.payload);
+  absl::StatusOr<LoadedBasis> decoded = DecodeBasis(file.payload);
   if (!decoded.ok()) {
     return absl::DataLossError(
         absl::StrCat("stored basis ", id, " is unreadable: ", decoded.status().message()));
@@ -634,7 +631,7 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std
     return absl::DataLossError(absl::StrCat("stored basis ", id, " names mesh ", decoded->mesh_id,
                                             ", its record ", file.record.key.mesh_id));
   }
-  std::shared_ptr<const Basis> basis = std::move(decoded->basis);
+  auto basis = std::make_shared<const Basis>(std::move(decoded->basis));
   ASSIGN_OR_RETURN(std::shared_ptr<const TriangleMesh> mesh, GetMesh(file.record.key.mesh_id));
   const int64_t dofs = int64_t{file.record.key.field.dofs_per_face()} * mesh->num_faces();
   if (basis->U.rows() != dofs || !(basis->type == file.record.key.field)) {
@@ -643,15 +640,7 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std
   }
   BuildContext context;
   context.threads = options_.build_threads;
-  ASSIGN_OR_RETURN(std::shared_ptr<const SubspaceModel> model,
-                   PrepareModel(*mesh, basis, nullptr, context));
-  auto loaded = std::make_shared<ServedBasis>();
-  loaded->record = file.record;
-  loaded->mesh = std::move(mesh);
-  loaded->basis = std::move(basis);
-  loaded->model = std::move(model);
-  loaded->memory_bytes = BasisBytes(*loaded->basis) + ModelBytes(*loaded->model);
-  return std::shared_ptr<const ServedBasis>(std::move(loaded));
+  return ServeBasis(file.record, std::move(mesh), std::move(basis), nullptr, context);
 }
 
 void Registry::CancelAllBuilds(std::chrono::milliseconds timeout) {

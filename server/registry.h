@@ -17,8 +17,8 @@
 #include "absl/status/statusor.h"
 #include "core/mesh/triangle_mesh.h"
 #include "server/compute_pool.h"
-#include "server/engine.h"
 #include "server/records.h"
+#include "server/served_basis.h"
 #include "server/store.h"
 
 namespace fieldspace::server {

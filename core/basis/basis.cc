@@ -484,4 +484,13 @@ absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOp
   return StackBases(std::move(fine), coarse);
 }
 
+int64_t Basis::MemoryBytes() const {
+  const int64_t nnz = U.nonZeros();
+  return nnz * static_cast<int64_t>(sizeof(float) + sizeof(int)) +
+         (U.outerSize() + 1) * static_cast<int64_t>(sizeof(int)) +
+         static_cast<int64_t>(local_eigenvalues.size() * sizeof(double) +
+                              sample_faces.size() * sizeof(int32_t)) +
+         params.face_weights.size() * static_cast<int64_t>(sizeof(double));
+}
+
 }  // namespace fieldspace

@@ -90,6 +90,8 @@ struct Basis {
 
   int32_t dimension() const { return static_cast<int32_t>(U.cols()); }
   int32_t num_regions() const { return static_cast<int32_t>(sample_faces.size()); }
+  // Bytes held by U and the per-column and per-face arrays (for memory budgets).
+  int64_t MemoryBytes() const;
 };
 
 // Builds the basis (section 4) for `op` on `mesh`:

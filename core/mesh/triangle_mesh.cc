@@ -400,4 +400,24 @@ int32_t TriangleMesh::genus() const {
   return g;
 }
 
+int64_t TriangleMesh::MemoryBytes() const {
+  int64_t bytes = 0;
+  for (const VertexMatrix* m :
+       {&vertices_, &face_normals_, &face_barycenters_, &frame_x_, &frame_y_}) {
+    bytes += m->size() * static_cast<int64_t>(sizeof(double));
+  }
+  for (const FaceMatrix* m : {&faces_, &face_edges_, &face_neighbors_}) {
+    bytes += m->size() * static_cast<int64_t>(sizeof(int32_t));
+  }
+  for (const PairMatrix* m : {&edges_, &edge_faces_}) {
+    bytes += m->size() * static_cast<int64_t>(sizeof(int32_t));
+  }
+  bytes += face_areas_.size() * static_cast<int64_t>(sizeof(double)) +
+           face_component_.size() * static_cast<int64_t>(sizeof(int));
+  for (const std::vector<int32_t>& loop : boundary_loops_) {
+    bytes += static_cast<int64_t>(loop.size() * sizeof(int32_t));
+  }
+  return bytes;
+}
+
 }  // namespace fieldspace

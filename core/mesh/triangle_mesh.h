@@ -84,6 +84,8 @@ class TriangleMesh {
   int32_t euler_characteristic() const;
   int32_t genus() const;
   double total_area() const { return total_area_; }
+  // Bytes held by the arrays above (for memory budgets).
+  int64_t MemoryBytes() const;
   int32_t dropped_unreferenced_vertices() const { return dropped_unreferenced_vertices_; }
 
  private:

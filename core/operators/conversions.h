@@ -60,6 +60,28 @@ absl::StatusOr<Eigen::MatrixXd> AmbientFromDofs(const TriangleMesh& mesh, const 
                                                 absl::Span<const int32_t> faces,
                                                 const Eigen::Ref<const Eigen::VectorXd>& dofs);
 
+// How per-face values travel between processes (fieldspace.v1.FieldEncoding mirrors it).
+enum class FieldEncoding : uint8_t {
+  kDof = 0,      // 2 (vector, n-field) or 3 (tensor) frame values per face, the DOF layout
+  kAmbient = 1,  // 3 (vector; one of the n directions of an n-field) or 6 (tensor: xx yy zz xy
+                 // yz zx) per face, projected to the face's tangent plane on input
+};
+
+int32_t ValuesPerFace(const FieldType& type, FieldEncoding encoding);
+
+// Values in `encoding` for `faces` (values: faces.size() * ValuesPerFace) to DOFs written at
+// dofs[i * dofs_per_face + c] (i the position in `faces`, not the face index). InvalidArgument
+// for non-finite values, bad face indices or sizes.
+absl::Status ValuesToDofs(const TriangleMesh& mesh, const FieldType& type, FieldEncoding encoding,
+                          absl::Span<const int32_t> faces, absl::Span<const double> values,
+                          absl::Span<double> dofs);
+
+// The inverse: `dofs` (faces.size() * dofs_per_face) to `out` (faces.size() * ValuesPerFace),
+// in float, as values travel on the wire.
+absl::Status DofsToValues(const TriangleMesh& mesh, const FieldType& type, FieldEncoding encoding,
+                          absl::Span<const int32_t> faces, absl::Span<const double> dofs,
+                          absl::Span<float> out);
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_OPERATORS_CONVERSIONS_H_

@@ -12,14 +12,6 @@ namespace {
 
 using SpMat = Eigen::SparseMatrix<double>;
 
-absl::Status CheckWeight(double w, const char* name) {
-  if (!std::isfinite(w) || w < 0.0) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("model problem: %s = %g must be finite and >= 0", name, w));
-  }
-  return absl::OkStatus();
-}
-
 absl::Status CheckConstraintValue(const FieldOperator& op, int32_t face,
                                   const Eigen::VectorXd& value, const char* kind) {
   const int64_t num_faces = op.dofs() / op.type.dofs_per_face();
@@ -67,6 +59,25 @@ SpMat Submatrix(const SpMat& A, const std::vector<int>& keep, const std::vector<
 
 }  // namespace
 
+absl::Status ValidateWeights(const EnergyWeights& w) {
+  const auto check = [](double v, const char* name) -> absl::Status {
+    if (!std::isfinite(v) || v < 0.0) {
+      return absl::InvalidArgumentError(
+          absl::StrFormat("energy weight %s = %g is invalid: must be finite and >= 0", name, v));
+    }
+    return absl::OkStatus();
+  };
+  RETURN_IF_ERROR(check(w.mu_s, "mu_s"));
+  RETURN_IF_ERROR(check(w.mu_b, "mu_b"));
+  RETURN_IF_ERROR(check(w.mu_c, "mu_c"));
+  if (w.mu_s + w.mu_b <= 0.0) {
+    return absl::InvalidArgumentError(
+        "energy weights mu_s and mu_b are both 0; at least one must be > 0 (otherwise the energy "
+        "does not determine the field away from the constraints)");
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<EigenResult> ReferenceEigenpairs(const FieldOperator& op,
                                                 const EigenOptions& options) {
   RETURN_IF_ERROR(CheckOperator(op));
@@ -87,12 +98,12 @@ SpMat BiharmonicMatrix(const FieldOperator& op) {
 absl::StatusOr<ModelSystem> AssembleModelSystem(const FieldOperator& op,
                                                 const ModelProblem& problem) {
   RETURN_IF_ERROR(CheckOperator(op));
-  RETURN_IF_ERROR(CheckWeight(problem.mu_s, "mu_s"));
-  RETURN_IF_ERROR(CheckWeight(problem.mu_b, "mu_b"));
-  RETURN_IF_ERROR(CheckWeight(problem.mu_c, "mu_c"));
+  RETURN_IF_ERROR(ValidateWeights(problem.weights));
+  const EnergyWeights& w = problem.weights;
   const int64_t k = op.dofs();
   const int32_t p = op.type.dofs_per_face();
-  for (const SoftConstraint& c : problem.soft) {
+  for (const FieldConstraint& c : problem.constraints) {
+    if (c.hard()) continue;
     RETURN_IF_ERROR(CheckConstraintValue(op, c.face, c.value, "soft"));
     if (!std::isfinite(c.weight) || !(c.weight > 0.0)) {
       return absl::InvalidArgumentError(absl::StrFormat(
@@ -102,17 +113,18 @@ absl::StatusOr<ModelSystem> AssembleModelSystem(const FieldOperator& op,
   }
   ModelSystem system;
   system.A.resize(k, k);
-  if (problem.mu_s > 0.0) system.A = problem.mu_s * op.stiffness;
-  if (problem.mu_b > 0.0) system.A += problem.mu_b * BiharmonicMatrix(op);
+  if (w.mu_s > 0.0) system.A = w.mu_s * op.stiffness;
+  if (w.mu_b > 0.0) system.A += w.mu_b * BiharmonicMatrix(op);
   // C^T C is diagonal: each soft constraint adds its weight to its face's DOFs.
   Eigen::VectorXd ctc = Eigen::VectorXd::Zero(k);
   system.b = Eigen::VectorXd::Zero(k);
-  if (problem.mu_c > 0.0) {
-    for (const SoftConstraint& c : problem.soft) {
+  if (w.mu_c > 0.0) {
+    for (const FieldConstraint& c : problem.constraints) {
+      if (c.hard()) continue;
       for (int32_t d = 0; d < p; ++d) {
         const int64_t i = static_cast<int64_t>(p) * c.face + d;
-        ctc[i] += problem.mu_c * c.weight;
-        system.b[i] += problem.mu_c * c.weight * c.value[d];
+        ctc[i] += w.mu_c * c.weight;
+        system.b[i] += w.mu_c * c.weight * c.value[d];
       }
     }
   }
@@ -137,7 +149,10 @@ absl::StatusOr<Eigen::VectorXd> SolveModelProblem(const FieldOperator& op,
   const int32_t p = op.type.dofs_per_face();
   Eigen::VectorXd X = Eigen::VectorXd::Zero(k);
   std::vector<bool> fixed(k, false);
-  for (const HardConstraint& c : problem.hard) {
+  bool any_hard = false;
+  for (const FieldConstraint& c : problem.constraints) {
+    if (!c.hard()) continue;
+    any_hard = true;
     RETURN_IF_ERROR(CheckConstraintValue(op, c.face, c.value, "hard"));
     if (fixed[static_cast<int64_t>(p) * c.face]) {
       return absl::InvalidArgumentError(
@@ -162,8 +177,8 @@ absl::StatusOr<Eigen::VectorXd> SolveModelProblem(const FieldOperator& op,
   const Eigen::VectorXd coupling = system.A * X;
   Eigen::VectorXd rhs(free.size());
   for (size_t i = 0; i < free.size(); ++i) rhs[i] = system.b[free[i]] - coupling[free[i]];
-  const SpMat reduced = problem.hard.empty() ? SpMat() : Submatrix(system.A, free, new_index);
-  const SpMat& A_ff = problem.hard.empty() ? system.A : reduced;
+  const SpMat reduced = any_hard ? Submatrix(system.A, free, new_index) : SpMat();
+  const SpMat& A_ff = any_hard ? reduced : system.A;
   auto factor = SparseCholesky::Factorize(A_ff, cholesky);
   if (!factor.ok()) {
     if (absl::IsFailedPrecondition(factor.status())) {

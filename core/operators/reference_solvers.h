@@ -7,6 +7,7 @@
 
 #include "Eigen/Core"
 #include "Eigen/SparseCore"
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "core/linalg/eigensolver.h"
 #include "core/linalg/sparse_cholesky.h"
@@ -27,29 +28,44 @@ absl::StatusOr<EigenResult> ReferenceEigenpairs(const FieldOperator& op,
 // couple faces up to two rings apart, so it holds several times the nonzeros of S.
 Eigen::SparseMatrix<double> BiharmonicMatrix(const FieldOperator& op);
 
-// A soft constraint: weight * ||X_face - value||^2 is added to the data term ||C X - c||^2.
-struct SoftConstraint {
-  int32_t face = 0;
-  Eigen::VectorXd value;  // dofs_per_face DOFs of the face (DOF representation)
-  double weight = 1.0;    // finite, > 0
+// The weights of the model problem (eq. 8):
+//   mu_s X^T S X + mu_b X^T B X + mu_c sum_soft w_i |X_f(i) - c_i|^2
+// (the constraint term is the plain Euclidean norm of the face's DOFs, not weighted by area).
+// The one weights type from core to the wire (fieldspace.v1.Weights carries the same names).
+struct EnergyWeights {
+  double mu_s = 1.0;  // harmonic (Dirichlet) energy, >= 0
+  double mu_b = 0.0;  // biharmonic energy, >= 0
+  double mu_c = 1.0;  // soft constraints (scales every soft constraint's weight), >= 0
 };
 
-// A hard (interpolation) constraint: X_face = value exactly.
-struct HardConstraint {
+// InvalidArgument (naming the weight) unless every weight is finite and >= 0 and
+// mu_s + mu_b > 0 (otherwise the energy does not determine the field away from the
+// constraints). mu_c = 0 is valid: the soft constraints then do nothing.
+absl::Status ValidateWeights(const EnergyWeights& weights);
+
+enum class ConstraintKind : uint8_t {
+  kSoft = 0,  // the term mu_c * weight * |X_face - value|^2
+  kHard = 1,  // X_face = value exactly (weight ignored)
+};
+
+// A constraint on one face's DOFs (docs/conventions.md: 2 frame values for vector and n-fields,
+// 3 Mandel-Voigt values for tensors). The one constraint type from core to the wire.
+struct FieldConstraint {
   int32_t face = 0;
   Eigen::VectorXd value;  // dofs_per_face DOFs of the face
+  double weight = 1.0;    // soft constraints: finite, > 0
+  ConstraintKind kind = ConstraintKind::kSoft;
+
+  bool hard() const { return kind == ConstraintKind::kHard; }
 };
 
 // The model problem (eq. 8), optionally with hard constraints:
-//   min mu_s X^T S X + mu_b X^T B X + mu_c sum_j weight_j ||X_{face_j} - value_j||^2
-//   subject to X_{face} = value for every hard constraint,
+//   min mu_s X^T S X + mu_b X^T B X + mu_c sum_soft weight_j ||X_{face_j} - value_j||^2
+//   subject to X_{face} = value for every hard constraint (at most one per face),
 // i.e. C selects the soft-constrained faces' DOFs, scaled by sqrt(weight_j).
 struct ModelProblem {
-  double mu_s = 0.0;  // harmonic (Dirichlet) energy weight, >= 0
-  double mu_b = 0.0;  // biharmonic energy weight, >= 0
-  double mu_c = 1.0;  // data term weight, >= 0
-  std::vector<SoftConstraint> soft;
-  std::vector<HardConstraint> hard;  // at most one per face
+  EnergyWeights weights;
+  std::vector<FieldConstraint> constraints;  // soft and hard, in any order
 };
 
 // Normal equations of eq. 9 before hard constraints are applied:

@@ -10,6 +10,23 @@
 
 namespace fieldspace {
 
+namespace {
+
+// ValidateWeights, and mu_c > 0: a session keeps each soft constraint as the diagonal term
+// 1 / (mu_c weight) of its Woodbury update.
+absl::Status ValidateSessionWeights(const EnergyWeights& weights) {
+  RETURN_IF_ERROR(ValidateWeights(weights));
+  if (!(weights.mu_c > 0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("energy weight mu_c = ", weights.mu_c,
+                     " is invalid for a design session: must be > 0 (it scales every soft "
+                     "constraint)"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
     const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options) {
   RETURN_IF_ERROR(ValidateWeights(weights));
@@ -19,7 +36,7 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
   const double* b = system.bilaplacian().valuePtr();
   double* v = A.valuePtr();
   for (int64_t p = 0; p < A.nonZeros(); ++p) {
-    v[p] = weights.harmonic * s[p] + weights.biharmonic * b[p];
+    v[p] = weights.mu_s * s[p] + weights.mu_b * b[p];
   }
   ASSIGN_OR_RETURN(SupernodalFactor f, FactorizeRegularized(system.pattern_symbolic(), A, options,
                                                             &out->regularization));
@@ -39,8 +56,8 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> EnergyFactorCache::Ge
     bool* factorized) {
   if (factorized != nullptr) *factorized = false;
   const Key key{&system,
-                weights.harmonic,
-                weights.biharmonic,
+                weights.mu_s,
+                weights.mu_b,
                 options.regularization,
                 options.max_regularization,
                 options.parallel};
@@ -86,7 +103,7 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
     std::shared_ptr<const ReducedSystem> system, const EnergyWeights& weights,
     const DesignSessionOptions& options) {
   if (system == nullptr) return absl::InvalidArgumentError("DesignSession: no reduced system");
-  RETURN_IF_ERROR(ValidateWeights(weights));
+  RETURN_IF_ERROR(ValidateSessionWeights(weights));
   RETURN_IF_ERROR(ValidateSolveOptions(options.solve));
   if (options.verify_interval < 1) {
     return absl::InvalidArgumentError("DesignSession: verify_interval must be >= 1");
@@ -135,13 +152,12 @@ void DesignSession::Resolve() {
   last_refinement_steps_ = sol.refinement_steps;
 }
 
-absl::Status DesignSession::AddConstraint(int64_t id, ConstraintKind kind,
-                                          const FieldConstraint& constraint) {
+absl::Status DesignSession::AddConstraint(int64_t id, const FieldConstraint& constraint) {
   if (slot_by_id_.count(id)) {
     return absl::AlreadyExistsError(absl::StrCat("constraint id ", id, " already exists"));
   }
-  const bool soft = kind == ConstraintKind::kSoft;
-  RETURN_IF_ERROR(ValidateConstraint(*system_, constraint, soft));
+  const bool soft = !constraint.hard();
+  RETURN_IF_ERROR(ValidateConstraint(*system_, constraint));
   kkt_->Append(BasisRowsOfFace(*system_, constraint.face), constraint.value,
                soft ? SoftE(constraint.weight) : 0.0, !soft);
   if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
@@ -152,25 +168,38 @@ absl::Status DesignSession::AddConstraint(int64_t id, ConstraintKind kind,
   }
   slot_by_id_[id] = static_cast<int32_t>(ids_by_slot_.size());
   ids_by_slot_.push_back(id);
-  records_.push_back({kind, constraint});
+  records_.push_back(constraint);
   num_hard_ += soft ? 0 : 1;
   Resolve();
   return absl::OkStatus();
 }
 
-absl::Status DesignSession::MoveConstraint(int64_t id, const FieldConstraint& constraint) {
+absl::Status DesignSession::MoveConstraint(int64_t id, int32_t face, Eigen::VectorXd value) {
+  auto it = slot_by_id_.find(id);
+  if (it == slot_by_id_.end()) {
+    return absl::NotFoundError(absl::StrCat("constraint id ", id, " does not exist"));
+  }
+  FieldConstraint moved = records_[it->second];
+  moved.face = face;
+  moved.value = std::move(value);
+  return MoveConstraint(id, moved);
+}
+
+absl::Status DesignSession::MoveConstraint(int64_t id, const FieldConstraint& target) {
   auto it = slot_by_id_.find(id);
   if (it == slot_by_id_.end()) {
     return absl::NotFoundError(absl::StrCat("constraint id ", id, " does not exist"));
   }
   const int32_t slot = it->second;
-  Record& record = records_[slot];
-  const bool soft = record.kind == ConstraintKind::kSoft;
-  RETURN_IF_ERROR(ValidateConstraint(*system_, constraint, soft));
+  FieldConstraint& record = records_[slot];
+  FieldConstraint constraint = target;
+  constraint.kind = record.kind;  // a move keeps the kind
+  const bool soft = !record.hard();
+  RETURN_IF_ERROR(ValidateConstraint(*system_, constraint));
   const double e = soft ? SoftE(constraint.weight) : 0.0;
-  if (constraint.face == record.constraint.face) {
+  if (constraint.face == record.face) {
     kkt_->SetTarget(slot, constraint.value);
-    if (soft && constraint.weight != record.constraint.weight) {
+    if (soft && constraint.weight != record.weight) {
       kkt_->SetE(slot, e);
       // A positive change of a soft row's diagonal cannot create a dependence.
       RETURN_IF_ERROR(kkt_->FactorizeSchur());
@@ -178,14 +207,14 @@ absl::Status DesignSession::MoveConstraint(int64_t id, const FieldConstraint& co
   } else {
     kkt_->Replace(slot, BasisRowsOfFace(*system_, constraint.face), constraint.value, e);
     if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
-      const FieldConstraint& old = record.constraint;
+      const FieldConstraint& old = record;
       kkt_->Replace(slot, BasisRowsOfFace(*system_, old.face), old.value,
                     soft ? SoftE(old.weight) : 0.0);
       RETURN_IF_ERROR(kkt_->FactorizeSchur());
       return st;
     }
   }
-  record.constraint = constraint;
+  record = std::move(constraint);
   Resolve();
   return absl::OkStatus();
 }
@@ -197,7 +226,7 @@ absl::Status DesignSession::RemoveConstraint(int64_t id) {
   }
   const int32_t slot = it->second;
   const int32_t last = static_cast<int32_t>(ids_by_slot_.size()) - 1;
-  if (records_[slot].kind == ConstraintKind::kHard) --num_hard_;
+  if (records_[slot].hard()) --num_hard_;
   kkt_->RemoveSwapLast(slot);
   slot_by_id_.erase(it);
   if (slot != last) {
@@ -224,10 +253,9 @@ void DesignSession::ClearConstraints() {
 }
 
 absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
-  RETURN_IF_ERROR(ValidateWeights(weights));
+  RETURN_IF_ERROR(ValidateSessionWeights(weights));
   const EnergyWeights old_weights = weights_;
-  const bool energy_changed =
-      weights.harmonic != weights_.harmonic || weights.biharmonic != weights_.biharmonic;
+  const bool energy_changed = weights.mu_s != weights_.mu_s || weights.mu_b != weights_.mu_b;
   std::shared_ptr<const EnergyFactorization> old_energy = energy_;
   last_factorized_ = false;
   if (energy_changed) {
@@ -238,9 +266,7 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
   }
   weights_ = weights;
   for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
-    if (records_[slot].kind == ConstraintKind::kSoft) {
-      kkt_->SetE(slot, SoftE(records_[slot].constraint.weight));
-    }
+    if (!records_[slot].hard()) kkt_->SetE(slot, SoftE(records_[slot].weight));
   }
   if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
     weights_ = old_weights;
@@ -250,9 +276,7 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
       verified_since_factorization_ = false;
     }
     for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
-      if (records_[slot].kind == ConstraintKind::kSoft) {
-        kkt_->SetE(slot, SoftE(records_[slot].constraint.weight));
-      }
+      if (!records_[slot].hard()) kkt_->SetE(slot, SoftE(records_[slot].weight));
     }
     RETURN_IF_ERROR(kkt_->FactorizeSchur());
     return st;
@@ -269,7 +293,7 @@ absl::StatusOr<Eigen::VectorXd> DesignSession::LiftAll() const {
   return Lift(*system_, coefficients_);
 }
 
-absl::StatusOr<ConstraintInfo> DesignSession::GetConstraint(int64_t id) const {
+absl::StatusOr<FieldConstraint> DesignSession::GetConstraint(int64_t id) const {
   auto it = slot_by_id_.find(id);
   if (it == slot_by_id_.end()) {
     return absl::NotFoundError(absl::StrCat("constraint id ", id, " does not exist"));
@@ -279,17 +303,8 @@ absl::StatusOr<ConstraintInfo> DesignSession::GetConstraint(int64_t id) const {
 
 ModelProblem DesignSession::problem() const {
   ModelProblem problem;
-  problem.mu_s = weights_.harmonic;
-  problem.mu_b = weights_.biharmonic;
-  problem.mu_c = weights_.constraint;
-  for (const auto& [id, slot] : slot_by_id_) {
-    const FieldConstraint& c = records_[slot].constraint;
-    if (records_[slot].kind == ConstraintKind::kSoft) {
-      problem.soft.push_back({c.face, c.value, c.weight});
-    } else {
-      problem.hard.push_back({c.face, c.value});
-    }
-  }
+  problem.weights = weights_;
+  for (const auto& [id, slot] : slot_by_id_) problem.constraints.push_back(records_[slot]);
   return problem;
 }
 

@@ -20,13 +20,6 @@ namespace fieldspace {
 
 class KktSolver;
 
-enum class ConstraintKind : uint8_t { kSoft = 0, kHard = 1 };
-
-struct ConstraintInfo {
-  ConstraintKind kind = ConstraintKind::kSoft;
-  FieldConstraint constraint;
-};
-
 // The energy matrix A = U^T (mu_S S + mu_B B) U of one reduced system for one (mu_S, mu_B), and
 // its (possibly regularized) factorization. Immutable; shared by sessions.
 struct EnergyFactorization {
@@ -110,7 +103,8 @@ struct DesignSessionOptions {
 // the immutable ReducedSystem.
 class DesignSession {
  public:
-  // InvalidArgument for invalid weights (see ValidateWeights), invalid options or a null system;
+  // InvalidArgument for invalid weights (see ValidateWeights; a session also needs mu_c > 0),
+  // invalid options or a null system;
   // FailedPrecondition when the energy matrix cannot be factorized.
   static absl::StatusOr<std::unique_ptr<DesignSession>> Create(
       std::shared_ptr<const ReducedSystem> system, const EnergyWeights& weights,
@@ -123,11 +117,13 @@ class DesignSession {
   // InvalidArgument for a bad face id, value size, non-finite value or non-positive soft weight;
   // FailedPrecondition when a hard constraint would make the hard constraints linearly dependent
   // in the subspace (e.g. a second hard constraint on the same face).
-  absl::Status AddConstraint(int64_t id, ConstraintKind kind, const FieldConstraint& constraint);
-  // Replaces constraint `id`'s face, value and weight (its kind stays). NotFound for an unknown
-  // id; otherwise the errors of AddConstraint. Moving within the same face (new value or weight)
-  // needs no solve with A.
+  absl::Status AddConstraint(int64_t id, const FieldConstraint& constraint);
+  // Replaces constraint `id`'s face, value and weight (its kind stays: constraint.kind is
+  // ignored). NotFound for an unknown id; otherwise the errors of AddConstraint. Moving within
+  // the same face (new value or weight) needs no solve with A.
   absl::Status MoveConstraint(int64_t id, const FieldConstraint& constraint);
+  // The same, keeping the constraint's weight too (an interactive drag).
+  absl::Status MoveConstraint(int64_t id, int32_t face, Eigen::VectorXd value);
   // NotFound for an unknown id.
   absl::Status RemoveConstraint(int64_t id);
   // Removes every constraint (the solution becomes 0).
@@ -147,7 +143,7 @@ class DesignSession {
   int32_t num_hard_constraints() const { return num_hard_; }
   bool HasConstraint(int64_t id) const { return slot_by_id_.count(id) > 0; }
   // NotFound for an unknown id.
-  absl::StatusOr<ConstraintInfo> GetConstraint(int64_t id) const;
+  absl::StatusOr<FieldConstraint> GetConstraint(int64_t id) const;
   // The current problem (soft and hard constraints in increasing id order), as solved by
   // SolveReducedModelProblem or, in the full space, SolveModelProblem.
   ModelProblem problem() const;
@@ -167,9 +163,7 @@ class DesignSession {
   // mu_S U^T S U + mu_B U^T B U, from the cache when there is one; sets last_factorized_.
   absl::StatusOr<std::shared_ptr<const EnergyFactorization>> Energy(const EnergyWeights& weights);
   void Resolve();
-  double SoftE(double weight) const { return 1.0 / (weights_.constraint * weight); }
-
-  using Record = ConstraintInfo;
+  double SoftE(double weight) const { return 1.0 / (weights_.mu_c * weight); }
 
   std::shared_ptr<const ReducedSystem> system_;
   DesignSessionOptions options_;
@@ -178,7 +172,7 @@ class DesignSession {
   std::unique_ptr<KktSolver> kkt_;
   std::map<int64_t, int32_t> slot_by_id_;
   std::vector<int64_t> ids_by_slot_;
-  std::vector<Record> records_;  // by slot
+  std::vector<FieldConstraint> records_;  // by slot
   int32_t num_hard_ = 0;
   Eigen::VectorXd coefficients_;
   double last_backward_error_ = 0;

@@ -78,7 +78,7 @@ absl::StatusOr<TestFieldSet> GenerateTestFields(const FieldOperator& op,
     }
     std::sort(faces.begin(), faces.end());
     Eigen::VectorXd c = Eigen::VectorXd::Zero(k);
-    std::vector<HardConstraint>& hard = set.constraints[f];
+    std::vector<FieldConstraint>& hard = set.constraints[f];
     for (int32_t face : faces) {
       Eigen::VectorXd value(p);
       if (p == 2) {
@@ -90,7 +90,7 @@ absl::StatusOr<TestFieldSet> GenerateTestFields(const FieldOperator& op,
         } while (value.norm() < 1e-12);
         value.normalize();
       }
-      hard.push_back({face, value});
+      hard.push_back({face, value, 1.0, ConstraintKind::kHard});
       for (int32_t i = 0; i < p; ++i) {
         constrained[static_cast<int64_t>(face) * p + i] = 1;
         c[static_cast<int64_t>(face) * p + i] = value[i];

@@ -28,8 +28,9 @@ struct TestFieldOptions {
 };
 
 struct TestFieldSet {
-  Eigen::MatrixXd fields;                                // k x count, DOF order of the operator
-  std::vector<std::vector<HardConstraint>> constraints;  // per field, the interpolated values
+  Eigen::MatrixXd fields;  // k x count, DOF order of the operator
+  std::vector<std::vector<FieldConstraint>>
+      constraints;  // hard  // per field, the interpolated values
 };
 
 // Test fields (section 6): each is the minimizer of the biharmonic energy X^T B X (B = S M^-1 S)

@@ -1,5 +1,6 @@
 #include "core/subspace/model_problem.h"
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 #include <vector>
@@ -11,29 +12,8 @@
 
 namespace fieldspace {
 
-absl::Status ValidateWeights(const EnergyWeights& w) {
-  const auto bad = [](const char* name, double v, const char* rule) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("energy weight ", name, " = ", v, " is invalid: must be ", rule));
-  };
-  if (!std::isfinite(w.harmonic) || w.harmonic < 0) {
-    return bad("harmonic (mu_S)", w.harmonic, "finite and >= 0");
-  }
-  if (!std::isfinite(w.biharmonic) || w.biharmonic < 0) {
-    return bad("biharmonic (mu_B)", w.biharmonic, "finite and >= 0");
-  }
-  if (!std::isfinite(w.constraint) || w.constraint <= 0) {
-    return bad("constraint (mu_C)", w.constraint, "finite and > 0");
-  }
-  if (w.harmonic + w.biharmonic <= 0) {
-    return absl::InvalidArgumentError(
-        "energy weights: harmonic (mu_S) and biharmonic (mu_B) are both 0; at least one must be "
-        "positive");
-  }
-  return absl::OkStatus();
-}
-
-absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c, bool soft) {
+absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c) {
+  const bool soft = !c.hard();
   if (c.face < 0 || c.face >= system.num_faces()) {
     return absl::InvalidArgumentError(
         absl::StrCat("constraint face id ", c.face, " is outside [0, ", system.num_faces(), ")"));
@@ -69,21 +49,10 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
                                                          const ModelProblem& problem,
                                                          const ReducedSolveOptions& options) {
   RETURN_IF_ERROR(ValidateSolveOptions(options));
-  EnergyWeights w{problem.mu_s, problem.mu_b, problem.mu_c};
-  if (!std::isfinite(w.constraint) || w.constraint < 0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "energy weight constraint (mu_c) = ", w.constraint, " must be finite and >= 0"));
-  }
-  {
-    EnergyWeights check = w;
-    check.constraint = 1.0;  // mu_c = 0 is allowed here (no soft term)
-    RETURN_IF_ERROR(ValidateWeights(check));
-  }
-  for (const SoftConstraint& c : problem.soft) {
-    RETURN_IF_ERROR(ValidateConstraint(system, {c.face, c.value, c.weight}, true));
-  }
-  for (const HardConstraint& c : problem.hard) {
-    RETURN_IF_ERROR(ValidateConstraint(system, {c.face, c.value, 1.0}, false));
+  RETURN_IF_ERROR(ValidateWeights(problem.weights));
+  const EnergyWeights& w = problem.weights;
+  for (const FieldConstraint& c : problem.constraints) {
+    RETURN_IF_ERROR(ValidateConstraint(system, c));
   }
   const absl::Status cancelled_error = absl::CancelledError("reduced model solve cancelled");
   if (IsCancelled(options.cancel)) return cancelled_error;
@@ -94,13 +63,16 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
     double* a = A.valuePtr();
     const double* s = system.stiffness().valuePtr();
     const double* bl = system.bilaplacian().valuePtr();
-    for (int64_t p = 0; p < A.nonZeros(); ++p) a[p] = w.harmonic * s[p] + w.biharmonic * bl[p];
+    for (int64_t p = 0; p < A.nonZeros(); ++p) a[p] = w.mu_s * s[p] + w.mu_b * bl[p];
   }
   Eigen::VectorXd b = Eigen::VectorXd::Zero(d);
-  if (!problem.soft.empty() && w.constraint > 0) {
+  const bool any_soft = std::any_of(problem.constraints.begin(), problem.constraints.end(),
+                                    [](const FieldConstraint& c) { return !c.hard(); });
+  if (any_soft && w.mu_c > 0) {
     std::vector<Eigen::Triplet<double>> triplets;
-    for (const SoftConstraint& c : problem.soft) {
-      const double mu = w.constraint * c.weight;
+    for (const FieldConstraint& c : problem.constraints) {
+      if (c.hard()) continue;
+      const double mu = w.mu_c * c.weight;
       const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
       for (size_t comp = 0; comp < rows.size(); ++comp) {
         const SparseRow& row = rows[comp];
@@ -128,7 +100,8 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   ASSIGN_OR_RETURN(SupernodalMatrix A_panels, SupernodalMatrix::Create(symbolic, A));
 
   KktSolver kkt(d, system.dofs_per_face(), options);
-  for (const HardConstraint& c : problem.hard) {
+  for (const FieldConstraint& c : problem.constraints) {
+    if (!c.hard()) continue;
     kkt.Append(BasisRowsOfFace(system, c.face), c.value, 0.0, /*hard=*/true);
   }
   if (IsCancelled(options.cancel)) return cancelled_error;

@@ -18,32 +18,12 @@ namespace fieldspace {
 // build one description and solve it in the full space (SolveModelProblem) or in a subspace
 // (SolveReducedModelProblem below) and compare.
 
-// The weights of the model problem (eq. 8) for interactive sessions:
-//   mu_S X^T S X + mu_B X^T B X + mu_C sum_soft w_i |X_f(i) - c_i|^2,  X_f(i) = X at face f(i)
-// (the |.|^2 of the constraint term is the plain Euclidean norm of the face's DOFs, as in eq. 8,
-// not weighted by area). Valid weights: all finite, mu_S >= 0, mu_B >= 0, mu_S + mu_B > 0,
-// mu_C > 0.
-struct EnergyWeights {
-  double harmonic = 1.0;    // mu_S
-  double biharmonic = 0.0;  // mu_B
-  double constraint = 1.0;  // mu_C (scales every soft constraint's weight)
-};
-
-// InvalidArgument (naming the weight) unless `weights` is valid.
-absl::Status ValidateWeights(const EnergyWeights& weights);
-
-// A constraint on one face's DOFs (DESIGN.md section 2: 2 values for vector and n-fields in the
-// face frame, 3 Mandel-Voigt values for tensors). Soft: the term mu_C * weight * |X_f - value|^2
-// (weight finite and > 0). Hard: X_f = value exactly (weight ignored).
-struct FieldConstraint {
-  int32_t face = 0;
-  Eigen::VectorXd value;
-  double weight = 1.0;
-};
+// The problem types (EnergyWeights, FieldConstraint, ModelProblem) and ValidateWeights live in
+// core/operators/reference_solvers.h: one description from core to the wire.
 
 // InvalidArgument unless `c` names a face of `system`, has dofs_per_face finite values and (for a
 // soft constraint) a finite positive weight.
-absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c, bool soft);
+absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c);
 
 // How reduced systems are factorized and solved (DesignSession and SolveReducedModelProblem).
 struct ReducedSolveOptions {
@@ -88,11 +68,11 @@ struct ReducedSolution {
 //   U^T (mu_s S + mu_b B) U + mu_c sum_soft w_i U_i^T U_i   (U_i: the rows of U at face f(i))
 // and imposes the hard constraints U_h x = c_h with a Schur complement on that factorization.
 // Use DesignSession for repeated solves with changing constraints.
-// Weights: finite, mu_s, mu_b, mu_c >= 0 and mu_s + mu_b > 0 (mu_c = 0 disables the soft
-// constraints). Errors: InvalidArgument for invalid weights or constraints (bad face id, wrong
-// value size, non-finite value, non-positive soft weight); FailedPrecondition when the hard
-// constraints are linearly dependent in the subspace (e.g. the same face twice, or more
-// constraint DOFs than d) or the system cannot be factorized; Cancelled (options.cancel).
+// Weights: see ValidateWeights (mu_c = 0 disables the soft constraints). Errors: InvalidArgument
+// for invalid weights or constraints (bad face id, wrong value size, non-finite value, non-positive
+// soft weight); FailedPrecondition when the hard constraints are linearly dependent in the subspace
+// (e.g. the same face twice, or more constraint DOFs than d) or the system cannot be factorized;
+// Cancelled (options.cancel).
 absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& system,
                                                          const ModelProblem& problem,
                                                          const ReducedSolveOptions& options = {});

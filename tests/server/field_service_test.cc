@@ -24,7 +24,7 @@
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
-#include "server/engine.h"
+#include "server/served_basis.h"
 #include "server/field_server.h"
 #include "server/registry.h"
 

@@ -36,7 +36,7 @@ TEST(EvaluationTest, TestFieldsAreConstrainedBiharmonicMinimizers) {
       ASSERT_LE(constraints.size(), 12u);
       const Eigen::VectorXd X = set->fields.col(f);
       Eigen::VectorXd BX = B * X;
-      for (const HardConstraint& c : constraints) {
+      for (const FieldConstraint& c : constraints) {
         EXPECT_NEAR(c.value.norm(), 1.0, 1e-12);  // random unit values
         EXPECT_LT((X.segment(static_cast<int64_t>(c.face) * p, p) - c.value).norm(), 1e-12);
         BX.segment(static_cast<int64_t>(c.face) * p, p).setZero();

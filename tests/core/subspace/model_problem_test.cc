@@ -29,9 +29,7 @@ ModelProblem RandomProblem(int32_t num_faces, int32_t p, int soft, int hard, uin
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   ModelProblem problem;
-  problem.mu_s = mu_s;
-  problem.mu_b = mu_b;
-  problem.mu_c = mu_c;
+  problem.weights = {.mu_s = mu_s, .mu_b = mu_b, .mu_c = mu_c};
   std::vector<char> used(num_faces, 0);
   auto face = [&] {
     int32_t f;
@@ -44,12 +42,12 @@ ModelProblem RandomProblem(int32_t num_faces, int32_t p, int soft, int hard, uin
   for (int i = 0; i < soft; ++i) {
     Eigen::VectorXd v(p);
     for (int c = 0; c < p; ++c) v[c] = u(rng);
-    problem.soft.push_back({face(), v, 0.5 + std::abs(u(rng))});
+    problem.constraints.push_back({face(), v, 0.5 + std::abs(u(rng))});
   }
   for (int i = 0; i < hard; ++i) {
     Eigen::VectorXd v(p);
     for (int c = 0; c < p; ++c) v[c] = u(rng);
-    problem.hard.push_back({face(), v});
+    problem.constraints.push_back({face(), v, 1.0, ConstraintKind::kHard});
   }
   return problem;
 }
@@ -63,23 +61,29 @@ Eigen::VectorXd DenseReducedSolution(const FieldOperator& op, const Basis& basis
   const Eigen::MatrixXd B = S * op.mass.cwiseInverse().asDiagonal() * S;
   const int p = op.type.dofs_per_face();
   const int64_t d = U.cols();
-  Eigen::MatrixXd A = U.transpose() * (problem.mu_s * S + problem.mu_b * B) * U;
+  const EnergyWeights& w = problem.weights;
+  Eigen::MatrixXd A = U.transpose() * (w.mu_s * S + w.mu_b * B) * U;
   Eigen::VectorXd b = Eigen::VectorXd::Zero(d);
-  for (const SoftConstraint& c : problem.soft) {
+  std::vector<FieldConstraint> hard;
+  for (const FieldConstraint& c : problem.constraints) {
+    if (c.hard()) {
+      hard.push_back(c);
+      continue;
+    }
     const Eigen::MatrixXd Uf = U.middleRows(static_cast<int64_t>(c.face) * p, p);
-    A += problem.mu_c * c.weight * Uf.transpose() * Uf;
-    b += problem.mu_c * c.weight * Uf.transpose() * c.value;
+    A += w.mu_c * c.weight * Uf.transpose() * Uf;
+    b += w.mu_c * c.weight * Uf.transpose() * c.value;
   }
-  const int64_t h = static_cast<int64_t>(problem.hard.size()) * p;
+  const int64_t h = static_cast<int64_t>(hard.size()) * p;
   Eigen::MatrixXd K = Eigen::MatrixXd::Zero(d + h, d + h);
   Eigen::VectorXd rhs = Eigen::VectorXd::Zero(d + h);
   K.topLeftCorner(d, d) = A;
   rhs.head(d) = b;
-  for (size_t i = 0; i < problem.hard.size(); ++i) {
-    const Eigen::MatrixXd Uf = U.middleRows(static_cast<int64_t>(problem.hard[i].face) * p, p);
+  for (size_t i = 0; i < hard.size(); ++i) {
+    const Eigen::MatrixXd Uf = U.middleRows(static_cast<int64_t>(hard[i].face) * p, p);
     K.block(d + i * p, 0, p, d) = Uf;
     K.block(0, d + i * p, d, p) = Uf.transpose();
-    rhs.segment(d + i * p, p) = problem.hard[i].value;
+    rhs.segment(d + i * p, p) = hard[i].value;
   }
   return K.fullPivLu().solve(rhs).head(d);
 }
@@ -139,7 +143,8 @@ TEST(ModelProblemTest, RandomBasisMatchesDenseKkt) {
       const Eigen::VectorXd expected = DenseReducedSolution(op, *basis, problem);
       EXPECT_LT(RelativeDifference(reduced->coefficients, expected), 1e-8) << type.ToString();
       // Hard constraints hold exactly in the lifted field.
-      for (const HardConstraint& c : problem.hard) {
+      for (const FieldConstraint& c : problem.constraints) {
+        if (!c.hard()) continue;
         auto values = LiftFaces(*basis, reduced->coefficients, std::vector<int32_t>{c.face});
         ASSERT_TRUE(values.ok());
         EXPECT_LT((*values - c.value).norm(), 1e-9);
@@ -159,32 +164,32 @@ TEST(ModelProblemTest, InvalidProblems) {
     return SolveReducedModelProblem(**sys, p).status().code();
   };
   ModelProblem p = good;
-  p.mu_s = -1;
+  p.weights.mu_s = -1;
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   p = good;
-  p.mu_b = std::numeric_limits<double>::quiet_NaN();
+  p.weights.mu_b = std::numeric_limits<double>::quiet_NaN();
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   p = good;
-  p.mu_s = 0;
-  p.mu_b = 0;
+  p.weights.mu_s = 0;
+  p.weights.mu_b = 0;
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   p = good;
-  p.mu_c = -2;
+  p.weights.mu_c = -2;
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   p = good;
-  p.soft[0].face = 80;
+  p.constraints[0].face = 80;  // soft
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   p = good;
-  p.hard[0].face = -3;
+  p.constraints[2].face = -3;  // hard
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   p = good;
-  p.soft[1].value = Eigen::VectorXd::Zero(3);
+  p.constraints[1].value = Eigen::VectorXd::Zero(3);
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   p = good;
-  p.hard[0].value[1] = std::numeric_limits<double>::infinity();
+  p.constraints[2].value[1] = std::numeric_limits<double>::infinity();
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   p = good;
-  p.soft[0].weight = 0;
+  p.constraints[0].weight = 0;
   EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
   ReducedSolveOptions bad_options;
   bad_options.dependence_tolerance = 0;
@@ -192,7 +197,7 @@ TEST(ModelProblemTest, InvalidProblems) {
             absl::StatusCode::kInvalidArgument);
   // The same face hard-constrained twice: dependent rows.
   p = good;
-  p.hard.push_back(p.hard[0]);
+  p.constraints.push_back(p.constraints[2]);
   EXPECT_EQ(code(p), absl::StatusCode::kFailedPrecondition);
   // More hard DOFs (2 x 11 = 22) than the dimension (20).
   p = RandomProblem(mesh.num_faces(), 2, 0, 11, 5, 1.0, 0.0, 1.0);

@@ -1,12 +1,9 @@
-// Basis construction and (de)serialization (core/operators, core/basis, core/basis/basis_io).
+#include "server/served_basis.h"
 
-#include "absl/strings/str_cat.h"
-#include "core/basis/basis.h"
-#include "core/basis/basis_io.h"
+#include <utility>
+
 #include "core/common/cancel.h"
 #include "core/common/status_macros.h"
-#include "core/operators/field_operator.h"
-#include "server/engine.h"
 
 namespace fieldspace::server {
 namespace {
@@ -32,9 +29,7 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
                                             const BuildContext& context) {
   if (context.progress) context.progress(BuildStage::kOperator, 0);
   ASSIGN_OR_RETURN(FieldOperator op, BuildFieldOperator(mesh, key.field));
-  if (IsCancelled(context.cancel)) {
-    return absl::CancelledError("basis construction cancelled");
-  }
+  if (IsCancelled(context.cancel)) return absl::CancelledError("basis construction cancelled");
   BasisOptions options;
   options.params.dimension = key.dimension;
   options.params.sigma = key.sigma;
@@ -55,16 +50,29 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
   return out;
 }
 
-absl::StatusOr<std::string> SerializeBasis(const Basis& basis, const std::string& mesh_id) {
-  return EncodeBasis(basis, mesh_id);
-}
-
-absl::StatusOr<DeserializedBasis> DeserializeBasis(std::string_view bytes) {
-  ASSIGN_OR_RETURN(fieldspace::LoadedBasis loaded, DecodeBasis(bytes));
-  DeserializedBasis out;
-  out.mesh_id = std::move(loaded.mesh_id);
-  out.basis = std::make_shared<const Basis>(std::move(loaded.basis));
-  return out;
+absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
+    BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
+    std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context) {
+  FieldOperator assembled;
+  if (op == nullptr) {
+    ASSIGN_OR_RETURN(assembled, BuildFieldOperator(*mesh, basis->type));
+    op = &assembled;
+  }
+  if (IsCancelled(context.cancel)) return absl::CancelledError("cancelled");
+  if (context.progress) context.progress(BuildStage::kPrecompute, 0.5);
+  ReducedSystemOptions options;
+  options.threads = context.threads;
+  options.cancel = context.cancel;
+  ASSIGN_OR_RETURN(std::shared_ptr<const ReducedSystem> system,
+                   ReducedSystem::Build(basis, *op, options));
+  auto served = std::make_shared<ServedBasis>();
+  served->record = std::move(record);
+  served->mesh = std::move(mesh);
+  served->memory_bytes = basis->MemoryBytes() + system->stats().memory_bytes;
+  served->basis = std::move(basis);
+  served->system = std::move(system);
+  served->energy_cache = std::make_shared<EnergyFactorCache>();
+  return std::shared_ptr<const ServedBasis>(std::move(served));
 }
 
 }  // namespace fieldspace::server

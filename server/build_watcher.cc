@@ -1,0 +1,187 @@
+// BuildBasis (server streaming): watches a (possibly shared) build job and streams its progress.
+
+#include <cmath>
+#include <memory>
+#include <mutex>
+
+#include "core/common/status_macros.h"
+#include "server/proto_convert.h"
+#include "server/reactors.h"
+#include "server/rpc_util.h"
+
+namespace fieldspace::server {
+namespace {
+
+// BuildBasis: watches a (possibly shared) build job and streams its progress. The job lives on
+// if this stream goes away.
+class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgress>,
+                           public RefCounted {
+ public:
+  BuildWatcher(FieldService* service, grpc::CallbackServerContext* context,
+               const v1::BuildBasisRequest& request)
+      : registry_(service->registry()) {
+    absl::Status st = service->Admit(context);
+    absl::StatusOr<Registry::StartedBuild> started = Registry::StartedBuild{};
+    if (st.ok()) {
+      started = Start(service, request);
+    } else {
+      started = st;
+    }
+    if (!started.ok()) {
+      finished_ = true;
+      FinishWith(this, (started.status()));
+      return;
+    }
+    if (started->existing.has_value()) {
+      finished_ = true;
+      msg_.set_basis_id(started->existing->id);
+      msg_.set_phase(v1::BUILD_PHASE_DONE);
+      msg_.set_fraction(1.0);
+      BasisInfoFromRecord(*started->existing, msg_.mutable_basis());
+      auto status = service->registry()->GetBasisStatus(started->existing->id);
+      if (status.ok()) BasisInfoFromStatus(*status, msg_.mutable_basis());
+      StartWriteAndFinish(&msg_, grpc::WriteOptions(), grpc::Status::OK);
+      return;
+    }
+    job_ = started->job;
+    joined_ = started->joined;
+    // The job calls the listener from its own thread, possibly after this stream is done: the
+    // gate tells it whether the watcher still exists, and a reference keeps it alive meanwhile.
+    gate_ = std::make_shared<Gate>();
+    gate_->watcher = this;
+    token_ = job_->Subscribe([gate = gate_] {
+      BuildWatcher* watcher;
+      {
+        std::lock_guard<std::mutex> lock(gate->mu);
+        watcher = gate->watcher;
+        if (watcher == nullptr) return;
+        watcher->AddRef();
+      }
+      watcher->Pump();
+      watcher->DropRef();
+    });
+    Pump();  // the current state (often QUEUED) right away, with the basis id
+  }
+
+  void OnWriteDone(bool ok) override {
+    bool again = false, finish = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      writing_ = false;
+      if (!ok || cancelled_) {
+        finish = !finished_;
+        finished_ = true;
+      } else {
+        again = pending_;
+        pending_ = false;
+      }
+    }
+    if (finish) FinishWith(this, (absl::CancelledError("the client went away")));
+    if (again) Pump();
+  }
+
+  void OnCancel() override {
+    bool finish = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      cancelled_ = true;
+      // With a write in flight, OnWriteDone finishes instead.
+      if (!finished_ && !writing_) {
+        finished_ = true;
+        finish = true;
+      }
+    }
+    if (finish) FinishWith(this, (absl::CancelledError("cancelled by the client")));
+  }
+
+  void OnDone() override {
+    if (job_ != nullptr) {
+      job_->Unsubscribe(token_);
+      std::lock_guard<std::mutex> lock(gate_->mu);
+      gate_->watcher = nullptr;
+    }
+    DropRef();
+  }
+
+ private:
+  struct Gate {
+    std::mutex mu;
+    BuildWatcher* watcher = nullptr;
+  };
+
+  static absl::StatusOr<Registry::StartedBuild> Start(FieldService* service,
+                                                      const v1::BuildBasisRequest& request) {
+    ASSIGN_OR_RETURN(BuildRequest build, BuildRequestFromProto(request));
+    return service->registry()->StartBuild(std::move(build));
+  }
+
+  // Sends the job's current state unless a write is in flight (then once it completes).
+  void Pump() {
+    BuildJob::Progress progress = job_->progress();
+    bool final_ok = false, final_error = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (finished_ || cancelled_) return;
+      if (writing_) {
+        pending_ = true;
+        return;
+      }
+      const v1::BuildPhase phase = PhaseToProto(progress.stage);
+      if (!progress.finished && sent_any_ && phase == msg_.phase() &&
+          std::abs(progress.fraction - msg_.fraction()) < 0.005) {
+        return;
+      }
+      msg_.Clear();
+      msg_.set_basis_id(job_->basis_id());
+      msg_.set_phase(phase);
+      msg_.set_fraction(progress.fraction);
+      msg_.set_joined(joined_);
+      sent_any_ = true;
+      if (progress.finished) {
+        finished_ = true;
+        if (progress.status.ok()) {
+          final_ok = true;
+          absl::StatusOr<BasisStatus> s = registry_->GetBasisStatus(progress.record.id);
+          if (s.ok()) {
+            BasisInfoFromStatus(*s, msg_.mutable_basis());
+          } else {  // deleted in the meantime: report what was built
+            BasisInfoFromRecord(progress.record, msg_.mutable_basis());
+          }
+        } else {
+          final_error = true;
+        }
+      }
+      writing_ = !final_error;
+    }
+    if (final_ok) {
+      StartWriteAndFinish(&msg_, grpc::WriteOptions(), grpc::Status::OK);
+    } else if (final_error) {
+      FinishWith(this, (progress.status));
+    } else {
+      StartWrite(&msg_);
+    }
+  }
+
+  Registry* const registry_;
+  std::shared_ptr<BuildJob> job_;
+  std::shared_ptr<Gate> gate_;
+  uint64_t token_ = 0;
+  bool joined_ = false;
+  std::mutex mu_;
+  bool writing_ = false;
+  bool pending_ = false;
+  bool finished_ = false;
+  bool cancelled_ = false;
+  bool sent_any_ = false;
+  v1::BuildBasisProgress msg_;
+};
+
+}  // namespace
+
+grpc::ServerWriteReactor<v1::BuildBasisProgress>* NewBuildWatcher(
+    FieldService* service, grpc::CallbackServerContext* context,
+    const v1::BuildBasisRequest& request) {
+  return new BuildWatcher(service, context, request);
+}
+
+}  // namespace fieldspace::server

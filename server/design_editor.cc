@@ -1,0 +1,121 @@
+#include "server/design_editor.h"
+
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "server/proto_convert.h"
+#include "server/rpc_util.h"
+
+namespace fieldspace::server {
+
+absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* update) {
+  update->set_seq(r.seq());
+  refactorized_ = false;
+  edit_start_ = Clock::now();
+  switch (r.edit_case()) {
+    case v1::DesignRequest::EDIT_NOT_SET:
+      return absl::InvalidArgumentError("a DesignRequest must carry one edit");
+    case v1::DesignRequest::kOpen:
+      RETURN_IF_ERROR(Open(r.open()));
+      break;
+    default:
+      RETURN_IF_ERROR(Edit(r));
+      break;
+  }
+  const double edit_ms = MsSince(edit_start_);
+  const Eigen::VectorXd& x = session_->coefficients();
+  update->mutable_coefficients()->Add(x.data(), x.data() + x.size());
+  const auto lift_start = Clock::now();
+  update->mutable_watched()->set_encoding(EncodingToProto(watch_encoding_));
+  update->mutable_watched()->mutable_faces()->Add(watch_.begin(), watch_.end());
+  RETURN_IF_ERROR(LiftToValues(*basis_, x, watch_, watch_encoding_,
+                               update->mutable_watched()->mutable_values()));
+  v1::DesignTimings* t = update->mutable_timings();
+  t->set_edit_ms(edit_ms);
+  t->set_lift_ms(MsSince(lift_start));
+  t->set_refactorized(refactorized_);
+  update->set_num_constraints(session_->num_constraints());
+  update->set_num_hard_constraints(session_->num_hard_constraints());
+  update->set_basis_id(basis_->record.id);
+  return absl::OkStatus();
+}
+
+absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
+  if (session_ != nullptr) return absl::FailedPreconditionError("the session is already open");
+  ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis, lookup_(open.basis_id()));
+  edit_start_ = Clock::now();  // a basis loaded from the store is not part of the edit
+  const EnergyWeights weights = WeightsFromProto(open.weights());
+  RETURN_IF_ERROR(ValidateWeights(weights));
+  basis_ = std::move(basis);
+  if (absl::Status st = SetWatch(open.watch_faces(), open.watch_encoding()); !st.ok()) {
+    basis_.reset();
+    return st;
+  }
+  DesignSessionOptions options;
+  options.energy_cache = basis_->energy_cache;
+  options.verify_interval = options_.verify_interval;
+  absl::StatusOr<std::unique_ptr<DesignSession>> session =
+      DesignSession::Create(basis_->system, weights, options);
+  if (!session.ok()) {
+    basis_.reset();
+    watch_.clear();
+    return session.status();
+  }
+  session_ = std::move(*session);
+  refactorized_ = session_->last_factorized();
+  return absl::OkStatus();
+}
+
+absl::Status DesignEditor::Edit(const v1::DesignRequest& r) {
+  if (session_ == nullptr) {
+    return absl::FailedPreconditionError("the first message of a session must be 'open'");
+  }
+  switch (r.edit_case()) {
+    case v1::DesignRequest::kAdd: {
+      if (session_->num_constraints() >= options_.max_constraints) {
+        return absl::ResourceExhaustedError("too many constraints in this session");
+      }
+      ASSIGN_OR_RETURN(FieldConstraint c,
+                       ConstraintFromProto(*basis_, r.add().constraint(),
+                                           absl::StrCat("add id ", r.add().id())));
+      return session_->AddConstraint(r.add().id(), c);
+    }
+    case v1::DesignRequest::kMove: {
+      ASSIGN_OR_RETURN(
+          Eigen::VectorXd value,
+          ConstraintValueFromProto(*basis_, r.move().face(), r.move().value(), r.move().encoding(),
+                                   absl::StrCat("move id ", r.move().id())));
+      return session_->MoveConstraint(r.move().id(), r.move().face(), std::move(value));
+    }
+    case v1::DesignRequest::kRemove:
+      return session_->RemoveConstraint(r.remove().id());
+    case v1::DesignRequest::kSetWeights: {
+      const EnergyWeights weights = WeightsFromProto(r.set_weights());
+      RETURN_IF_ERROR(ValidateWeights(weights));
+      RETURN_IF_ERROR(session_->SetWeights(weights));
+      refactorized_ = session_->last_factorized();
+      return absl::OkStatus();
+    }
+    case v1::DesignRequest::kWatch:
+      return SetWatch(r.watch().faces(), r.watch().encoding());
+    case v1::DesignRequest::kOpen:
+    case v1::DesignRequest::EDIT_NOT_SET:
+      break;
+  }
+  return absl::InternalError("unreachable: open and empty requests are handled by Apply");
+}
+
+absl::Status DesignEditor::SetWatch(absl::Span<const int32_t> faces, int encoding) {
+  RETURN_IF_ERROR(CheckFaces(faces, basis_->mesh->num_faces(), "watch"));
+  ASSIGN_OR_RETURN(FieldEncoding watch_encoding, EncodingFromProto(encoding));
+  const int64_t bytes =
+      static_cast<int64_t>(faces.size()) * ValuesPerFace(basis_->basis->type, watch_encoding) * 4;
+  if (bytes > options_.max_message_bytes / 2) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("watching ", faces.size(), " faces exceeds the message size limit"));
+  }
+  watch_encoding_ = watch_encoding;
+  watch_.assign(faces.begin(), faces.end());
+  return absl::OkStatus();
+}
+
+}  // namespace fieldspace::server

@@ -1,0 +1,67 @@
+#ifndef FIELDSPACE_SERVER_DESIGN_EDITOR_H_
+#define FIELDSPACE_SERVER_DESIGN_EDITOR_H_
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/operators/conversions.h"
+#include "core/subspace/design_session.h"
+#include "fieldspace/v1/fieldspace.pb.h"
+#include "server/served_basis.h"
+
+namespace fieldspace::server {
+
+struct DesignEditorOptions {
+  // DesignSessionOptions::verify_interval of the sessions.
+  int32_t verify_interval = 16;
+  // Watched faces must fit in half of a message of this size.
+  int64_t max_message_bytes = int64_t{64} << 20;
+  int32_t max_constraints = 1 << 20;
+};
+
+// What a Design stream does with its messages, without gRPC: the first request opens a
+// core DesignSession on a basis (weights, watched faces), every later one is an edit
+// (add / move / remove / set_weights / watch), and each is answered by one DesignUpdate with the
+// coefficients, the watched faces' lifted values (through the basis's LiftPlan) and timings.
+// A request that fails leaves the session exactly as it was. Thread-compatible (one stream).
+class DesignEditor {
+ public:
+  using BasisLookup =
+      std::function<absl::StatusOr<std::shared_ptr<const ServedBasis>>(const std::string& id)>;
+
+  DesignEditor(BasisLookup lookup, const DesignEditorOptions& options)
+      : lookup_(std::move(lookup)), options_(options) {}
+
+  // Fills `update` (everything but timings.total_ms, which the transport adds). Errors: those
+  // of the session (InvalidArgument, NotFound, AlreadyExists, FailedPrecondition), of the basis
+  // lookup, FailedPrecondition for an edit before `open` or a second `open`,
+  // ResourceExhausted for too many constraints or watched faces.
+  absl::Status Apply(const fieldspace::v1::DesignRequest& request,
+                     fieldspace::v1::DesignUpdate* update);
+
+  bool is_open() const { return session_ != nullptr; }
+  const DesignSession* session() const { return session_.get(); }
+
+ private:
+  absl::Status Open(const fieldspace::v1::OpenDesign& open);
+  absl::Status Edit(const fieldspace::v1::DesignRequest& request);
+  absl::Status SetWatch(absl::Span<const int32_t> faces, int encoding);
+
+  BasisLookup lookup_;
+  DesignEditorOptions options_;
+  std::shared_ptr<const ServedBasis> basis_;
+  std::unique_ptr<DesignSession> session_;
+  std::vector<int32_t> watch_;
+  FieldEncoding watch_encoding_ = FieldEncoding::kDof;
+  bool refactorized_ = false;  // by the request being applied
+  std::chrono::steady_clock::time_point edit_start_;
+};
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_DESIGN_EDITOR_H_

@@ -1,0 +1,185 @@
+// Design (bidirectional streaming): one DesignEditor per stream. Strictly sequential: read an
+// edit, apply it on the pool, write the answer, read the next one.
+
+#include <atomic>
+#include <mutex>
+#include <string>
+
+#include "server/design_editor.h"
+#include "server/reactors.h"
+#include "server/rpc_util.h"
+
+namespace fieldspace::server {
+namespace {
+
+DesignEditorOptions EditorOptions(const ServiceOptions& service) {
+  DesignEditorOptions options;
+  options.verify_interval = service.design_verify_interval;
+  options.max_message_bytes = service.max_message_bytes;
+  return options;
+}
+
+// Design: one session per stream. Strictly sequential: read an edit, process it on the pool,
+// write the answer, read the next one.
+class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1::DesignUpdate>,
+                            public DrainableStream {
+ public:
+  DesignReactor(FieldService* service, grpc::CallbackServerContext* context)
+      : service_(service),
+        editor_([registry =
+                     service->registry()](const std::string& id) { return registry->GetBasis(id); },
+                EditorOptions(service->options())) {
+    if (absl::Status admit = service->Admit(context); !admit.ok()) {
+      finish_sent_ = true;
+      FinishWith(this, (admit));
+      return;
+    }
+    service_->RegisterStream(this);
+    registered_ = true;
+    reading_ = true;
+    StartRead(&request_);
+  }
+
+  void OnReadDone(bool ok) override {
+    received_ = Clock::now();
+    enum { kWork, kFinish, kNothing } next;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      reading_ = false;
+      if (finish_sent_) {
+        // Drain() finished the stream while this read was in flight: the message (or the end of
+        // the client's side) is dropped, and no work may be queued for a finishing reactor. (A
+        // failed read used to fall through to Work() here and write to a finished call.)
+        next = kNothing;
+      } else if (!ok) {
+        // The client closed its side (or went away): end the session.
+        finish_sent_ = true;
+        next = kFinish;
+      } else {
+        working_ = true;
+        next = kWork;
+      }
+    }
+    if (next == kNothing) return;
+    if (next == kFinish) {
+      FinishWith(this, absl::OkStatus());
+      return;
+    }
+    // The queued task holds a reference: OnDone (and deletion) cannot overtake it.
+    AddRef();
+    const bool submitted = service_->pool()->Submit(ComputePool::Lane::kInteractive, [this] {
+      Work();
+      DropRef();
+    });
+    if (!submitted) {
+      {
+        std::lock_guard<std::mutex> lock(mu_);
+        working_ = false;
+        finish_sent_ = true;
+      }
+      FinishWith(this, (ShuttingDown()));
+      DropRef();
+    }
+  }
+
+  void OnWriteDone(bool ok) override {
+    enum { kRead, kFinishCancelled, kFinishDrain, kNothing } next = kNothing;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      writing_ = false;
+      if (finish_sent_) {
+        next = kNothing;
+      } else if (!ok) {
+        next = kFinishCancelled;
+        finish_sent_ = true;
+      } else if (drain_requested_) {
+        next = kFinishDrain;
+        finish_sent_ = true;
+      } else {
+        next = kRead;
+        reading_ = true;
+      }
+    }
+    switch (next) {
+      case kRead:
+        StartRead(&request_);
+        break;
+      case kFinishCancelled:
+        FinishWith(this, (absl::CancelledError("the client went away")));
+        break;
+      case kFinishDrain:
+        FinishWith(this, (ShuttingDown()));
+        break;
+      case kNothing:
+        break;
+    }
+  }
+
+  void OnCancel() override { cancelled_.store(true); }
+
+  void OnDone() override {
+    if (registered_) service_->UnregisterStream(this);
+    DropRef();
+  }
+
+  void Drain() override {
+    bool finish = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      drain_requested_ = true;
+      if (!working_ && !writing_ && !finish_sent_) {
+        finish = true;
+        finish_sent_ = true;
+      }
+    }
+    if (finish) FinishWith(this, (ShuttingDown()));
+  }
+
+ private:
+  void Work() {
+    update_.Clear();
+    absl::Status status = cancelled_.load()
+                              ? absl::CancelledError("cancelled")
+                              : Guarded([this] { return editor_.Apply(request_, &update_); });
+    bool finish = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      working_ = false;
+      if (!status.ok()) {
+        finish = !finish_sent_;
+        finish_sent_ = true;
+      } else {
+        writing_ = true;
+      }
+    }
+    if (!status.ok()) {
+      if (finish) FinishWith(this, (status));
+      return;
+    }
+    update_.mutable_timings()->set_total_ms(MsSince(received_));
+    StartWrite(&update_);
+  }
+
+  FieldService* const service_;
+  bool registered_ = false;
+  std::atomic<bool> cancelled_{false};
+  std::mutex mu_;
+  bool reading_ = false;
+  bool working_ = false;
+  bool writing_ = false;
+  bool finish_sent_ = false;
+  bool drain_requested_ = false;
+  Clock::time_point received_;
+  v1::DesignRequest request_;
+  v1::DesignUpdate update_;
+  DesignEditor editor_;
+};
+
+}  // namespace
+
+grpc::ServerBidiReactor<v1::DesignRequest, v1::DesignUpdate>* NewDesignReactor(
+    FieldService* service, grpc::CallbackServerContext* context) {
+  return new DesignReactor(service, context);
+}
+
+}  // namespace fieldspace::server

@@ -1,0 +1,257 @@
+#include "server/proto_convert.h"
+
+#include <cmath>
+#include <numeric>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "core/subspace/projection.h"
+
+namespace fieldspace::server {
+
+absl::StatusOr<FieldType> FieldTypeFromProto(const v1::FieldType& p) {
+  switch (p.kind()) {
+    case v1::FIELD_KIND_VECTOR:
+      return FieldType::Vector();
+    case v1::FIELD_KIND_NFIELD: {
+      FieldType t = FieldType::NField(p.n());
+      RETURN_IF_ERROR(t.Validate());
+      return t;
+    }
+    case v1::FIELD_KIND_TENSOR:
+      return FieldType::Tensor();
+    default:
+      return absl::InvalidArgumentError(
+          "field.kind must be FIELD_KIND_VECTOR, FIELD_KIND_NFIELD or FIELD_KIND_TENSOR");
+  }
+}
+
+void FieldTypeToProto(const FieldType& t, v1::FieldType* p) {
+  switch (t.kind) {
+    case FieldKind::kVector:
+      p->set_kind(v1::FIELD_KIND_VECTOR);
+      break;
+    case FieldKind::kNField:
+      p->set_kind(v1::FIELD_KIND_NFIELD);
+      p->set_n(t.n);
+      break;
+    case FieldKind::kTensor:
+      p->set_kind(v1::FIELD_KIND_TENSOR);
+      break;
+  }
+}
+
+absl::StatusOr<FieldEncoding> EncodingFromProto(int encoding) {
+  switch (encoding) {
+    case v1::FIELD_ENCODING_DOF:
+      return FieldEncoding::kDof;
+    case v1::FIELD_ENCODING_AMBIENT:
+      return FieldEncoding::kAmbient;
+    default:
+      return absl::InvalidArgumentError(absl::StrCat("unknown field encoding ", encoding));
+  }
+}
+
+v1::FieldEncoding EncodingToProto(FieldEncoding e) {
+  return e == FieldEncoding::kAmbient ? v1::FIELD_ENCODING_AMBIENT : v1::FIELD_ENCODING_DOF;
+}
+
+v1::BuildPhase PhaseToProto(BuildStage stage) {
+  switch (stage) {
+    case BuildStage::kQueued:
+      return v1::BUILD_PHASE_QUEUED;
+    case BuildStage::kOperator:
+      return v1::BUILD_PHASE_OPERATOR;
+    case BuildStage::kSampling:
+      return v1::BUILD_PHASE_SAMPLING;
+    case BuildStage::kRegions:
+      return v1::BUILD_PHASE_REGIONS;
+    case BuildStage::kEigensolve:
+      return v1::BUILD_PHASE_EIGENSOLVE;
+    case BuildStage::kAssembly:
+      return v1::BUILD_PHASE_ASSEMBLY;
+    case BuildStage::kPrecompute:
+      return v1::BUILD_PHASE_PRECOMPUTE;
+    case BuildStage::kSaving:
+      return v1::BUILD_PHASE_SAVING;
+    case BuildStage::kDone:
+      return v1::BUILD_PHASE_DONE;
+  }
+  return v1::BUILD_PHASE_UNSPECIFIED;
+}
+
+void MeshInfoFromRecord(const MeshRecord& r, bool loaded, v1::MeshInfo* p) {
+  p->set_id(r.id);
+  p->set_name(r.name);
+  p->set_num_vertices(r.num_vertices);
+  p->set_num_faces(r.num_faces);
+  p->set_num_edges(r.num_edges);
+  p->set_num_components(r.num_components);
+  p->set_num_boundary_loops(r.num_boundary_loops);
+  p->set_euler_characteristic(r.euler_characteristic);
+  p->set_genus(r.genus);
+  p->set_total_area(r.total_area);
+  p->set_dropped_unreferenced_vertices(r.dropped_unreferenced_vertices);
+  p->set_polygons_triangulated(r.polygons_triangulated);
+  p->set_loaded(loaded);
+  p->set_created_unix_ms(r.created_unix_ms);
+}
+
+void BasisInfoFromStatus(const BasisStatus& s, v1::BasisInfo* p) {
+  const BasisRecord& r = s.record;
+  p->set_id(r.id);
+  p->set_mesh_id(r.key.mesh_id);
+  FieldTypeToProto(r.key.field, p->mutable_field());
+  p->set_dimension(r.key.dimension);
+  p->set_sigma(r.key.sigma);
+  p->set_fields_per_region(r.key.fields_per_region);
+  p->set_seed(r.key.seed);
+  p->set_coarse_dimension(r.key.coarse_dimension);
+  p->set_adaptive(r.key.weights_hash != 0);
+  p->set_dofs(r.dofs);
+  if (s.ready) {
+    p->set_state(v1::BASIS_STATE_READY);
+    p->set_columns(r.columns);
+    p->set_num_regions(r.num_regions);
+    p->set_radius(r.radius);
+    p->set_nnz(r.nnz);
+    p->set_build_seconds(r.build_seconds);
+    p->set_loaded(s.loaded);
+    p->set_memory_bytes(s.memory_bytes);
+    p->set_created_unix_ms(r.created_unix_ms);
+    p->set_phase(v1::BUILD_PHASE_DONE);
+    p->set_fraction(1.0);
+  } else {
+    p->set_state(v1::BASIS_STATE_BUILDING);
+    p->set_phase(PhaseToProto(s.progress.stage));
+    p->set_fraction(s.progress.fraction);
+  }
+}
+
+void BasisInfoFromRecord(const BasisRecord& r, v1::BasisInfo* p) {
+  BasisStatus s;
+  s.record = r;
+  s.ready = true;
+  BasisInfoFromStatus(s, p);
+}
+
+absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& p) {
+  BuildRequest build;
+  build.key.mesh_id = p.mesh_id();
+  ASSIGN_OR_RETURN(build.key.field, FieldTypeFromProto(p.field()));
+  build.key.dimension = p.dimension();
+  build.key.sigma = p.has_sigma() ? p.sigma() : 40.0;
+  build.key.fields_per_region = p.fields_per_region();
+  build.key.seed = p.seed();
+  build.key.coarse_dimension = p.coarse_dimension();
+  build.face_weights =
+      Eigen::Map<const Eigen::VectorXd>(p.face_weights().data(), p.face_weights().size());
+  return build;
+}
+
+EnergyWeights WeightsFromProto(const v1::Weights& w) {
+  return {.mu_s = w.mu_s(), .mu_b = w.mu_b(), .mu_c = w.mu_c()};
+}
+
+absl::Status CheckFaces(absl::Span<const int32_t> faces, int32_t num_faces,
+                        absl::string_view what) {
+  for (int32_t f : faces) {
+    if (f < 0 || f >= num_faces) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ": face ", f, " is out of range [0, ", num_faces, ")"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<Eigen::VectorXd> ConstraintValueFromProto(const ServedBasis& basis, int32_t face,
+                                                         absl::Span<const double> value,
+                                                         int encoding, absl::string_view what) {
+  const TriangleMesh& mesh = *basis.mesh;
+  const FieldType& type = basis.basis->type;
+  const int32_t faces[1] = {face};
+  RETURN_IF_ERROR(CheckFaces(faces, mesh.num_faces(), what));
+  ASSIGN_OR_RETURN(FieldEncoding enc, EncodingFromProto(encoding));
+  const int32_t vpf = ValuesPerFace(type, enc);
+  if (static_cast<int64_t>(value.size()) != vpf) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        what, ": value has ", value.size(), " numbers; a ", type.ToString(), " constraint in ",
+        enc == FieldEncoding::kAmbient ? "ambient" : "DOF", " encoding needs ", vpf));
+  }
+  Eigen::VectorXd dofs(type.dofs_per_face());
+  RETURN_IF_ERROR(
+      ValuesToDofs(mesh, type, enc, faces, value, absl::MakeSpan(dofs.data(), dofs.size())));
+  return dofs;
+}
+
+absl::StatusOr<FieldConstraint> ConstraintFromProto(const ServedBasis& basis,
+                                                    const v1::Constraint& c,
+                                                    absl::string_view what) {
+  FieldConstraint out;
+  out.face = c.face();
+  ASSIGN_OR_RETURN(out.value,
+                   ConstraintValueFromProto(basis, c.face(), c.value(), c.encoding(), what));
+  if (c.has_weight()) {
+    if (!std::isfinite(c.weight()) || c.weight() <= 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ": weight must be finite and > 0, got ", c.weight()));
+    }
+    out.weight = c.weight();
+  }
+  out.kind = c.hard() ? ConstraintKind::kHard : ConstraintKind::kSoft;
+  return out;
+}
+
+absl::StatusOr<Eigen::VectorXd> CoefficientsFromProto(absl::Span<const double> c,
+                                                      const ServedBasis& basis) {
+  const int32_t d = basis.basis->dimension();
+  if (static_cast<int64_t>(c.size()) != d) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("expected ", d, " coefficients (the basis dimension), got ", c.size()));
+  }
+  for (size_t i = 0; i < c.size(); ++i) {
+    if (!std::isfinite(c[i])) {
+      return absl::InvalidArgumentError(absl::StrCat("coefficient ", i, " is not finite"));
+    }
+  }
+  return Eigen::Map<const Eigen::VectorXd>(c.data(), d);
+}
+
+absl::StatusOr<Eigen::VectorXd> FieldFromProto(const v1::FieldValues& field,
+                                               const ServedBasis& basis) {
+  const TriangleMesh& mesh = *basis.mesh;
+  const FieldType& type = basis.basis->type;
+  if (!field.faces().empty()) {
+    return absl::InvalidArgumentError(
+        "Project takes a field on all faces: leave field.faces empty");
+  }
+  ASSIGN_OR_RETURN(FieldEncoding encoding, EncodingFromProto(field.encoding()));
+  const int64_t vpf = ValuesPerFace(type, encoding);
+  if (field.values().size() != vpf * mesh.num_faces()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("field has ", field.values().size(), " values; ", mesh.num_faces(),
+                     " faces x ", vpf, " values per face = ", vpf * mesh.num_faces(), " expected"));
+  }
+  const std::vector<double> values(field.values().begin(), field.values().end());
+  std::vector<int32_t> faces(mesh.num_faces());
+  std::iota(faces.begin(), faces.end(), 0);
+  Eigen::VectorXd X(int64_t{type.dofs_per_face()} * mesh.num_faces());
+  RETURN_IF_ERROR(
+      ValuesToDofs(mesh, type, encoding, faces, values, absl::MakeSpan(X.data(), X.size())));
+  return X;
+}
+
+absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
+                          absl::Span<const int32_t> faces, FieldEncoding encoding,
+                          google::protobuf::RepeatedField<float>* out) {
+  const FieldType& type = basis.basis->type;
+  std::vector<double> dofs(faces.size() * type.dofs_per_face());
+  RETURN_IF_ERROR(LiftFacesInto(*basis.system, x, faces, absl::MakeSpan(dofs)));
+  const int32_t vpf = ValuesPerFace(type, encoding);
+  const int old = out->size();
+  out->Resize(old + static_cast<int>(faces.size()) * vpf, 0.0f);
+  return DofsToValues(*basis.mesh, type, encoding, faces, dofs,
+                      absl::MakeSpan(out->mutable_data() + old, faces.size() * vpf));
+}
+
+}  // namespace fieldspace::server

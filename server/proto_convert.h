@@ -1,0 +1,70 @@
+#ifndef FIELDSPACE_SERVER_PROTO_CONVERT_H_
+#define FIELDSPACE_SERVER_PROTO_CONVERT_H_
+
+// The one place where fieldspace.v1 messages become core types and back. Every function checks
+// what it reads (sizes, ranges, finiteness) and says what is wrong with InvalidArgument; nothing
+// else in the server reads request fields that carry numbers for core.
+
+#include <cstdint>
+#include <vector>
+
+#include "Eigen/Core"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "absl/types/span.h"
+#include "core/operators/conversions.h"
+#include "core/operators/field_type.h"
+#include "core/operators/reference_solvers.h"
+#include "fieldspace/v1/fieldspace.pb.h"
+#include "server/registry.h"
+
+namespace fieldspace::server {
+
+namespace v1 = ::fieldspace::v1;
+
+absl::StatusOr<FieldType> FieldTypeFromProto(const v1::FieldType& p);
+void FieldTypeToProto(const FieldType& t, v1::FieldType* p);
+
+absl::StatusOr<FieldEncoding> EncodingFromProto(int encoding);
+v1::FieldEncoding EncodingToProto(FieldEncoding e);
+
+v1::BuildPhase PhaseToProto(BuildStage stage);
+
+void MeshInfoFromRecord(const MeshRecord& r, bool loaded, v1::MeshInfo* p);
+void BasisInfoFromStatus(const BasisStatus& s, v1::BasisInfo* p);
+void BasisInfoFromRecord(const BasisRecord& r, v1::BasisInfo* p);
+
+// The build a BuildBasisRequest asks for (validated further by Registry::StartBuild).
+absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& p);
+
+// EnergyWeights with the wire's names (unset fields are 0, as proto3 reads them).
+EnergyWeights WeightsFromProto(const v1::Weights& w);
+
+// InvalidArgument naming `what` unless every face is in [0, num_faces).
+absl::Status CheckFaces(absl::Span<const int32_t> faces, int32_t num_faces, absl::string_view what);
+
+// One face's value in `encoding` -> its DOFs in the face frame. `what` names the request part in
+// messages ("add id 3", "constraint 7").
+absl::StatusOr<Eigen::VectorXd> ConstraintValueFromProto(const ServedBasis& basis, int32_t face,
+                                                         absl::Span<const double> value,
+                                                         int encoding, absl::string_view what);
+absl::StatusOr<FieldConstraint> ConstraintFromProto(const ServedBasis& basis,
+                                                    const v1::Constraint& c,
+                                                    absl::string_view what);
+
+// d finite coefficients (d = the basis dimension).
+absl::StatusOr<Eigen::VectorXd> CoefficientsFromProto(absl::Span<const double> c,
+                                                      const ServedBasis& basis);
+
+// A field on all faces (faces empty) -> k DOFs.
+absl::StatusOr<Eigen::VectorXd> FieldFromProto(const v1::FieldValues& field,
+                                               const ServedBasis& basis);
+
+// Lifts `x` at `faces` through the basis's LiftPlan and appends the values in `encoding` to `out`.
+absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
+                          absl::Span<const int32_t> faces, FieldEncoding encoding,
+                          google::protobuf::RepeatedField<float>* out);
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_PROTO_CONVERT_H_

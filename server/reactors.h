@@ -1,0 +1,38 @@
+#ifndef FIELDSPACE_SERVER_REACTORS_H_
+#define FIELDSPACE_SERVER_REACTORS_H_
+
+// The streaming RPCs' reactors, one file each (upload_reactor.cc, chunk_writers.cc,
+// build_watcher.cc, design_reactor.cc). Each deletes itself when gRPC is done with it.
+
+#include "fieldspace/v1/fieldspace.grpc.pb.h"
+#include "grpcpp/grpcpp.h"
+
+namespace fieldspace::server {
+
+class FieldService;
+
+// UploadMesh: accumulates in-order chunks, then parses and registers the mesh on the pool.
+grpc::ServerReadReactor<fieldspace::v1::UploadMeshRequest>* NewUploadReactor(
+    FieldService* service, grpc::CallbackServerContext* context,
+    fieldspace::v1::MeshInfo* response);
+
+// GetMeshGeometry and Lift: chunks produced on the pool.
+grpc::ServerWriteReactor<fieldspace::v1::MeshGeometryChunk>* NewGeometryWriter(
+    FieldService* service, grpc::CallbackServerContext* context,
+    const fieldspace::v1::GetMeshGeometryRequest& request);
+grpc::ServerWriteReactor<fieldspace::v1::FieldChunk>* NewLiftWriter(
+    FieldService* service, grpc::CallbackServerContext* context,
+    const fieldspace::v1::LiftRequest& request);
+
+// BuildBasis: watches a (possibly shared) build job; the job outlives the stream.
+grpc::ServerWriteReactor<fieldspace::v1::BuildBasisProgress>* NewBuildWatcher(
+    FieldService* service, grpc::CallbackServerContext* context,
+    const fieldspace::v1::BuildBasisRequest& request);
+
+// Design: one session per stream (the edit logic is DesignEditor, design_editor.h).
+grpc::ServerBidiReactor<fieldspace::v1::DesignRequest, fieldspace::v1::DesignUpdate>*
+NewDesignReactor(FieldService* service, grpc::CallbackServerContext* context);
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_REACTORS_H_

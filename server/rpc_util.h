@@ -1,0 +1,153 @@
+#ifndef FIELDSPACE_SERVER_RPC_UTIL_H_
+#define FIELDSPACE_SERVER_RPC_UTIL_H_
+
+// Building blocks of the RPC layer: how a call ends (FinishWith: the one place a reactor turns
+// an absl::Status into the call's grpc::Status), how exceptions from core are contained
+// (Guarded), reference counting for reactors other threads touch, unary calls on the compute
+// pool (RunUnary) and server-streaming calls that produce chunks on the pool (ChunkWriter).
+
+#include <atomic>
+#include <chrono>
+#include <exception>
+#include <new>
+#include <utility>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "grpcpp/grpcpp.h"
+#include "server/compute_pool.h"
+#include "server/field_service.h"
+#include "server/status_util.h"
+
+namespace fieldspace::server {
+
+namespace v1 = ::fieldspace::v1;
+using Clock = std::chrono::steady_clock;
+
+inline double MsSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+// Ends a call of any reactor type with `status`.
+template <typename Reactor>
+void FinishWith(Reactor* reactor, const absl::Status& status) {
+  reactor->Finish(ToGrpcStatus(status));
+}
+
+// Runs `fn` (returning absl::Status) and turns exceptions escaping core code into statuses, so
+// that no request can take the server down.
+template <typename Fn>
+absl::Status Guarded(Fn&& fn) {
+  try {
+    return fn();
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError("out of memory");
+  } catch (const std::exception& e) {
+    return absl::InternalError(absl::StrCat("internal error: ", e.what()));
+  }
+}
+
+inline absl::Status ShuttingDown() { return absl::UnavailableError("server is shutting down"); }
+
+// Unary calls: the work runs on the compute pool and finishes the call from there.
+class UnaryCall final : public grpc::ServerUnaryReactor {
+ public:
+  void OnCancel() override { cancelled_.store(true); }
+  void OnDone() override { delete this; }
+  const std::atomic<bool>* cancelled() const { return &cancelled_; }
+
+ private:
+  std::atomic<bool> cancelled_{false};
+};
+
+// `work(const std::atomic<bool>* cancel) -> absl::Status` runs on the pool (heavy work) or inline
+// on the gRPC thread (bookkeeping that only takes a lock and copies a little).
+enum class Where { kPool, kInline };
+template <typename Work>
+grpc::ServerUnaryReactor* RunUnary(FieldService* service, grpc::CallbackServerContext* context,
+                                   Where where, Work work) {
+  auto* call = new UnaryCall();
+  if (absl::Status admit = service->Admit(context); !admit.ok()) {
+    FinishWith(call, admit);
+    return call;
+  }
+  if (where == Where::kInline) {
+    FinishWith(call, Guarded([&] { return work(call->cancelled()); }));
+    return call;
+  }
+  const bool submitted = service->pool()->Submit(
+      ComputePool::Lane::kInteractive, [call, work = std::move(work)]() mutable {
+        FinishWith(call, call->cancelled()->load()
+                             ? absl::CancelledError("the call was cancelled before it started")
+                             : Guarded([&] { return work(call->cancelled()); }));
+      });
+  if (!submitted) FinishWith(call, ShuttingDown());
+  return call;
+}
+
+// Server-streaming calls that produce chunks on the pool, one write at a time.
+template <typename Message>
+class ChunkWriter : public grpc::ServerWriteReactor<Message> {
+ public:
+  ChunkWriter(FieldService* service, grpc::CallbackServerContext* context) : service_(service) {
+    admitted_ = service->Admit(context);
+  }
+
+  // Call once from the subclass constructor.
+  void Begin() {
+    if (!admitted_.ok()) {
+      FinishWith(this, admitted_);
+      return;
+    }
+    Schedule(true);
+  }
+
+  void OnWriteDone(bool ok) override {
+    if (!ok) {
+      FinishWith(this, absl::CancelledError("the client went away"));
+      return;
+    }
+    Schedule(false);
+  }
+  void OnCancel() override { cancelled_.store(true); }
+  void OnDone() override { delete this; }
+
+ protected:
+  // On the pool: Prepare() once, then Next() for each chunk. Next() fills `chunk` and returns
+  // true, or returns false when there is nothing more to send.
+  virtual absl::Status Prepare(const std::atomic<bool>* cancel) = 0;
+  virtual absl::StatusOr<bool> Next(Message* chunk) = 0;
+
+  FieldService* service() const { return service_; }
+
+ private:
+  void Schedule(bool first) {
+    const bool submitted = service_->pool()->Submit(ComputePool::Lane::kInteractive, [this, first] {
+      bool has_chunk = false;
+      absl::Status status = Guarded([&]() -> absl::Status {
+        if (cancelled_.load()) return absl::CancelledError("cancelled");
+        if (first) RETURN_IF_ERROR(Prepare(&cancelled_));
+        chunk_.Clear();
+        ASSIGN_OR_RETURN(has_chunk, Next(&chunk_));
+        return absl::OkStatus();
+      });
+      if (!status.ok() || !has_chunk) {
+        FinishWith(this, status);
+      } else {
+        this->StartWrite(&chunk_);
+      }
+    });
+    if (!submitted) FinishWith(this, ShuttingDown());
+  }
+
+  FieldService* const service_;
+  absl::Status admitted_;
+  std::atomic<bool> cancelled_{false};
+  Message chunk_;
+};
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_RPC_UTIL_H_

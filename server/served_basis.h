@@ -1,0 +1,72 @@
+#ifndef FIELDSPACE_SERVER_SERVED_BASIS_H_
+#define FIELDSPACE_SERVER_SERVED_BASIS_H_
+
+// Server state around a basis: the basis in memory with its per-basis precomputation, and how a
+// build reports progress. Every numeric step is a core/ call; the RPC layer works on core's own
+// types (EnergyWeights, FieldConstraint, ModelProblem, DesignSession, ...).
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+
+#include "Eigen/Core"
+#include "absl/status/statusor.h"
+#include "core/basis/basis.h"
+#include "core/mesh/triangle_mesh.h"
+#include "core/operators/field_operator.h"
+#include "core/subspace/design_session.h"
+#include "core/subspace/reduced_system.h"
+#include "server/records.h"
+
+namespace fieldspace::server {
+
+// Build progress as the server reports it (core's BasisPhase plus the server's own steps).
+enum class BuildStage : uint8_t {
+  kQueued = 0,
+  kOperator = 1,
+  kSampling = 2,
+  kRegions = 3,
+  kEigensolve = 4,
+  kAssembly = 5,
+  kPrecompute = 6,
+  kSaving = 7,
+  kDone = 8,
+};
+
+// A basis in memory with everything the subspace methods need. Immutable once published; shared
+// by the requests that use it (each holds it only for the request or session).
+struct ServedBasis {
+  BasisRecord record;
+  std::shared_ptr<const TriangleMesh> mesh;
+  std::shared_ptr<const Basis> basis;               // the same object as system->basis()
+  std::shared_ptr<const ReducedSystem> system;      // U^T S U, U^T B U, U^T M U, LiftPlan, ...
+  std::shared_ptr<EnergyFactorCache> energy_cache;  // shared by this basis's design sessions
+  int64_t memory_bytes = 0;  // basis + system, as core counts them (for the memory budget)
+};
+
+struct BuildContext {
+  std::function<void(BuildStage stage, double fraction)> progress;  // any thread
+  const std::atomic<bool>* cancel = nullptr;
+  int32_t threads = 0;  // 0: all
+};
+
+// Assembles the operator and builds the basis (core/basis) for `key` on `mesh`.
+// `face_weights`: #F positive adaptivity weights or empty.
+struct BuiltBasis {
+  std::shared_ptr<const Basis> basis;
+  std::shared_ptr<const FieldOperator> op;  // S and M the basis was built for
+};
+absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const BasisKey& key,
+                                            const Eigen::VectorXd& face_weights,
+                                            const BuildContext& context);
+
+// The per-basis precomputation (core's ReducedSystem) and the served handle. `op`: the basis's
+// operator, or null to assemble it here (after a load from the store).
+absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
+    BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
+    std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context);
+
+}  // namespace fieldspace::server
+
+#endif  // FIELDSPACE_SERVER_SERVED_BASIS_H_

@@ -1,0 +1,165 @@
+// UploadMesh (client streaming).
+
+#include <atomic>
+#include <cstring>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
+#include "core/mesh/mesh_io.h"
+#include "server/proto_convert.h"
+#include "server/reactors.h"
+#include "server/rpc_util.h"
+
+namespace fieldspace::server {
+namespace {
+
+// UploadMesh: accumulates in-order chunks, then parses and registers on the pool.
+class UploadReactor final : public grpc::ServerReadReactor<v1::UploadMeshRequest> {
+ public:
+  UploadReactor(FieldService* service, grpc::CallbackServerContext* context, v1::MeshInfo* response)
+      : service_(service), response_(response) {
+    if (absl::Status admit = service->Admit(context); !admit.ok()) {
+      FinishWith(this, (admit));
+      return;
+    }
+    StartRead(&request_);
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {
+      End();
+      return;
+    }
+    if (absl::Status st = Accept(); !st.ok()) {
+      FinishWith(this, (st));
+      return;
+    }
+    StartRead(&request_);
+  }
+  void OnCancel() override { cancelled_.store(true); }
+  void OnDone() override { delete this; }
+
+ private:
+  absl::Status Accept() {
+    const int64_t limit = service_->options().max_upload_bytes;
+    if (!have_header_) {
+      if (!request_.has_header()) {
+        return absl::InvalidArgumentError("the first UploadMeshRequest must carry the header");
+      }
+      header_ = request_.header();
+      have_header_ = true;
+      if (header_.format() == v1::MESH_FORMAT_UNSPECIFIED) {
+        absl::StatusOr<MeshFormat> f = MeshFormatFromPath(header_.name());
+        if (!f.ok()) {
+          return absl::InvalidArgumentError(
+              absl::StrCat("header.format is unspecified and the name '", header_.name(),
+                           "' has no .obj, .off or .ply extension"));
+        }
+        header_.set_format(*f == MeshFormat::kObj   ? v1::MESH_FORMAT_OBJ
+                           : *f == MeshFormat::kOff ? v1::MESH_FORMAT_OFF
+                                                    : v1::MESH_FORMAT_PLY);
+      }
+      if (header_.format() < v1::MESH_FORMAT_OBJ || header_.format() > v1::MESH_FORMAT_RAW) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("unknown mesh format ", static_cast<int>(header_.format())));
+      }
+      if (header_.format() == v1::MESH_FORMAT_RAW) {
+        constexpr int64_t kMaxElements = int64_t{1} << 27;
+        if (header_.num_vertices() <= 0 || header_.num_faces() <= 0 ||
+            header_.num_vertices() > kMaxElements || header_.num_faces() > kMaxElements) {
+          return absl::InvalidArgumentError(
+              absl::StrCat("raw upload needs 0 < num_vertices, num_faces <= ", kMaxElements,
+                           "; got ", header_.num_vertices(), " and ", header_.num_faces()));
+        }
+        const int64_t expected = 24 * header_.num_vertices() + 12 * header_.num_faces();
+        if (expected > limit) {
+          return absl::ResourceExhaustedError(absl::StrCat(
+              "raw mesh of ", expected, " bytes exceeds the upload limit of ", limit, " bytes"));
+        }
+      }
+      if (header_.total_bytes() > static_cast<uint64_t>(limit)) {
+        return absl::ResourceExhaustedError(absl::StrCat(
+            "upload of ", header_.total_bytes(), " bytes exceeds the limit of ", limit, " bytes"));
+      }
+      if (header_.total_bytes() > 0) data_.reserve(header_.total_bytes());
+    } else if (request_.has_header()) {
+      return absl::InvalidArgumentError("only the first UploadMeshRequest may carry a header");
+    }
+    if (request_.offset() != data_.size()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("out-of-order chunk: offset ", request_.offset(), ", expected ",
+                       data_.size(), " (chunks must arrive in order, without gaps)"));
+    }
+    if (static_cast<int64_t>(data_.size() + request_.data().size()) > limit) {
+      return absl::ResourceExhaustedError(
+          absl::StrCat("upload exceeds the limit of ", limit, " bytes"));
+    }
+    data_.append(request_.data());
+    request_.Clear();
+    return absl::OkStatus();
+  }
+
+  void End() {
+    if (!have_header_) {
+      FinishWith(this, (absl::InvalidArgumentError("empty upload: no header was sent")));
+      return;
+    }
+    if (header_.total_bytes() > 0 && header_.total_bytes() != data_.size()) {
+      FinishWith(this, (absl::InvalidArgumentError(absl::StrCat("upload ended after ", data_.size(),
+                                                                " bytes; the header announced ",
+                                                                header_.total_bytes()))));
+      return;
+    }
+    const bool submitted = service_->pool()->Submit(ComputePool::Lane::kInteractive, [this] {
+      absl::Status status = cancelled_.load() ? absl::CancelledError("upload cancelled")
+                                              : Guarded([this] { return Register(); });
+      FinishWith(this, (status));
+    });
+    if (!submitted) FinishWith(this, (ShuttingDown()));
+  }
+
+  absl::Status Register() {
+    MeshReadResult parsed;
+    if (header_.format() == v1::MESH_FORMAT_RAW) {
+      const int64_t nv = header_.num_vertices(), nf = header_.num_faces();
+      if (static_cast<int64_t>(data_.size()) != 24 * nv + 12 * nf) {
+        return absl::InvalidArgumentError(absl::StrCat("raw upload has ", data_.size(), " bytes; ",
+                                                       nv, " vertices and ", nf, " faces need ",
+                                                       24 * nv + 12 * nf));
+      }
+      parsed.arrays.vertices.resize(nv, 3);
+      parsed.arrays.faces.resize(nf, 3);
+      std::memcpy(parsed.arrays.vertices.data(), data_.data(), 24 * nv);
+      std::memcpy(parsed.arrays.faces.data(), data_.data() + 24 * nv, 12 * nf);
+    } else {
+      const MeshFormat format = header_.format() == v1::MESH_FORMAT_OBJ   ? MeshFormat::kObj
+                                : header_.format() == v1::MESH_FORMAT_OFF ? MeshFormat::kOff
+                                                                          : MeshFormat::kPly;
+      ASSIGN_OR_RETURN(parsed, ReadMesh(data_, format));
+    }
+    std::string().swap(data_);  // the parsed arrays replace the bytes
+    ASSIGN_OR_RETURN(MeshRecord record, service_->registry()->AddMesh(
+                                            std::move(parsed.arrays), header_.name(),
+                                            static_cast<int32_t>(parsed.polygons_triangulated)));
+    MeshInfoFromRecord(record, service_->registry()->IsMeshLoaded(record.id), response_);
+    return absl::OkStatus();
+  }
+
+  FieldService* const service_;
+  v1::MeshInfo* const response_;
+  v1::UploadMeshRequest request_;
+  v1::UploadMeshHeader header_;
+  bool have_header_ = false;
+  std::string data_;
+  std::atomic<bool> cancelled_{false};
+};
+
+}  // namespace
+
+grpc::ServerReadReactor<v1::UploadMeshRequest>* NewUploadReactor(
+    FieldService* service, grpc::CallbackServerContext* context, v1::MeshInfo* response) {
+  return new UploadReactor(service, context, response);
+}
+
+}  // namespace fieldspace::server

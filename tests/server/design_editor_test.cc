@@ -1,0 +1,192 @@
+// The Design stream's edit logic without gRPC: DesignEditor on a basis built in the test. Every
+// answer must equal a fresh reduced solve of the session's current problem, failed requests must
+// leave the session as it was, and each error has its exact code.
+
+#include "server/design_editor.h"
+
+#include <memory>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "core/mesh/shapes.h"
+#include "core/subspace/model_problem.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace fieldspace::server {
+namespace {
+
+namespace v1 = ::fieldspace::v1;
+
+class DesignEditorTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    auto arrays = MakeIcosphere(3, 1.0);  // 1280 faces
+    ASSERT_TRUE(arrays.ok()) << arrays.status();
+    auto mesh = TriangleMesh::Create(*arrays);
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    auto shared_mesh = std::make_shared<const TriangleMesh>(std::move(*mesh));
+    BasisKey key;
+    key.mesh_id = "m-test";
+    key.field = FieldType::Vector();
+    key.dimension = 60;
+    BuildContext context;
+    context.threads = 2;
+    auto built = BuildBasisForKey(*shared_mesh, key, Eigen::VectorXd(), context);
+    ASSERT_TRUE(built.ok()) << built.status();
+    BasisRecord record;
+    record.id = "b-test";
+    record.key = key;
+    auto served = ServeBasis(record, shared_mesh, built->basis, built->op.get(), context);
+    ASSERT_TRUE(served.ok()) << served.status();
+    basis_ = new std::shared_ptr<const ServedBasis>(*served);
+  }
+  static void TearDownTestSuite() { delete basis_; }
+
+  static DesignEditor NewEditor() {
+    return DesignEditor(
+        [](const std::string& id) -> absl::StatusOr<std::shared_ptr<const ServedBasis>> {
+          if (id != (*basis_)->record.id) return absl::NotFoundError(absl::StrCat("no ", id));
+          return *basis_;
+        },
+        DesignEditorOptions());
+  }
+
+  static v1::DesignRequest Open(double mu_s, double mu_b, double mu_c) {
+    v1::DesignRequest r;
+    r.set_seq(1);
+    r.mutable_open()->set_basis_id("b-test");
+    r.mutable_open()->mutable_weights()->set_mu_s(mu_s);
+    r.mutable_open()->mutable_weights()->set_mu_b(mu_b);
+    r.mutable_open()->mutable_weights()->set_mu_c(mu_c);
+    r.mutable_open()->add_watch_faces(10);
+    r.mutable_open()->add_watch_faces(600);
+    return r;
+  }
+  static v1::DesignRequest Add(int id, int face, double a, double b, bool hard) {
+    v1::DesignRequest r;
+    r.mutable_add()->set_id(id);
+    v1::Constraint* c = r.mutable_add()->mutable_constraint();
+    c->set_face(face);
+    c->add_value(a);
+    c->add_value(b);
+    c->set_hard(hard);
+    return r;
+  }
+
+  // The update's coefficients equal a fresh solve of the session's problem.
+  static void ExpectFresh(const DesignEditor& editor, const v1::DesignUpdate& u) {
+    ASSERT_NE(editor.session(), nullptr);
+    auto fresh = SolveReducedModelProblem(*(*basis_)->system, editor.session()->problem());
+    ASSERT_TRUE(fresh.ok()) << fresh.status();
+    ASSERT_EQ(u.coefficients_size(), fresh->coefficients.size());
+    const double scale = std::max(fresh->coefficients.norm(), 1e-300);
+    double diff = 0;
+    for (int i = 0; i < u.coefficients_size(); ++i) {
+      diff += std::pow(u.coefficients(i) - fresh->coefficients[i], 2);
+    }
+    EXPECT_LT(std::sqrt(diff) / scale, 1e-8);
+  }
+
+  static std::shared_ptr<const ServedBasis>* basis_;
+};
+
+std::shared_ptr<const ServedBasis>* DesignEditorTest::basis_ = nullptr;
+
+TEST_F(DesignEditorTest, EditsMatchFreshSolvesAndWatchedFacesAreLifted) {
+  DesignEditor editor = NewEditor();
+  v1::DesignUpdate u;
+  ASSERT_TRUE(editor.Apply(Open(1, 0.01, 1), &u).ok());
+  EXPECT_EQ(u.seq(), 1u);
+  EXPECT_TRUE(u.timings().refactorized());
+  EXPECT_EQ(u.coefficients_size(), 60);
+  EXPECT_EQ(u.watched().values_size(), 4);  // two faces x 2 DOFs
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(Add(1, 10, 1.0, 0.0, /*hard=*/true), &u).ok());
+  ExpectFresh(editor, u);
+  // A hard constraint holds in the lifted (watched) value of its face.
+  EXPECT_NEAR(u.watched().values(0), 1.0, 1e-5);
+  EXPECT_NEAR(u.watched().values(1), 0.0, 1e-5);
+  EXPECT_EQ(u.num_hard_constraints(), 1);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(Add(2, 600, 0.0, 2.0, /*hard=*/false), &u).ok());
+  ExpectFresh(editor, u);
+  EXPECT_FALSE(u.timings().refactorized());
+  // A move keeps the kind and the weight.
+  v1::DesignRequest move;
+  move.mutable_move()->set_id(2);
+  move.mutable_move()->set_face(601);
+  move.mutable_move()->add_value(0.5);
+  move.mutable_move()->add_value(0.5);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(move, &u).ok());
+  ExpectFresh(editor, u);
+  auto moved = editor.session()->GetConstraint(2);
+  ASSERT_TRUE(moved.ok());
+  EXPECT_EQ(moved->face, 601);
+  EXPECT_FALSE(moved->hard());
+  // Weights: mu_b changes refactorize, mu_c alone does not.
+  v1::DesignRequest weights;
+  weights.mutable_set_weights()->set_mu_s(1);
+  weights.mutable_set_weights()->set_mu_b(0.1);
+  weights.mutable_set_weights()->set_mu_c(1);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(weights, &u).ok());
+  EXPECT_TRUE(u.timings().refactorized());
+  ExpectFresh(editor, u);
+  weights.mutable_set_weights()->set_mu_c(5);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(weights, &u).ok());
+  EXPECT_FALSE(u.timings().refactorized());
+  ExpectFresh(editor, u);
+  v1::DesignRequest remove;
+  remove.mutable_remove()->set_id(1);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(remove, &u).ok());
+  EXPECT_EQ(u.num_constraints(), 1);
+  ExpectFresh(editor, u);
+}
+
+TEST_F(DesignEditorTest, ErrorsHaveExactCodesAndLeaveTheSessionAsItWas) {
+  DesignEditor editor = NewEditor();
+  v1::DesignUpdate u;
+  EXPECT_EQ(editor.Apply(Add(1, 10, 1, 0, false), &u).code(),
+            absl::StatusCode::kFailedPrecondition);  // before open
+  EXPECT_EQ(editor.Apply(v1::DesignRequest(), &u).code(), absl::StatusCode::kInvalidArgument);
+  v1::DesignRequest unknown = Open(1, 0, 1);
+  unknown.mutable_open()->set_basis_id("b-nope");
+  EXPECT_EQ(editor.Apply(unknown, &u).code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(editor.Apply(Open(0, 0, 1), &u).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(editor.Apply(Open(1, 0, 0), &u).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_FALSE(editor.is_open());
+  ASSERT_TRUE(editor.Apply(Open(1, 0, 1), &u).ok());
+  EXPECT_EQ(editor.Apply(Open(1, 0, 1), &u).code(), absl::StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(editor.Apply(Add(1, 10, 1, 0, true), &u).ok());
+  const std::vector<double> before(u.coefficients().begin(), u.coefficients().end());
+  // Each of these fails and changes nothing.
+  EXPECT_EQ(editor.Apply(Add(1, 11, 1, 0, false), &u).code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_EQ(editor.Apply(Add(2, 10, 0, 1, true), &u).code(),
+            absl::StatusCode::kFailedPrecondition);  // the same face hard twice
+  EXPECT_EQ(editor.Apply(Add(3, 5000, 1, 0, false), &u).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(editor.Apply(Add(3, 5, std::nan(""), 0, false), &u).code(),
+            absl::StatusCode::kInvalidArgument);
+  v1::DesignRequest move;
+  move.mutable_move()->set_id(42);
+  move.mutable_move()->set_face(3);
+  move.mutable_move()->add_value(1);
+  move.mutable_move()->add_value(0);
+  EXPECT_EQ(editor.Apply(move, &u).code(), absl::StatusCode::kNotFound);
+  v1::DesignRequest watch;
+  watch.mutable_watch()->add_faces(-1);
+  EXPECT_EQ(editor.Apply(watch, &u).code(), absl::StatusCode::kInvalidArgument);
+  v1::DesignRequest bad_weights;
+  bad_weights.mutable_set_weights()->set_mu_s(-1);
+  EXPECT_EQ(editor.Apply(bad_weights, &u).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(editor.session()->num_constraints(), 1);
+  const Eigen::VectorXd& x = editor.session()->coefficients();
+  ASSERT_EQ(static_cast<size_t>(x.size()), before.size());
+  for (size_t i = 0; i < before.size(); ++i) EXPECT_EQ(x[i], before[i]) << i;
+}
+
+}  // namespace
+}  // namespace fieldspace::server
