@@ -32,9 +32,10 @@ struct EnergyWeights {
 // InvalidArgument (naming the weight) unless `weights` is valid.
 absl::Status ValidateWeights(const EnergyWeights& weights);
 
-// A constraint on one face's DOFs (DESIGN.md section 2: 2 values for vector and n-fields in the
-// face frame, 3 Mandel-Voigt values for tensors). Soft: the term mu_C * weight * |X_f - value|^2
-// (weight finite and > 0). Hard: X_f = value exactly (weight ignored).
+// A constraint on one face's DOFs (docs/conventions.md, DOF layout: 2 values for vector and
+// n-fields in the face frame, 3 Mandel-Voigt values for tensors). Soft: the term
+// mu_C * weight * |X_f - value|^2 (weight finite and > 0). Hard: X_f = value exactly (weight
+// ignored).
 struct FieldConstraint {
   int32_t face = 0;
   Eigen::VectorXd value;
