@@ -7,8 +7,8 @@
 // --weights FILE: one positive adaptivity weight per face, one per line.
 // --save FILE: the basis file (core/basis/basis_io.h), mesh id "crc32c:<hex of the mesh file>".
 // --export-mtx DIR: DIR/U.mtx (k x d), DIR/S.mtx, DIR/M.mtx (MatrixMarket coordinate real
-// general, 1-based, DESIGN.md DOF order, the operator subcommand's writer) and DIR/samples.txt
-// (the sample face of each region, 0-based, one per line).
+// general, 1-based, DOF order of docs/conventions.md, the operator subcommand's writer) and
+// DIR/samples.txt (the sample face of each region, 0-based, one per line).
 // --tolerance T: residual tolerance of the local eigenproblems (BasisOptions::eigen_tolerance).
 // --stats adds "stats":{...} (how the local problems were solved; core/basis/basis.h BasisStats).
 #include <cstdio>

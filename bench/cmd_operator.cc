@@ -1,7 +1,7 @@
 // `fieldspace-bench operator MESH --field vector|nfield|tensor [--n N] [--out DIR] [--timing]`:
-// assembles the field operator (DESIGN.md section 2) and writes DIR/S.mtx and DIR/M.mtx
+// assembles the field operator (docs/conventions.md, Operators) and writes DIR/S.mtx and DIR/M.mtx
 // (MatrixMarket coordinate real general, both triangles, 1-based, %.17g; M as a diagonal sparse
-// matrix) in the DESIGN.md DOF order. Prints {"dofs":..,"nnz_s":..}; --timing adds
+// matrix) in the DOF order of docs/conventions.md. Prints {"dofs":..,"nnz_s":..}; --timing adds
 // "seconds":{"load":..,"assemble":..[,"write":..]}.
 #include "bench/cmd_operator.h"
 

@@ -33,7 +33,7 @@ struct StoreContents {
   std::vector<DamagedEntry> damaged;
 };
 
-// The on-disk store (DESIGN.md section 6): DIR/meshes/<id>.fsmesh and DIR/bases/<id>.fsbasis.
+// The on-disk store (docs/api.md, Store): DIR/meshes/<id>.fsmesh and DIR/bases/<id>.fsbasis.
 //
 // Every file is one container: a 40-byte header (magic, format version, metadata and payload
 // lengths, XXH64 of the payload, XXH64 of header + metadata), the metadata (the record), the

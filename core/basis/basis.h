@@ -18,7 +18,8 @@ namespace fieldspace {
 
 enum class BasisPhase : uint8_t { kSampling = 0, kRegions = 1, kEigensolve = 2, kAssembly = 3 };
 
-// Parameters of the locally supported basis construction (paper section 4, DESIGN.md section 3).
+// Parameters of the locally supported basis construction (paper section 4; docs/conventions.md,
+// Basis construction).
 struct BasisParams {
   int32_t dimension = 0;                     // d: target number of columns of U (>= 1)
   double sigma = 40.0;                       // overlap factor of eq. 12 (> 0)
@@ -76,8 +77,8 @@ struct Basis {
   FieldType type;
   BasisParams params;
   double radius = 0;  // r of eq. 12 actually used (in dual-graph distance units)
-  // k x d, DOF order of DESIGN.md section 2; column j = region j / m, field j % m, M-orthonormal
-  // within a region. Row-major float storage: lifting (U x) walks rows in parallel.
+  // k x d, DOF order of docs/conventions.md (DOF layout); column j = region j / m, field j % m,
+  // M-orthonormal within a region. Row-major float storage: lifting (U x) walks rows in parallel.
   Eigen::SparseMatrix<float, Eigen::RowMajor> U;
   std::vector<int32_t> sample_faces;      // sample (center) face of each region
   std::vector<double> local_eigenvalues;  // d: eigenvalue of each column's local problem (eq. 7)

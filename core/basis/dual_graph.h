@@ -20,8 +20,8 @@ struct DualArc {
   int32_t unused = 0;
 };
 
-// The dual graph of a triangle mesh (paper section 4, DESIGN.md section 3): one node per face,
-// an arc in both directions between two faces sharing an edge, of length
+// The dual graph of a triangle mesh (paper section 4; docs/conventions.md, Basis construction): one
+// node per face, an arc in both directions between two faces sharing an edge, of length
 // |barycenter_f - barycenter_g| * (w_f + w_g) / 2 with the per-face adaptivity weights w.
 //
 // Nodes are the faces renumbered along a Morton (Z-order) curve of their barycenters, and each

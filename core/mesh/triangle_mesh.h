@@ -37,8 +37,8 @@ struct MeshComponent {
 };
 
 // An immutable, validated, manifold, consistently oriented triangle mesh with its topology and
-// per-face geometry (DESIGN.md section 2). Created only through Create(); thread-safe to share
-// (all state is computed eagerly, nothing is cached lazily).
+// per-face geometry (docs/conventions.md, Meshes and Frames). Created only through Create();
+// thread-safe to share (all state is computed eagerly, nothing is cached lazily).
 class TriangleMesh {
  public:
   // Validates `arrays` and builds topology and geometry. Unreferenced vertices are dropped (and
@@ -65,7 +65,7 @@ class TriangleMesh {
   // #E x 2: the faces incident to edge e; (f0, f1) with f0 < f1, or (f0, kNoFace) on a boundary.
   const PairMatrix& edge_faces() const { return edge_faces_; }
 
-  // Per face (#F rows): area, unit normal, barycenter, and the frame of DESIGN.md section 2:
+  // Per face (#F rows): area, unit normal, barycenter, and the frame (docs/conventions.md, Frames)
   // x_f = normalize(p1 - p0), n_f = normalize((p1 - p0) x (p2 - p0)), y_f = n_f x x_f.
   const Eigen::VectorXd& face_areas() const { return face_areas_; }
   const VertexMatrix& face_normals() const { return face_normals_; }

@@ -13,8 +13,8 @@
 namespace fieldspace {
 
 // Conversions between per-face fields in ambient 3D form (what clients send and draw) and the DOF
-// representation of DESIGN.md section 2 (frame coordinates; n-field representation vectors;
-// Mandel-Voigt tensors). Ambient input is projected to the face's tangent plane.
+// representation (frame coordinates; n-field representation vectors; Mandel-Voigt tensors) of
+// docs/conventions.md, DOF layout. Ambient input is projected to the face's tangent plane.
 // Errors are InvalidArgument: wrong sizes, a face index out of range, a non-finite value (the
 // message names the face), an asymmetric tensor, an invalid FieldType.
 

@@ -7,7 +7,8 @@
 
 namespace fieldspace {
 
-// Per-edge data of the face-based connection Laplacians (n-field and tensor, DESIGN.md section 2).
+// Per-edge data of the face-based connection Laplacians (n-field and tensor; docs/conventions.md,
+// Operators).
 // For an interior edge e with faces (f0, f1) = mesh.edge_faces().row(e), f0 < f1:
 //   weight = w_e = 3 |e|^2 / (area_f0 + area_f1),
 //   (cos_delta, sin_delta) = e^{i (theta_f0 - theta_f1)},

@@ -14,8 +14,8 @@ namespace fieldspace {
 // A Laplace operator on per-face fields of one FieldType: stiffness S and diagonal mass M.
 struct FieldOperator {
   FieldType type;
-  // k x k, k = dofs_per_face * #F, DOF order of DESIGN.md section 2. Sparse, symmetric, positive
-  // semi-definite; column-major with both triangles stored.
+  // k x k, k = dofs_per_face * #F, DOF order of docs/conventions.md (DOF layout). Sparse,
+  // symmetric, positive semi-definite; column-major with both triangles stored.
   Eigen::SparseMatrix<double> stiffness;
   // k: the diagonal of M, the area of the DOF's face (positive).
   Eigen::VectorXd mass;
@@ -38,8 +38,9 @@ struct FieldOperator {
   }
 };
 
-// Assembles S and M for `type` on `mesh` (DESIGN.md section 2): the vector Hodge Laplacian
-// (eq. 1), the n-field connection Laplacian, or the (1,1)-tensor Laplacian (eq. 2, 14-20).
+// Assembles S and M for `type` on `mesh` (docs/conventions.md, Operators): the vector Hodge
+// Laplacian (eq. 1), the n-field connection Laplacian, or the (1,1)-tensor Laplacian (eqs. 2,
+// 14-20).
 // O(#F) time and memory, assembled in parallel.
 // InvalidArgument for an invalid type (FieldType::Validate), ResourceExhausted when S would need
 // more than 2^31 nonzeros.

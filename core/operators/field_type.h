@@ -13,9 +13,10 @@ namespace fieldspace {
 
 enum class FieldKind : uint8_t { kVector = 0, kNField = 1, kTensor = 2 };
 
-// What a per-face field is, and so its DOF layout (DESIGN.md section 2): vector and n-fields have
-// 2 DOFs per face at 2f + c (frame coordinates; for n-fields the representation vector), symmetric
-// (1,1)-tensors 3 DOFs per face at 3f + c (Mandel-Voigt (a11, a22, sqrt(2) a12)).
+// What a per-face field is, and so its DOF layout (docs/conventions.md, DOF layout): vector and
+// n-fields have 2 DOFs per face at 2f + c (frame coordinates; for n-fields the representation
+// vector), symmetric (1,1)-tensors 3 DOFs per face at 3f + c (Mandel-Voigt (a11, a22,
+// sqrt(2) a12)).
 struct FieldType {
   FieldKind kind = FieldKind::kVector;
   int32_t n = 1;  // rotational symmetry order; meaningful for kNField only

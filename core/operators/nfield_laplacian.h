@@ -10,7 +10,7 @@
 namespace fieldspace {
 
 // Stiffness of the face-based n-field connection Laplacian on representation vectors
-// (DESIGN.md section 2, [BSEH18]):
+// (docs/conventions.md, n-field connection Laplacian; [BSEH18]):
 //   x^T S x = sum over interior edges e = (f0, f1) of w_e |u_f0 - R(n (theta_f0 - theta_f1))
 //   u_f1|^2,
 // u_f the representation vector (angle times n, length kept) in face f's frame, theta_f the angle

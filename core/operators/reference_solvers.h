@@ -15,9 +15,10 @@
 
 namespace fieldspace {
 
-// Full-space solvers for the problems the subspace methods approximate (DESIGN.md section 4):
-// references for tests, for measuring subspace errors, and for generating test fields. They
-// factorize k x k systems with CHOLMOD, so cost grows superlinearly with the mesh.
+// Full-space solvers for the problems the subspace methods approximate (docs/conventions.md, Model
+// problem and Subspace methods): references for tests, for measuring subspace errors, and for
+// generating test fields. They factorize k x k systems with CHOLMOD, so cost grows superlinearly
+// with the mesh.
 
 // The K lowest eigenpairs of S x = lambda M x for `op` (eigenvectors in the DOF order of op,
 // M-orthonormal). Errors as LowestEigenpairs.

@@ -8,7 +8,7 @@
 namespace fieldspace {
 
 // Stiffness of the discrete Hodge Laplacian on piecewise constant tangent vector fields (paper
-// eq. 1, DESIGN.md section 2):
+// eq. 1, docs/conventions.md, Vector Hodge Laplacian):
 //   S = M G_V Mv^-1 G_V^T M + M J G_E Me^-1 G_E^T J^T M,
 // G_V (2F x #V) the gradients of the Lagrange hat functions, G_E (2F x #E) those of the
 // Crouzeix-Raviart edge functions (grad psi_e = -2 grad phi_k on a face, k opposite e), Mv / Me

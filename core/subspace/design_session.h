@@ -81,9 +81,9 @@ struct DesignSessionOptions {
   std::shared_ptr<EnergyFactorCache> energy_cache;
 };
 
-// An interactive design session on one basis (paper section 8, DESIGN.md section 4): the model
-// problem (eq. 8) reduced to the subspace (eq. 10, 11), with soft and hard constraints edited one
-// at a time.
+// An interactive design session on one basis (paper section 8; docs/conventions.md, Model
+// problem): the model problem (eq. 8) reduced to the subspace (eq. 10, 11), with soft and hard
+// constraints edited one at a time.
 //
 // Cost model: the energy matrix A = U^T (mu_S S + mu_B B) U is factorized once per (mu_S, mu_B)
 // (sparse supernodal Cholesky P A P^T = L L^T on the basis's shared symbolic analysis; shared

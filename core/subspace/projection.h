@@ -12,9 +12,9 @@
 
 namespace fieldspace {
 
-// Moving fields between the full space (k DOFs, DESIGN.md section 2 order) and the subspace
-// (d coefficients of the columns of U). All functions are thread-safe (const inputs only) and
-// parallel over rows of U.
+// Moving fields between the full space (k DOFs, ordered as in docs/conventions.md, DOF layout) and
+// the subspace (d coefficients of the columns of U). All functions are thread-safe (const inputs
+// only) and parallel over rows of U.
 
 struct ProjectionResult {
   Eigen::VectorXd coefficients;  // d: x = argmin ||X - U x||_M (eq. 13)

@@ -48,11 +48,11 @@ struct ReducedSystemStats {
   int64_t memory_bytes = 0;  // held by the ReducedSystem itself (not counting the Basis)
 };
 
-// The per-basis precomputation of the subspace methods (paper section 5, DESIGN.md section 4):
-// the reduced matrices U^T S U, U^T B U (B = S M^-1 S) and U^T M U, the symbolic analysis shared
-// by every factorization of a weighted combination of them, and the factorization of U^T M U used
-// by projections. Immutable after Build(): share one instance between any number of threads and
-// sessions (all accessors are const, nothing is computed lazily).
+// The per-basis precomputation of the subspace methods (paper section 5; docs/conventions.md,
+// Reduced quantities): the reduced matrices U^T S U, U^T B U (B = S M^-1 S) and U^T M U, the
+// symbolic analysis shared by every factorization of a weighted combination of them, and the
+// factorization of U^T M U used by projections. Immutable after Build(): share one instance between
+// any number of threads and sessions (all accessors are const, nothing is computed lazily).
 class ReducedSystem {
  public:
   // basis->U: k x d (k = op.dofs(), d >= 1), finite; op: the operator the basis was built for

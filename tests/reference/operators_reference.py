@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Independent reference for the field operators of DESIGN.md section 2.
+"""Independent reference for the field operators of docs/conventions.md, Operators.
 
 Builds S and M for the vector Hodge Laplacian (eq. 1, from literal gradient matrices G_V, G_E),
 the n-field connection Laplacian and the (1,1)-tensor Laplacian (appendix eqs. 14-20, from the

@@ -95,7 +95,8 @@ TEST(BasisTest, VectorBasisOnRealMeshHasPaperStructure) {
   const FieldOperator op = Operator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 200);
   CheckStructure(mesh, op, basis, 25);
-  // About 0.6 sigma nonzeros per row with dual-graph distances (DESIGN.md section 3).
+  // About 0.6 sigma nonzeros per row with dual-graph distances (docs/conventions.md, Basis
+  // construction).
   const double per_row = static_cast<double>(basis.U.nonZeros()) / basis.U.rows();
   EXPECT_GT(per_row, 15.0);
   EXPECT_LT(per_row, 45.0);

@@ -1,6 +1,6 @@
 // Golden values: the assembled operators against hand computations and against literal,
-// independent constructions of the formulas in DESIGN.md section 2 (explicit gradient matrices
-// multiplied out; per-edge transports from atan2 angles and tensor basis transforms).
+// independent constructions of the formulas in docs/conventions.md, Operators (explicit gradient
+// matrices multiplied out; per-edge transports from atan2 angles and tensor basis transforms).
 #include <cmath>
 #include <string>
 #include <vector>
