@@ -1,11 +1,7 @@
 #include "server/store.h"
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <sys/uio.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <bit>
 #include <cerrno>
 #include <chrono>
@@ -15,6 +11,7 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "core/common/file_util.h"
 #include "core/common/status_macros.h"
 #include "server/hash.h"
 
@@ -33,10 +30,11 @@ constexpr size_t kHeaderBytes = 40;
 constexpr uint32_t kMaxMetaBytes = 1 << 20;
 constexpr char kMeshExt[] = ".fsmesh";
 constexpr char kBasisExt[] = ".fsbasis";
-constexpr char kTempMarker[] = ".tmp-";
 
-absl::Status ErrnoStatus(int err, absl::string_view what) {
-  std::string message = absl::StrCat(what, ": ", std::strerror(err));
+// The store's errno codes: anything not listed is Internal.
+absl::Status StoreErrnoStatus(int err, std::string_view what) {
+  std::string message =
+      absl::StrCat(absl::string_view(what.data(), what.size()), ": ", std::strerror(err));
   switch (err) {
     case ENOENT:
       return absl::NotFoundError(message);
@@ -212,132 +210,44 @@ std::string EncodeHeader(const char (&magic)[8], std::string_view meta, uint64_t
   return h;
 }
 
-// An open file descriptor, closed on scope exit.
-class Fd {
- public:
-  explicit Fd(int fd) : fd_(fd) {}
-  Fd(const Fd&) = delete;
-  Fd& operator=(const Fd&) = delete;
-  ~Fd() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  int get() const { return fd_; }
-  // Closes now and reports the result (close can report deferred write errors).
-  int Close() {
-    const int rc = ::close(fd_);
-    fd_ = -1;
-    return rc;
-  }
-
- private:
-  int fd_;
-};
-
-absl::Status ReadExact(int fd, void* data, size_t size, uint64_t offset, const std::string& path) {
-  auto* p = static_cast<char*>(data);
-  while (size > 0) {
-    const ssize_t n = ::pread(fd, p, size, static_cast<off_t>(offset));
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return ErrnoStatus(errno, absl::StrCat("reading ", path));
-    }
-    if (n == 0) return absl::DataLossError(absl::StrCat(path, ": unexpected end of file"));
-    p += n;
-    size -= static_cast<size_t>(n);
-    offset += static_cast<uint64_t>(n);
-  }
-  return absl::OkStatus();
-}
-
-absl::Status WriteAll(int fd, const char* data, size_t size, const std::string& path) {
-  while (size > 0) {
-    const ssize_t n = ::write(fd, data, size);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      return ErrnoStatus(errno, absl::StrCat("writing ", path));
-    }
-    data += n;
-    size -= static_cast<size_t>(n);
-  }
-  return absl::OkStatus();
-}
-
-absl::Status FsyncDir(const std::string& dir) {
-  Fd fd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
-  if (fd.get() < 0) return ErrnoStatus(errno, absl::StrCat("opening directory ", dir));
-  if (::fsync(fd.get()) != 0) return ErrnoStatus(errno, absl::StrCat("fsync of ", dir));
-  return absl::OkStatus();
-}
-
 // Writes header + meta + payload pieces to `path` atomically (temp file, fsync, rename, fsync of
 // the directory). `pause_ms` > 0 sleeps halfway through the payload (crash tests).
 absl::Status WriteAtomically(const std::string& path, const std::string& header,
                              const std::string& meta, const std::vector<std::string_view>& payload,
                              int32_t pause_ms) {
-  static std::atomic<uint64_t> counter{0};
-  const fs::path final_path(path);
-  const std::string dir = final_path.parent_path().string();
-  const std::string tmp = absl::StrCat(dir, "/.", final_path.filename().string(), kTempMarker,
-                                       ::getpid(), "-", counter.fetch_add(1));
-  Fd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
-  if (fd.get() < 0) return ErrnoStatus(errno, absl::StrCat("creating ", tmp));
-  auto fail = [&](absl::Status status) {
-    ::unlink(tmp.c_str());
-    return status;
-  };
-  absl::Status st = WriteAll(fd.get(), header.data(), header.size(), tmp);
-  if (st.ok()) st = WriteAll(fd.get(), meta.data(), meta.size(), tmp);
-  uint64_t total = 0;
-  for (std::string_view piece : payload) total += piece.size();
-  uint64_t written = 0;
-  bool paused = false;
-  for (std::string_view piece : payload) {
-    if (!st.ok()) break;
-    // Written in pieces of at most 64 MiB, so that the test pause lands inside the payload.
-    while (st.ok() && !piece.empty()) {
-      const size_t n = std::min<size_t>(piece.size(), size_t{64} << 20);
-      size_t step = n;
-      if (pause_ms > 0 && !paused && written + n > total / 2) {
-        step = std::max<size_t>(1, static_cast<size_t>(total / 2 - written));
-      }
-      st = WriteAll(fd.get(), piece.data(), step, tmp);
-      piece.remove_prefix(step);
-      written += step;
-      if (pause_ms > 0 && !paused && written >= total / 2) {
-        paused = true;
-        std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms));
-      }
-    }
+  std::vector<std::string_view> pieces = {header, meta};
+  pieces.insert(pieces.end(), payload.begin(), payload.end());
+  AtomicWriteOptions options;
+  options.mode = 0644;
+  options.errno_status = StoreErrnoStatus;
+  if (pause_ms > 0) {
+    uint64_t total = 0;
+    for (std::string_view piece : payload) total += piece.size();
+    options.midway_hook_at_byte = header.size() + meta.size() + total / 2;
+    options.midway_hook = [pause_ms] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(pause_ms));
+    };
   }
-  if (!st.ok()) return fail(st);
-  if (::fsync(fd.get()) != 0) return fail(ErrnoStatus(errno, absl::StrCat("fsync of ", tmp)));
-  if (fd.Close() != 0) return fail(ErrnoStatus(errno, absl::StrCat("closing ", tmp)));
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    return fail(ErrnoStatus(errno, absl::StrCat("renaming ", tmp, " to ", path)));
-  }
-  return FsyncDir(dir);
+  return WriteFileAtomically(path, pieces, std::move(options));
 }
 
 // Opens `path`, checks magic, version, header checksum and total size; returns meta bytes.
 struct OpenedFile {
-  std::unique_ptr<Fd> fd;
+  ReadableFile file;
   Header header;
   std::string meta;
 };
 
 absl::StatusOr<OpenedFile> OpenContainer(const std::string& path, const char (&magic)[8]) {
   OpenedFile f;
-  f.fd = std::make_unique<Fd>(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
-  if (f.fd->get() < 0) return ErrnoStatus(errno, absl::StrCat("opening ", path));
-  struct stat st;
-  if (::fstat(f.fd->get(), &st) != 0) return ErrnoStatus(errno, absl::StrCat("stat of ", path));
-  const auto file_size = static_cast<uint64_t>(st.st_size);
+  ASSIGN_OR_RETURN(f.file, OpenForReading(path, StoreErrnoStatus));
+  const auto file_size = static_cast<uint64_t>(f.file.size);
   if (file_size < kHeaderBytes) {
     return absl::DataLossError(
         absl::StrCat(path, ": truncated (", file_size, " bytes, shorter than the header)"));
   }
   char h[kHeaderBytes];
-  RETURN_IF_ERROR(ReadExact(f.fd->get(), h, kHeaderBytes, 0, path));
+  RETURN_IF_ERROR(ReadExactlyAt(f.file.fd.get(), 0, h, kHeaderBytes, path, StoreErrnoStatus));
   if (std::memcmp(h, magic, 8) != 0) {
     return absl::DataLossError(absl::StrCat(path, ": not a fieldspace store file (bad magic)"));
   }
@@ -355,7 +265,8 @@ absl::StatusOr<OpenedFile> OpenContainer(const std::string& path, const char (&m
     return absl::DataLossError(absl::StrCat(path, ": corrupt header (metadata length)"));
   }
   f.meta.resize(f.header.meta_len);
-  RETURN_IF_ERROR(ReadExact(f.fd->get(), f.meta.data(), f.meta.size(), kHeaderBytes, path));
+  RETURN_IF_ERROR(ReadExactlyAt(f.file.fd.get(), kHeaderBytes, f.meta.data(), f.meta.size(), path,
+                                StoreErrnoStatus));
   Hasher hasher;
   hasher.Update(h, 32);
   hasher.Update(f.meta);
@@ -380,7 +291,8 @@ absl::Status ReadPayload(const OpenedFile& f, const std::vector<std::pair<char*,
     size_t done = 0;
     while (done < size) {
       const size_t n = std::min<size_t>(size - done, size_t{8} << 20);
-      RETURN_IF_ERROR(ReadExact(f.fd->get(), data + done, n, offset, path));
+      RETURN_IF_ERROR(
+          ReadExactlyAt(f.file.fd.get(), offset, data + done, n, path, StoreErrnoStatus));
       hasher.Update(data + done, n);
       offset += n;
       done += n;
@@ -417,7 +329,7 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir,
   for (const char* sub : {"meshes", "bases"}) {
     for (const auto& entry : fs::directory_iterator(fs::path(dir) / sub, ec)) {
       const std::string name = entry.path().filename().string();
-      if (absl::StartsWith(name, ".") && absl::StrContains(name, kTempMarker)) {
+      if (IsTemporaryFileName(name)) {
         fs::remove(entry.path(), ec);
       }
     }
@@ -544,17 +456,17 @@ absl::StatusOr<Store::LoadedBasisFile> Store::LoadBasis(const std::string& id) c
 absl::Status Store::DeleteMesh(const std::string& id) const {
   if (!ValidId(id, 'm')) return absl::OkStatus();
   if (::unlink(MeshPath(id).c_str()) != 0 && errno != ENOENT) {
-    return ErrnoStatus(errno, "deleting " + MeshPath(id));
+    return StoreErrnoStatus(errno, "deleting " + MeshPath(id));
   }
-  return FsyncDir(dir_ + "/meshes");
+  return FsyncDirectory(dir_ + "/meshes", StoreErrnoStatus);
 }
 
 absl::Status Store::DeleteBasis(const std::string& id) const {
   if (!ValidId(id, 'b')) return absl::OkStatus();
   if (::unlink(BasisPath(id).c_str()) != 0 && errno != ENOENT) {
-    return ErrnoStatus(errno, "deleting " + BasisPath(id));
+    return StoreErrnoStatus(errno, "deleting " + BasisPath(id));
   }
-  return FsyncDir(dir_ + "/bases");
+  return FsyncDirectory(dir_ + "/bases", StoreErrnoStatus);
 }
 
 }  // namespace fieldspace::server

@@ -1,20 +1,16 @@
 #include "core/basis/basis_io.h"
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
-#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <limits>
-#include <memory>
+#include <utility>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/basis/crc32c.h"
+#include "core/common/file_util.h"
 
 namespace fieldspace {
 namespace {
@@ -198,26 +194,15 @@ class StringSink final : public Sink {
   std::string* out_;
 };
 
-class FdSink final : public Sink {
+class FileSink final : public Sink {
  public:
-  FdSink(int fd, std::string path) : fd_(fd), path_(std::move(path)) {}
+  explicit FileSink(AtomicFileWriter& out) : out_(out) {}
   absl::Status Write(const void* data, size_t size) override {
-    const char* p = static_cast<const char*>(data);
-    while (size > 0) {
-      const ssize_t w = ::write(fd_, p, std::min<size_t>(size, size_t{1} << 30));
-      if (w < 0) {
-        if (errno == EINTR) continue;
-        return absl::ErrnoToStatus(errno, absl::StrCat("writing '", path_, "'"));
-      }
-      p += w;
-      size -= static_cast<size_t>(w);
-    }
-    return absl::OkStatus();
+    return out_.Append(std::string_view(static_cast<const char*>(data), size));
   }
 
  private:
-  int fd_;
-  std::string path_;
+  AtomicFileWriter& out_;
 };
 
 class Source {
@@ -241,31 +226,17 @@ class StringSource final : public Source {
   std::string_view bytes_;
 };
 
-class FdSource final : public Source {
+class FileSource final : public Source {
  public:
-  FdSource(int fd, uint64_t size, std::string path)
-      : fd_(fd), size_(size), path_(std::move(path)) {}
-  uint64_t size() const override { return size_; }
+  FileSource(ReadableFile file, std::string path)
+      : file_(std::move(file)), path_(std::move(path)) {}
+  uint64_t size() const override { return static_cast<uint64_t>(file_.size); }
   absl::Status ReadAt(uint64_t offset, void* dst, size_t size) const override {
-    char* p = static_cast<char*>(dst);
-    while (size > 0) {
-      const ssize_t r =
-          ::pread(fd_, p, std::min<size_t>(size, size_t{1} << 30), static_cast<off_t>(offset));
-      if (r < 0) {
-        if (errno == EINTR) continue;
-        return absl::ErrnoToStatus(errno, absl::StrCat("reading '", path_, "'"));
-      }
-      if (r == 0) return DataLoss("file shrank while reading (truncated)");
-      p += r;
-      offset += static_cast<uint64_t>(r);
-      size -= static_cast<size_t>(r);
-    }
-    return absl::OkStatus();
+    return ReadExactlyAt(file_.fd.get(), offset, dst, size, path_);
   }
 
  private:
-  int fd_;
-  uint64_t size_;
+  ReadableFile file_;
   std::string path_;
 };
 
@@ -508,32 +479,13 @@ absl::StatusOr<LoadedBasis> Decode(const Source& src) {
   return out;
 }
 
-// RAII file descriptor.
-struct Fd {
-  int fd = -1;
-  ~Fd() {
-    if (fd >= 0) ::close(fd);
-  }
-};
-
-std::string DirName(const std::string& path) {
-  const size_t slash = path.find_last_of('/');
-  if (slash == std::string::npos) return ".";
-  if (slash == 0) return "/";
-  return path.substr(0, slash);
-}
-
-absl::StatusOr<std::unique_ptr<FdSource>> OpenSource(const std::string& path, Fd* fd) {
-  fd->fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd->fd < 0) return absl::ErrnoToStatus(errno, absl::StrCat("cannot open '", path, "'"));
-  struct stat st;
-  if (::fstat(fd->fd, &st) != 0) {
-    return absl::ErrnoToStatus(errno, absl::StrCat("cannot stat '", path, "'"));
-  }
-  if (!S_ISREG(st.st_mode)) {
+absl::StatusOr<FileSource> OpenSource(const std::string& path) {
+  absl::StatusOr<ReadableFile> file = OpenForReading(path);
+  if (!file.ok()) return file.status();
+  if (!file->is_regular) {
     return absl::InvalidArgumentError(absl::StrCat("'", path, "' is not a regular file"));
   }
-  return std::make_unique<FdSource>(fd->fd, static_cast<uint64_t>(st.st_size), path);
+  return FileSource(*std::move(file), path);
 }
 
 }  // namespace
@@ -553,48 +505,24 @@ absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes) {
 }
 
 absl::Status SaveBasisFile(const std::string& path, const Basis& basis, std::string_view mesh_id) {
-  std::string tmp = path + ".tmp.XXXXXX";
-  Fd fd;
-  fd.fd = ::mkstemp(tmp.data());
-  if (fd.fd < 0) return absl::ErrnoToStatus(errno, absl::StrCat("cannot create '", tmp, "'"));
-  auto fail = [&](absl::Status s) {
-    ::unlink(tmp.c_str());
-    return s;
-  };
-  ::fchmod(fd.fd, 0644);
-  FdSink sink(fd.fd, tmp);
-  if (absl::Status s = Encode(basis, mesh_id, sink); !s.ok()) return fail(s);
-  if (::fsync(fd.fd) != 0)
-    return fail(absl::ErrnoToStatus(errno, absl::StrCat("fsync '", tmp, "'")));
-  if (::close(fd.fd) != 0) {
-    fd.fd = -1;
-    return fail(absl::ErrnoToStatus(errno, absl::StrCat("close '", tmp, "'")));
-  }
-  fd.fd = -1;
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    return fail(absl::ErrnoToStatus(errno, absl::StrCat("cannot rename to '", path, "'")));
-  }
-  Fd dir;
-  dir.fd = ::open(DirName(path).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dir.fd >= 0 && ::fsync(dir.fd) != 0) {
-    return absl::ErrnoToStatus(errno, absl::StrCat("fsync of the folder of '", path, "'"));
-  }
-  return absl::OkStatus();
+  absl::StatusOr<AtomicFileWriter> out = AtomicFileWriter::Create(path);
+  if (!out.ok()) return out.status();
+  FileSink sink(*out);
+  if (absl::Status s = Encode(basis, mesh_id, sink); !s.ok()) return s;
+  return out->Commit();
 }
 
 absl::StatusOr<LoadedBasis> LoadBasisFile(const std::string& path) {
-  Fd fd;
-  absl::StatusOr<std::unique_ptr<FdSource>> src = OpenSource(path, &fd);
+  absl::StatusOr<FileSource> src = OpenSource(path);
   if (!src.ok()) return src.status();
-  return Decode(**src);
+  return Decode(*src);
 }
 
 absl::StatusOr<BasisFileInfo> ReadBasisFileInfo(const std::string& path) {
-  Fd fd;
-  absl::StatusOr<std::unique_ptr<FdSource>> src = OpenSource(path, &fd);
+  absl::StatusOr<FileSource> src = OpenSource(path);
   if (!src.ok()) return src.status();
   uint64_t header_end = 0;
-  absl::StatusOr<Header> h = ReadHeader(**src, &header_end);
+  absl::StatusOr<Header> h = ReadHeader(*src, &header_end);
   if (!h.ok()) return h.status();
   BasisFileInfo info;
   info.mesh_id = h->mesh_id;
@@ -607,7 +535,7 @@ absl::StatusOr<BasisFileInfo> ReadBasisFileInfo(const std::string& path) {
   info.rows = h->rows;
   info.nnz = h->nnz;
   info.num_regions = h->num_regions;
-  info.file_bytes = static_cast<int64_t>((*src)->size());
+  info.file_bytes = static_cast<int64_t>(src->size());
   return info;
 }
 

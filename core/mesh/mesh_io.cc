@@ -1,14 +1,8 @@
 #include "core/mesh/mesh_io.h"
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <bit>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstring>
@@ -28,6 +22,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/string_view.h"
 #include "absl/strings/strip.h"
+#include "core/common/file_util.h"
 #include "core/common/status_macros.h"
 
 namespace fieldspace {
@@ -1111,30 +1106,10 @@ absl::string_view FormatName(MeshFormat format) {
 // ---------------------------------------------------------------------------------------------
 // Files
 
-class FileDescriptor {
- public:
-  explicit FileDescriptor(int fd) : fd_(fd) {}
-  FileDescriptor(const FileDescriptor&) = delete;
-  FileDescriptor& operator=(const FileDescriptor&) = delete;
-  ~FileDescriptor() {
-    if (fd_ >= 0) ::close(fd_);
-  }
-  int get() const { return fd_; }
-  // Closes now and reports the error close() may return (delayed write errors).
-  int Close() {
-    const int r = ::close(fd_);
-    fd_ = -1;
-    return r;
-  }
-
- private:
-  int fd_;
-};
-
-// Little-endian output through a fixed buffer, flushed with write(2).
+// Little-endian output through a fixed buffer, flushed into an atomic file writer.
 class BinaryWriter {
  public:
-  explicit BinaryWriter(int fd) : fd_(fd) { buffer_.reserve(kCapacity); }
+  explicit BinaryWriter(AtomicFileWriter& out) : out_(out) { buffer_.reserve(kCapacity); }
 
   template <typename T>
   void Put(T value) {
@@ -1149,29 +1124,21 @@ class BinaryWriter {
   }
 
   void PutBytes(const void* data, size_t n) {
-    if (buffer_.size() + n > kCapacity) Flush();
+    if (buffer_.size() + n > kCapacity) Flush().IgnoreError();
     buffer_.append(static_cast<const char*>(data), n);
   }
 
-  // Returns 0 or the errno of the first failed write.
-  int Flush() {
-    size_t done = 0;
-    while (error_ == 0 && done < buffer_.size()) {
-      const ssize_t r = ::write(fd_, buffer_.data() + done, buffer_.size() - done);
-      if (r < 0) {
-        if (errno != EINTR) error_ = errno;
-        continue;
-      }
-      done += static_cast<size_t>(r);
-    }
+  // The status of the first failed write (later writes are skipped).
+  absl::Status Flush() {
+    if (status_.ok()) status_ = out_.Append(buffer_);
     buffer_.clear();
-    return error_;
+    return status_;
   }
 
  private:
   static constexpr size_t kCapacity = size_t{1} << 20;
-  int fd_;
-  int error_ = 0;
+  AtomicFileWriter& out_;
+  absl::Status status_;
   std::string buffer_;
 };
 
@@ -1215,51 +1182,6 @@ absl::StatusOr<MeshReadResult> ReadMeshFile(const std::string& path,
                                      ? absl::string_view(path)
                                      : absl::string_view(path).substr(slash + 1);
   return ReadMeshLabeled(data, format, options, name);
-}
-
-absl::StatusOr<std::string> ReadFileToString(const std::string& path, int64_t max_bytes) {
-  FileDescriptor fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
-  if (fd.get() < 0) {
-    return absl::ErrnoToStatus(errno, absl::StrCat("cannot open '", path, "'"));
-  }
-  struct stat st;
-  if (::fstat(fd.get(), &st) != 0) {
-    return absl::ErrnoToStatus(errno, absl::StrCat("cannot stat '", path, "'"));
-  }
-  if (S_ISDIR(st.st_mode)) {
-    return absl::InvalidArgumentError(absl::StrCat("'", path, "' is a directory"));
-  }
-  auto too_big = [&] {
-    return absl::ResourceExhaustedError(
-        absl::StrCat("'", path, "' is larger than the limit of ", max_bytes, " bytes"));
-  };
-  if (S_ISREG(st.st_mode) && st.st_size > max_bytes) return too_big();
-  // Regular files are read in one call (size + 1 to see the end); pipes and the like in growing
-  // chunks. Either way the total is bounded by max_bytes.
-  max_bytes = std::max<int64_t>(max_bytes, 0);
-  // One byte more than allowed, to tell "exactly max_bytes" from "more".
-  const int64_t cap = max_bytes < std::numeric_limits<int64_t>::max() ? max_bytes + 1 : max_bytes;
-  std::string data;
-  const int64_t initial = S_ISREG(st.st_mode) ? st.st_size + 1 : int64_t{1} << 16;
-  data.resize(static_cast<size_t>(std::min(initial, cap)));
-  size_t size = 0;
-  while (true) {
-    if (size == data.size()) {
-      if (static_cast<int64_t>(size) > max_bytes) return too_big();
-      data.resize(static_cast<size_t>(
-          std::min<int64_t>(std::max<int64_t>(2 * static_cast<int64_t>(size), 4096), cap)));
-    }
-    const ssize_t r = ::read(fd.get(), data.data() + size, data.size() - size);
-    if (r < 0) {
-      if (errno == EINTR) continue;
-      return absl::ErrnoToStatus(errno, absl::StrCat("cannot read '", path, "'"));
-    }
-    if (r == 0) break;
-    size += static_cast<size_t>(r);
-  }
-  if (static_cast<int64_t>(size) > max_bytes) return too_big();
-  data.resize(size);
-  return data;
 }
 
 absl::Status WritePly(const std::string& path, const VertexMatrix& V, const FaceMatrix& F,
@@ -1317,15 +1239,11 @@ absl::Status WritePly(const std::string& path, const VertexMatrix& V, const Face
   }
   header += "end_header\n";
 
-  // A unique temporary name in the same directory, so that rename() replaces `path` atomically.
-  static std::atomic<uint64_t> counter{0};
-  const std::string tmp_path = absl::StrCat(path, ".tmp.", ::getpid(), ".", counter.fetch_add(1));
-  FileDescriptor fd(
-      ::open(tmp_path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_TRUNC | O_CLOEXEC, 0666));
-  if (fd.get() < 0) {
-    return absl::ErrnoToStatus(errno, absl::StrCat("cannot create '", tmp_path, "'"));
-  }
-  BinaryWriter out(fd.get());
+  // A temporary file next to `path`, renamed over it once complete.
+  AtomicWriteOptions write_options;
+  write_options.mode = 0666;
+  ASSIGN_OR_RETURN(AtomicFileWriter file, AtomicFileWriter::Create(path, std::move(write_options)));
+  BinaryWriter out(file);
   out.PutBytes(header.data(), header.size());
   for (int64_t i = 0; i < num_vertices; ++i) {
     for (int k = 0; k < 3; ++k) out.Put(static_cast<float>(V(i, k)));
@@ -1335,14 +1253,8 @@ absl::Status WritePly(const std::string& path, const VertexMatrix& V, const Face
     for (int k = 0; k < 3; ++k) out.Put(F(f, k));
     for (const FaceProperty& prop : face_properties) out.Put(prop.values[f]);
   }
-  int error = out.Flush();
-  if (fd.Close() != 0 && error == 0) error = errno;
-  if (error == 0 && ::rename(tmp_path.c_str(), path.c_str()) != 0) error = errno;
-  if (error != 0) {
-    ::unlink(tmp_path.c_str());
-    return absl::ErrnoToStatus(error, absl::StrCat("cannot write '", path, "'"));
-  }
-  return absl::OkStatus();
+  RETURN_IF_ERROR(out.Flush());
+  return file.Commit();
 }
 
 }  // namespace fieldspace

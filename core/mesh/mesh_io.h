@@ -8,6 +8,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "core/common/file_util.h"  // ReadFileToString, which ReadMeshFile uses
 #include "core/mesh/triangle_mesh.h"
 
 namespace fieldspace {
@@ -60,11 +61,6 @@ absl::StatusOr<MeshReadResult> ReadMesh(std::string_view data, MeshFormat format
 // file's base name instead of the format name. NotFound if it does not exist.
 absl::StatusOr<MeshReadResult> ReadMeshFile(const std::string& path,
                                             const MeshReadOptions& options = {});
-
-// Reads a whole file. NotFound if it does not exist, InvalidArgument for a directory,
-// ResourceExhausted if it holds more than max_bytes bytes, otherwise the errno's status.
-absl::StatusOr<std::string> ReadFileToString(const std::string& path,
-                                             int64_t max_bytes = int64_t{1} << 33);
 
 // A per-face scalar stored with the mesh by WritePly (e.g. a field's magnitude for a viewer).
 struct FaceProperty {
