@@ -17,6 +17,7 @@
 #include "core/operators/reference_solvers.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tbb/global_control.h"
 #include "tests/core/operators/operator_test_util.h"
 
 namespace fieldspace {
@@ -369,6 +370,29 @@ TEST(KnownSingularitiesTest, CrossFieldOnBoxHasQuarterIndicesAtCorners) {
   EXPECT_EQ(s.index_sum, 8);
 }
 
+// The smoothest 4-field on the box: the axis cross field turned by any constant angle has zero
+// energy (nothing turns across the folds), so the lowest eigenfields are such fields and carry
+// +1/4 at exactly the 8 corners.
+TEST(KnownSingularitiesTest, SmoothestCrossFieldOnBoxHasQuarterIndicesAtCorners) {
+  const TriangleMesh mesh = MustCreate(MakeGenusSurface(0, 2));
+  auto op = BuildFieldOperator(mesh, FieldType::NField(4));
+  ASSERT_TRUE(op.ok()) << op.status();
+  EigenOptions options;
+  options.count = 2;
+  auto eig = ReferenceEigenpairs(*op, options);
+  ASSERT_TRUE(eig.ok()) << eig.status();
+  const Singularities axis = MustSingularities(mesh, Dofs(mesh, 4, AxisCrossField(mesh)), 4);
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_LT(std::abs(eig->values[i]), 1e-8);
+    const Singularities s = MustSingularities(mesh, eig->vectors.col(i), 4);
+    ASSERT_EQ(s.singularities.size(), 8u);
+    for (size_t j = 0; j < 8; ++j) {
+      EXPECT_EQ(s.singularities[j].vertex, axis.singularities[j].vertex);
+      EXPECT_EQ(s.singularities[j].index, 1);
+    }
+  }
+}
+
 TEST(KnownSingularitiesTest, CrossFieldOnGenus2PlateHasNegativeQuartersAtHoles) {
   const TriangleMesh mesh = MustCreate(MakeGenusSurface(2, 2));
   const Singularities s = MustSingularities(mesh, Dofs(mesh, 4, AxisCrossField(mesh)), 4);
@@ -518,6 +542,36 @@ TEST(SingularitiesTest, BoundaryValuesCompleteEulerCharacteristic) {
       EXPECT_EQ(s.boundary.size(), 28u);
       EXPECT_NEAR(TotalValue(s), n * mesh.euler_characteristic(), 1e-9);
     }
+  }
+}
+
+TEST(SingularitiesTest, ResultDoesNotDependOnThreadCount) {
+  const TriangleMesh mesh = MustCreate(MakeIcosphere(5));  // several parallel chunks
+  const Eigen::VectorXd dofs = RandomDofs(mesh, 9);
+  const VertexIndices parallel = MustIndices(mesh, dofs, 4);
+  VertexIndices serial;
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    serial = MustIndices(mesh, dofs, 4);
+  }
+  EXPECT_EQ(parallel.index, serial.index);
+  EXPECT_EQ(parallel.value, serial.value);  // bit for bit
+}
+
+TEST(SingularitiesTest, SeveralComponentsSumToTotalEulerCharacteristic) {
+  auto sphere = MakeIcosphere(2);
+  auto torus = MakeTorus(2.0, 0.7, 16, 8);
+  ASSERT_TRUE(sphere.ok() && torus.ok());
+  MeshArrays both;
+  const int64_t sv = sphere->vertices.rows(), tv = torus->vertices.rows();
+  both.vertices.resize(sv + tv, 3);
+  both.vertices << sphere->vertices, torus->vertices.rowwise() + Eigen::RowVector3d(5, 0, 0);
+  both.faces.resize(sphere->faces.rows() + torus->faces.rows(), 3);
+  both.faces << sphere->faces, (torus->faces.array() + static_cast<int32_t>(sv)).matrix();
+  const TriangleMesh mesh = MustCreate(both);
+  ASSERT_EQ(mesh.num_components(), 2);
+  for (int n : {1, 2, 4}) {
+    EXPECT_EQ(MustSingularities(mesh, RandomDofs(mesh, 4), n).index_sum, 2 * n);
   }
 }
 
