@@ -86,7 +86,11 @@ absl::StatusOr<VertexIndices> ComputeVertexIndices(const TriangleMesh& mesh,
   for (int32_t f = 0; f < nf; ++f) max_norm2 = std::max(max_norm2, norm2(f));
   const double zero_norm2 = options.zero_tolerance * options.zero_tolerance * max_norm2;
   std::vector<uint8_t> zero_face(nf);
-  for (int32_t f = 0; f < nf; ++f) zero_face[f] = norm2(f) <= zero_norm2;
+  for (int32_t f = 0; f < nf; ++f) {
+    // Without a tolerance only exact zeros (a squared norm could underflow for tiny vectors).
+    zero_face[f] = options.zero_tolerance == 0.0 ? dofs[2 * f] == 0.0 && dofs[2 * f + 1] == 0.0
+                                                 : norm2(f) <= zero_norm2;
+  }
 
   // Per interior edge between nonzero faces: omega_e, the rotation from f1 to f0 relative to the
   // transport, in representation angles; and the vertex p with p -> q counter-clockwise in f0

@@ -521,6 +521,9 @@ TEST(SingularitiesTest, ZeroFacesMakeTheirVerticesUndefined) {
   // A tiny face counts as zero only with a tolerance.
   dofs.segment<2>(2 * 7) << 1e-9, 0.0;
   EXPECT_EQ(MustSingularities(mesh, dofs, 2).undefined_vertices.size(), 0u);
+  dofs.segment<2>(2 * 7) << 1e-170, -1e-170;  // squares underflow, still a direction
+  EXPECT_EQ(MustSingularities(mesh, dofs, 2).undefined_vertices.size(), 0u);
+  dofs.segment<2>(2 * 7) << 1e-9, 0.0;
   SingularityOptions o;
   o.n = 2;
   o.zero_tolerance = 1e-6;
