@@ -254,20 +254,43 @@ absl::StatusOr<Eigen::VectorXd> ComputeShapeOperator(const TriangleMesh& mesh,
     default:
       return absl::InvalidArgumentError("unknown curvature estimator");
   }
-  const VertexMatrix normals = ComputeVertexNormals(mesh, options.normal_weighting);
-  const bool jet = options.estimator == CurvatureEstimator::kJetFit;
-  const VertexFaces vertex_faces = jet ? BuildVertexFaces(mesh) : VertexFaces();
   const int64_t nf = mesh.num_faces();
   Eigen::VectorXd dofs(3 * nf);
-  tbb::parallel_for(tbb::blocked_range<int64_t>(0, nf, kGrain), [&](const auto& range) {
-    std::vector<int32_t> ring;
-    for (int64_t f = range.begin(); f < range.end(); ++f) {
-      std::optional<Eigen::Matrix2d> B;
-      if (jet) B = JetFitFace(mesh, vertex_faces, f, ring);
-      if (!B.has_value()) B = NormalDifferencesFace(mesh, normals, f);
-      dofs[3 * f] = (*B)(0, 0);
-      dofs[3 * f + 1] = (*B)(1, 1);
-      dofs[3 * f + 2] = std::sqrt(2.0) * 0.5 * ((*B)(0, 1) + (*B)(1, 0));
+  auto store = [&](int64_t f, const Eigen::Matrix2d& B) {
+    dofs[3 * f] = B(0, 0);
+    dofs[3 * f + 1] = B(1, 1);
+    dofs[3 * f + 2] = std::sqrt(2.0) * 0.5 * (B(0, 1) + B(1, 0));
+  };
+  // Faces that take normal differences: all of them, or the jet fit's fallbacks. Vertex normals
+  // are only computed if there is one.
+  std::vector<int64_t> fallback;
+  if (options.estimator == CurvatureEstimator::kJetFit) {
+    const VertexFaces vertex_faces = BuildVertexFaces(mesh);
+    std::vector<uint8_t> failed(nf, 0);
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, nf, kGrain), [&](const auto& range) {
+      std::vector<int32_t> ring;
+      for (int64_t f = range.begin(); f < range.end(); ++f) {
+        const std::optional<Eigen::Matrix2d> B = JetFitFace(mesh, vertex_faces, f, ring);
+        if (B.has_value()) {
+          store(f, *B);
+        } else {
+          failed[f] = 1;
+        }
+      }
+    });
+    for (int64_t f = 0; f < nf; ++f) {
+      if (failed[f]) fallback.push_back(f);
+    }
+  } else {
+    fallback.resize(nf);
+    for (int64_t f = 0; f < nf; ++f) fallback[f] = f;
+  }
+  if (fallback.empty()) return dofs;
+  const VertexMatrix normals = ComputeVertexNormals(mesh, options.normal_weighting);
+  const int64_t count = static_cast<int64_t>(fallback.size());
+  tbb::parallel_for(tbb::blocked_range<int64_t>(0, count, kGrain), [&](const auto& range) {
+    for (int64_t i = range.begin(); i < range.end(); ++i) {
+      store(fallback[i], NormalDifferencesFace(mesh, normals, fallback[i]));
     }
   });
   return dofs;
