@@ -15,6 +15,7 @@ int RunServeLoad(int argc, char** argv);
 int RunApprox(int argc, char** argv);
 int RunEigen(int argc, char** argv);
 int RunDesign(int argc, char** argv);
+int RunCurvature(int argc, char** argv);
 
 // Prints `status` as one line on stderr and returns the exit code: 2 for caller errors
 // (InvalidArgument, NotFound, OutOfRange, FailedPrecondition, ResourceExhausted, DataLoss), else 1.

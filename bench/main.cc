@@ -37,6 +37,8 @@ constexpr Command kCommands[] = {
     {"design", fieldspace::bench::RunDesign,
      "design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S [--sigma S] "
      "[--max-constraints C] [--no-full] [--full-biharmonic]"},
+    {"curvature", fieldspace::bench::RunCurvature,
+     "curvature MESH [--estimator jet|normal-differences]"},
 };
 
 void PrintUsage() {
