@@ -55,10 +55,14 @@ int ScopedFd::Close() {
 absl::StatusOr<ReadableFile> OpenForReading(const std::string& path, ErrnoStatusFn errno_status) {
   ReadableFile file;
   file.fd.reset(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
-  if (!file.fd.is_open()) return errno_status(errno, absl::StrCat("opening '", path, "'"));
+  if (!file.fd.is_open()) {
+    const int err = errno;  // before building the message, which may allocate
+    return errno_status(err, absl::StrCat("opening '", path, "'"));
+  }
   struct stat st;
   if (::fstat(file.fd.get(), &st) != 0) {
-    return errno_status(errno, absl::StrCat("stat of '", path, "'"));
+    const int err = errno;
+    return errno_status(err, absl::StrCat("stat of '", path, "'"));
   }
   file.size = static_cast<int64_t>(st.st_size);
   file.is_regular = S_ISREG(st.st_mode);
@@ -73,7 +77,8 @@ absl::Status ReadExactlyAt(int fd, uint64_t offset, void* data, size_t size, std
     const ssize_t n = ::pread(fd, p, size, static_cast<off_t>(offset));
     if (n < 0) {
       if (errno == EINTR) continue;
-      return errno_status(errno, absl::StrCat("reading '", Abs(path), "'"));
+      const int err = errno;
+      return errno_status(err, absl::StrCat("reading '", Abs(path), "'"));
     }
     if (n == 0) return absl::DataLossError(absl::StrCat(Abs(path), ": unexpected end of file"));
     p += n;
@@ -119,7 +124,8 @@ absl::StatusOr<std::string> ReadFileToString(const std::string& path, int64_t ma
     const ssize_t r = ::read(file.fd.get(), data.data() + size, data.size() - size);
     if (r < 0) {
       if (errno == EINTR) continue;
-      return ErrnoStatus(errno, absl::StrCat("reading '", Abs(path), "'"));
+      const int err = errno;
+      return ErrnoStatus(err, absl::StrCat("reading '", Abs(path), "'"));
     }
     if (r == 0) break;
     size += static_cast<size_t>(r);
@@ -131,9 +137,13 @@ absl::StatusOr<std::string> ReadFileToString(const std::string& path, int64_t ma
 
 absl::Status FsyncDirectory(const std::string& dir, ErrnoStatusFn errno_status) {
   ScopedFd fd(::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
-  if (!fd.is_open()) return errno_status(errno, absl::StrCat("opening directory '", dir, "'"));
+  if (!fd.is_open()) {
+    const int err = errno;
+    return errno_status(err, absl::StrCat("opening directory '", dir, "'"));
+  }
   if (::fsync(fd.get()) != 0) {
-    return errno_status(errno, absl::StrCat("fsync of directory '", dir, "'"));
+    const int err = errno;
+    return errno_status(err, absl::StrCat("fsync of directory '", dir, "'"));
   }
   return absl::OkStatus();
 }
@@ -163,9 +173,10 @@ absl::StatusOr<AtomicFileWriter> AtomicFileWriter::Create(const std::string& pat
       return AtomicFileWriter(path, std::move(dir), std::move(temp_path), std::move(fd),
                               std::move(options));
     }
-    if (errno != EEXIST || attempt + 1 == kAttempts) {
+    const int err = errno;
+    if (err != EEXIST || attempt + 1 == kAttempts) {
       return options.errno_status(
-          errno, absl::StrCat("writing '", path, "' (creating '", temp_path, "')"));
+          err, absl::StrCat("writing '", path, "' (creating '", temp_path, "')"));
     }
   }
 }
@@ -258,13 +269,15 @@ absl::Status AtomicFileWriter::Commit() {
   if (committed_) return absl::FailedPreconditionError(absl::StrCat(path_, ": already committed"));
   RunHookIfDue(/*at_commit=*/true);
   if (::fsync(fd_.get()) != 0) {
-    return Fail(StepError(errno, absl::StrCat("fsync of '", temp_path_, "'")));
+    const int err = errno;
+    return Fail(StepError(err, absl::StrCat("fsync of '", temp_path_, "'")));
   }
   if (const int err = fd_.Close(); err != 0) {
     return Fail(StepError(err, absl::StrCat("closing '", temp_path_, "'")));
   }
   if (::rename(temp_path_.c_str(), path_.c_str()) != 0) {
-    return Fail(StepError(errno, absl::StrCat("renaming '", temp_path_, "' over it")));
+    const int err = errno;
+    return Fail(StepError(err, absl::StrCat("renaming '", temp_path_, "' over it")));
   }
   temp_exists_ = false;
   committed_ = true;
