@@ -7,21 +7,24 @@
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <utility>
 
 #include "gtest/gtest.h"
-#include "tests/core/basis/basis_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/reference.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using testing::Icosphere;
-using testing::Operator;
+using testing::MustBuildOperator;
 
 class BasisIoTest : public ::testing::Test {
  protected:
   void SetUp() override {
     const TriangleMesh mesh = Icosphere(2);
-    const FieldOperator op = Operator(mesh, FieldType::NField(3));
+    const FieldOperator op = MustBuildOperator(mesh, FieldType::NField(3));
     BasisOptions options;
     options.params.dimension = 31;
     options.params.sigma = 12.5;

@@ -16,7 +16,8 @@
 #include "core/basis/regions.h"
 #include "core/basis/sampling.h"
 #include "gtest/gtest.h"
-#include "tests/core/basis/basis_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/reference.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -28,7 +29,7 @@ using basis_internal::LocalOperator;
 using basis_internal::UpperCsc;
 using testing::DualDistances;
 using testing::Icosphere;
-using testing::LoadMesh;
+using testing::MustLoadMesh;
 using testing::TwoSpheres;
 
 TEST(DualGraphTest, ArcsAndLengths) {
@@ -71,7 +72,7 @@ TEST(DualGraphTest, ArcsAndLengths) {
 
 TEST(DualGraphTest, BoundaryFacesHaveFewerArcs) {
   FS_REQUIRE_SHARED_MESH(path, "camelhead_23k.off");
-  const TriangleMesh mesh = LoadMesh(path);
+  const TriangleMesh mesh = MustLoadMesh(path);
   auto g = BuildDualGraph(mesh, {});
   ASSERT_TRUE(g.ok());
   int64_t interior_edges = 0, arcs = 0;

@@ -5,12 +5,14 @@
 #include <cmath>
 #include <limits>
 #include <set>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Eigenvalues"
 #include "core/basis/basis_io.h"
 #include "gtest/gtest.h"
-#include "tests/core/basis/basis_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/reference.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -21,8 +23,8 @@ using testing::DenseColumn;
 using testing::DenseRestricted;
 using testing::DualDistances;
 using testing::Icosphere;
-using testing::LoadMesh;
-using testing::Operator;
+using testing::MustBuildOperator;
+using testing::MustLoadMesh;
 using testing::RegionFaces;
 using testing::TwoSpheres;
 
@@ -91,8 +93,8 @@ void CheckStructure(const TriangleMesh& mesh, const FieldOperator& op, const Bas
 
 TEST(BasisTest, VectorBasisOnRealMeshHasPaperStructure) {
   FS_REQUIRE_SHARED_MESH(path, "bimba_18k.obj");
-  const TriangleMesh mesh = LoadMesh(path);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = MustLoadMesh(path);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 200);
   CheckStructure(mesh, op, basis, 25);
   // About 0.6 sigma nonzeros per row with dual-graph distances (DESIGN.md section 3).
@@ -155,7 +157,7 @@ void CheckLocalEigenproblems(const TriangleMesh& mesh, const FieldOperator& op, 
 
 TEST(BasisTest, LocalEigenproblemsMatchDenseSolveVector) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 120, 20.0);
   CheckStructure(mesh, op, basis, 20);
   CheckLocalEigenproblems(mesh, op, basis, 4);
@@ -163,7 +165,7 @@ TEST(BasisTest, LocalEigenproblemsMatchDenseSolveVector) {
 
 TEST(BasisTest, LocalEigenproblemsMatchDenseSolveNField) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
-  const FieldOperator op = Operator(mesh, FieldType::NField(4));
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::NField(4));
   const Basis basis = Build(mesh, op, 120, 20.0);
   CheckStructure(mesh, op, basis, 20);
   CheckLocalEigenproblems(mesh, op, basis, 4);
@@ -171,7 +173,7 @@ TEST(BasisTest, LocalEigenproblemsMatchDenseSolveNField) {
 
 TEST(BasisTest, LocalEigenproblemsMatchDenseSolveTensor) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
-  const FieldOperator op = Operator(mesh, FieldType::Tensor());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Tensor());
   const Basis basis = Build(mesh, op, 120, 20.0);  // 40 regions x 3 fields
   CheckStructure(mesh, op, basis, 20);
   CheckLocalEigenproblems(mesh, op, basis, 4);
@@ -179,7 +181,7 @@ TEST(BasisTest, LocalEigenproblemsMatchDenseSolveTensor) {
 
 TEST(BasisTest, FactoredAndGenericVectorPathsAgree) {
   const TriangleMesh mesh = Icosphere(4);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 60;
   auto fast = BuildBasis(mesh, op, options);
@@ -210,7 +212,7 @@ TEST(BasisTest, FactoredAndGenericVectorPathsAgree) {
 
 TEST(BasisTest, DeterministicAndIndependentOfThreadCount) {
   const TriangleMesh mesh = Icosphere(4);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis a = Build(mesh, op, 80, 40.0, /*threads=*/1, /*seed=*/7);
   const Basis b = Build(mesh, op, 80, 40.0, /*threads=*/1, /*seed=*/7);
   const Basis c = Build(mesh, op, 80, 40.0, /*threads=*/2, /*seed=*/7);
@@ -231,7 +233,7 @@ TEST(BasisTest, DeterministicAndIndependentOfThreadCount) {
 
 TEST(BasisTest, AdaptivityWeightsConcentrateSamples) {
   const TriangleMesh mesh = Icosphere(4);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   // Weight 4 on the cap z > 0.6 (20% of the sphere's area).
   Eigen::VectorXd w = Eigen::VectorXd::Ones(mesh.num_faces());
   double cap_area = 0;
@@ -281,7 +283,7 @@ TEST(BasisTest, AdaptivityWeightsConcentrateSamples) {
 TEST(BasisTest, MultiComponentMeshSamplesEveryComponentByArea) {
   const TriangleMesh mesh = TwoSpheres(3, 2.0);  // areas 1 : 4
   ASSERT_EQ(mesh.num_components(), 2);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 100);  // 50 regions: 10 + 40
   CheckStructure(mesh, op, basis, 50);
   int32_t in_first = 0;
@@ -293,7 +295,7 @@ TEST(BasisTest, MultiComponentMeshSamplesEveryComponentByArea) {
 
 TEST(BasisTest, TinyDimensionStillGivesEveryComponentASample) {
   const TriangleMesh mesh = TwoSpheres(2, 3.0);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 3;  // 2 regions: one per component, the second with one field
   auto basis = BuildBasis(mesh, op, options);
@@ -309,8 +311,8 @@ TEST(BasisTest, TinyDimensionStillGivesEveryComponentASample) {
 TEST(BasisTest, MeshesWithBoundary) {
   for (const char* name : {"camelhead_23k.off", "blade_16k.off"}) {
     FS_REQUIRE_SHARED_MESH(path, name);
-    const TriangleMesh mesh = LoadMesh(path);
-    const FieldOperator op = Operator(mesh, FieldType::Vector());
+    const TriangleMesh mesh = MustLoadMesh(path);
+    const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
     const Basis basis = Build(mesh, op, 150);
     SCOPED_TRACE(name);
     CheckStructure(mesh, op, basis, 15);
@@ -319,7 +321,7 @@ TEST(BasisTest, MeshesWithBoundary) {
 
 TEST(BasisTest, OddDimensionDropsTheLastRegionsSecondField) {
   const TriangleMesh mesh = Icosphere(3);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 41);
   EXPECT_EQ(basis.num_regions(), 21);
   EXPECT_EQ(basis.dimension(), 41);
@@ -333,7 +335,7 @@ TEST(BasisTest, OddDimensionDropsTheLastRegionsSecondField) {
 
 TEST(BasisTest, CustomFieldsPerRegion) {
   const TriangleMesh mesh = Icosphere(3);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 40;
   options.params.sigma = 16.0;  // small regions keep the dense checks fast
@@ -347,7 +349,7 @@ TEST(BasisTest, CustomFieldsPerRegion) {
 
 TEST(BasisTest, ProgressAndCancellation) {
   const TriangleMesh mesh = Icosphere(4);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 100;
   std::vector<std::pair<BasisPhase, double>> calls;
@@ -379,7 +381,7 @@ TEST(BasisTest, ProgressAndCancellation) {
 
 TEST(BasisTest, StackBasesConcatenatesColumns) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 60;
   auto fine = BuildBasis(mesh, op, options);
@@ -400,17 +402,17 @@ TEST(BasisTest, StackBasesConcatenatesColumns) {
   EXPECT_EQ(s.rightCols(9), Eigen::MatrixXf(coarse->U));
 
   const TriangleMesh small = Icosphere(2);
-  auto other = BuildBasis(small, Operator(small, FieldType::Vector()), options);
+  auto other = BuildBasis(small, MustBuildOperator(small, FieldType::Vector()), options);
   ASSERT_TRUE(other.ok());
   EXPECT_EQ(StackBases(*fine, *other).status().code(), absl::StatusCode::kInvalidArgument);
-  auto nfield = BuildBasis(mesh, Operator(mesh, FieldType::NField(4)), options);
+  auto nfield = BuildBasis(mesh, MustBuildOperator(mesh, FieldType::NField(4)), options);
   ASSERT_TRUE(nfield.ok());
   EXPECT_EQ(StackBases(*fine, *nfield).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
   const TriangleMesh mesh = Icosphere(3);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 69;
   std::vector<std::pair<BasisPhase, double>> seen;
@@ -457,7 +459,7 @@ TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
 
 TEST(BasisTest, InvalidParameters) {
   const TriangleMesh mesh = Icosphere(2);  // 320 faces, 640 DOFs
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto code = [&](auto mutate) {
     BasisOptions options;
     options.params.dimension = 20;
@@ -500,7 +502,7 @@ TEST(BasisTest, InvalidParameters) {
             StatusCode::kResourceExhausted);
   // An operator for another mesh.
   const TriangleMesh other = Icosphere(1);
-  const FieldOperator other_op = Operator(other, FieldType::Vector());
+  const FieldOperator other_op = MustBuildOperator(other, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 10;
   EXPECT_EQ(BuildBasis(mesh, other_op, options).status().code(), StatusCode::kInvalidArgument);
@@ -508,7 +510,7 @@ TEST(BasisTest, InvalidParameters) {
 
 TEST(BasisTest, DimensionEqualToDofCountIsAllowed) {
   const TriangleMesh mesh = Icosphere(1);  // 80 faces, 160 DOFs
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 160;  // 80 regions: every face a sample
   options.params.sigma = 2.0;

@@ -7,7 +7,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/linalg/linalg_test_util.h"
+#include "tests/testing/fixtures.h"
 
 namespace fieldspace {
 namespace {

@@ -1,5 +1,6 @@
 #include "core/linalg/matrix_market.h"
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>

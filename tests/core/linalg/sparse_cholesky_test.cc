@@ -3,11 +3,12 @@
 #include <cmath>
 #include <random>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/linalg/linalg_test_util.h"
+#include "tests/testing/fixtures.h"
 
 namespace fieldspace {
 namespace {

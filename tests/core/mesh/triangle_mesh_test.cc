@@ -1,8 +1,11 @@
 #include "core/mesh/triangle_mesh.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Geometry"
@@ -15,25 +18,11 @@
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::Arrays;
+using ::fieldspace::testing::MustCreate;
 using ::testing::HasSubstr;
 
 constexpr double kPi = 3.14159265358979323846;
-
-MeshArrays Arrays(std::vector<Eigen::Vector3d> v, std::vector<Eigen::Vector3i> f) {
-  MeshArrays a;
-  a.vertices.resize(static_cast<int64_t>(v.size()), 3);
-  for (size_t i = 0; i < v.size(); ++i) a.vertices.row(i) = v[i];
-  a.faces.resize(static_cast<int64_t>(f.size()), 3);
-  for (size_t i = 0; i < f.size(); ++i) a.faces.row(i) = f[i];
-  return a;
-}
-
-TriangleMesh MustCreate(absl::StatusOr<MeshArrays> arrays) {
-  EXPECT_TRUE(arrays.ok()) << arrays.status();
-  auto mesh = TriangleMesh::Create(*std::move(arrays));
-  EXPECT_TRUE(mesh.ok()) << mesh.status();
-  return *std::move(mesh);
-}
 
 // Checks that every table of `mesh` agrees with every other one.
 void ExpectConsistentTopology(const TriangleMesh& mesh) {

@@ -1,5 +1,6 @@
 #include "core/operators/conversions.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -8,9 +9,10 @@
 #include <vector>
 
 #include "Eigen/Geometry"
+#include "core/mesh/shapes.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/fixtures.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {

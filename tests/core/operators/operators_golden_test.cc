@@ -12,7 +12,7 @@
 #include "core/operators/tensor_laplacian.h"
 #include "core/operators/vector_laplacian.h"
 #include "gtest/gtest.h"
-#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/fixtures.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {

@@ -10,13 +10,15 @@
 #include "Eigen/SparseCore"
 #include "core/linalg/eigensolver.h"
 #include "core/linalg/sparse_checks.h"
+#include "core/mesh/mesh_io.h"
+#include "core/mesh/shapes.h"
 #include "core/operators/conversions.h"
 #include "core/operators/field_operator.h"
 #include "core/operators/nfield_laplacian.h"
 #include "core/operators/tensor_laplacian.h"
 #include "core/operators/vector_laplacian.h"
 #include "gtest/gtest.h"
-#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/fixtures.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -26,6 +28,7 @@ using SpMat = Eigen::SparseMatrix<double>;
 using ::fieldspace::testing::LoadMesh;
 using ::fieldspace::testing::MaxAbs;
 using ::fieldspace::testing::MaxAbsDiff;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::MustCreate;
 using ::fieldspace::testing::PlanarStrip;
 
@@ -36,12 +39,6 @@ EigenResult Lowest(const SpMat& S, const Eigen::VectorXd& mass, int count, bool 
   auto result = LowestEigenpairs(S, mass, options);
   EXPECT_TRUE(result.ok()) << result.status();
   return result.ok() ? *result : EigenResult{};
-}
-
-FieldOperator MustBuild(const TriangleMesh& mesh, FieldType type) {
-  auto op = BuildFieldOperator(mesh, type);
-  EXPECT_TRUE(op.ok()) << op.status();
-  return *std::move(op);
 }
 
 // max_i S_ii / M_ii: the scale of the largest eigenvalues.
@@ -59,7 +56,7 @@ TEST(OperatorPropertiesTest, SymmetricPsdPositiveMassOnRealMeshes) {
     ASSERT_TRUE(mesh.ok()) << mesh.status();
     for (FieldType type : {FieldType::Vector(), FieldType::NField(3), FieldType::Tensor()}) {
       SCOPED_TRACE(std::string(name) + " " + type.ToString());
-      const FieldOperator op = MustBuild(*mesh, type);
+      const FieldOperator op = MustBuildOperator(*mesh, type);
       // Bitwise symmetric (the assembly mirrors blocks exactly).
       EXPECT_TRUE(CheckSymmetric(op.stiffness, 0.0, "S").ok());
       EXPECT_TRUE(op.stiffness.isCompressed());
@@ -82,7 +79,7 @@ TEST(OperatorPropertiesTest, DensePsdCheckOnSmallShapes) {
   meshes.push_back(MustCreate(PlanarStrip(12, 6)));
   for (const TriangleMesh& mesh : meshes) {
     for (FieldType type : {FieldType::Vector(), FieldType::NField(5), FieldType::Tensor()}) {
-      const FieldOperator op = MustBuild(mesh, type);
+      const FieldOperator op = MustBuildOperator(mesh, type);
       const Eigen::VectorXd d = op.mass.cwiseSqrt().cwiseInverse();
       const Eigen::MatrixXd A = d.asDiagonal() * Eigen::MatrixXd(op.stiffness) * d.asDiagonal();
       Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(A, Eigen::EigenvaluesOnly);
@@ -123,7 +120,7 @@ TEST(VectorHodgeTest, KernelDimensionIsTwiceTheGenus) {
     auto mesh = LoadMesh(path);
     ASSERT_TRUE(mesh.ok()) << mesh.status();
     ASSERT_EQ(mesh->genus(), c.genus);
-    const FieldOperator op = MustBuild(*mesh, FieldType::Vector());
+    const FieldOperator op = MustBuildOperator(*mesh, FieldType::Vector());
     const KernelReport k = Kernel(op, 2 * c.genus + 4);
     EXPECT_EQ(k.dimension, 2 * c.genus) << c.name;
     // A clear gap: harmonic eigenvalues are rounding noise next to the first nonzero one.
@@ -140,7 +137,7 @@ TEST(VectorHodgeTest, UnitSphereSpectrumConvergesToLTimesLPlusOne) {
   double previous_error = 1e300;
   for (int level = 3; level <= 5; ++level) {
     const TriangleMesh mesh = MustCreate(MakeIcosphere(level, 1.0));
-    const FieldOperator op = MustBuild(mesh, FieldType::Vector());
+    const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
     const EigenResult r = Lowest(op.stiffness, op.mass, static_cast<int>(exact.size()));
     double error = 0;
     for (size_t i = 0; i < exact.size(); ++i) {
@@ -184,7 +181,7 @@ TEST(NFieldTest, FourFieldOnSphereHasNoKernel) {
   double previous = 0;
   for (int level = 3; level <= 4; ++level) {
     const TriangleMesh mesh = MustCreate(MakeIcosphere(level, 1.0));
-    const FieldOperator op = MustBuild(mesh, FieldType::NField(4));
+    const FieldOperator op = MustBuildOperator(mesh, FieldType::NField(4));
     const EigenResult r = Lowest(op.stiffness, op.mass, 4);
     std::printf("4-field on icosphere level %d: lowest eigenvalues %.6g %.6g %.6g\n", level,
                 r.values[0], r.values[1], r.values[2]);
@@ -200,8 +197,8 @@ TEST(TensorTest, SpectrumIsUnionOfScalarAndTwoFieldSpectra) {
   FS_REQUIRE_SHARED_MESH(path, "bimba_1k.off");
   auto mesh = LoadMesh(path);
   ASSERT_TRUE(mesh.ok()) << mesh.status();
-  const FieldOperator tensor = MustBuild(*mesh, FieldType::Tensor());
-  const FieldOperator two = MustBuild(*mesh, FieldType::NField(2));
+  const FieldOperator tensor = MustBuildOperator(*mesh, FieldType::Tensor());
+  const FieldOperator two = MustBuildOperator(*mesh, FieldType::NField(2));
   // Scalar face Laplacian with the same weights w_e = 3 |e|^2 / (A_i + A_j), built here.
   std::vector<Eigen::Triplet<double>> t;
   for (int e = 0; e < mesh->num_edges(); ++e) {
@@ -313,8 +310,8 @@ TEST(FrameIndependenceTest, CyclicVertexOrderOnlyRotatesTheDofs) {
   const TriangleMesh b = MustCreate(permuted);
   for (FieldType type :
        {FieldType::Vector(), FieldType::NField(1), FieldType::NField(4), FieldType::Tensor()}) {
-    const FieldOperator oa = MustBuild(a, type);
-    const FieldOperator ob = MustBuild(b, type);
+    const FieldOperator oa = MustBuildOperator(a, type);
+    const FieldOperator ob = MustBuildOperator(b, type);
     // DOFs in frame b are Q times DOFs in frame a, energies agree: S_b = Q S_a Q^T.
     const SpMat Q = FrameChange(a, b, type);
     const SpMat expected = Q * oa.stiffness * SpMat(Q.transpose());

@@ -5,11 +5,13 @@
 #include <optional>
 #include <ostream>
 #include <random>
+#include <utility>
 #include <vector>
 
+#include "core/mesh/shapes.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/fixtures.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {

@@ -1,7 +1,9 @@
 #include "core/subspace/dense_eigen.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <thread>
 
 #include "Eigen/Eigenvalues"

@@ -1,31 +1,35 @@
 #include "core/subspace/design_session.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
+#include <memory>
 #include <random>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Dense"
 #include "core/subspace/projection.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::RelativeDifference;
-using ::fieldspace::testing::TorusMesh;
+using ::fieldspace::testing::Torus;
 
 class DesignSessionTest : public ::testing::TestWithParam<FieldType> {
  protected:
   void SetUp() override {
-    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(2));
-    op_ = MakeOperator(*mesh_, GetParam());
+    mesh_ = std::make_unique<TriangleMesh>(Icosphere(2));
+    op_ = MustBuildOperator(*mesh_, GetParam());
     basis_ = RandomBasis(GetParam(), op_.dofs(), 150, 30, 17);
     auto sys = ReducedSystem::Build(basis_, op_);
     ASSERT_TRUE(sys.ok()) << sys.status();
@@ -356,8 +360,8 @@ INSTANTIATE_TEST_SUITE_P(FieldTypes, DesignSessionTest,
 TEST(DesignSessionTorusTest, SingularEnergyWithConstraints) {
   // U = I on a torus and mu_B only: the energy has the harmonic fields in its kernel, so the
   // factorization is regularized; with constraints the session still matches the fresh solve.
-  const TriangleMesh mesh = TorusMesh(12, 6);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Torus(12, 6);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(
       ::fieldspace::testing::IdentityBasis(FieldType::Vector(), op.dofs()), op);
   ASSERT_TRUE(sys.ok());

@@ -1,25 +1,27 @@
 #include "core/subspace/evaluation.h"
 
 #include <cmath>
+#include <vector>
 
 #include "Eigen/Dense"
 #include "core/operators/reference_solvers.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using ::fieldspace::testing::DenseU;
-using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::IdentityBasis;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 
 TEST(EvaluationTest, TestFieldsAreConstrainedBiharmonicMinimizers) {
-  const TriangleMesh mesh = IcosphereMesh(2);
+  const TriangleMesh mesh = Icosphere(2);
   for (const FieldType& type : {FieldType::Vector(), FieldType::NField(2), FieldType::Tensor()}) {
-    const FieldOperator op = MakeOperator(mesh, type);
+    const FieldOperator op = MustBuildOperator(mesh, type);
     TestFieldOptions options;
     options.count = 3;
     options.min_constraints = 5;
@@ -56,8 +58,8 @@ TEST(EvaluationTest, TestFieldsAreConstrainedBiharmonicMinimizers) {
 }
 
 TEST(EvaluationTest, SmoothingWeightsFollowTheOperatorScale) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto lambdas = SmoothingWeights(op, 5);
   ASSERT_TRUE(lambdas.ok());
   const Eigen::VectorXd ones = Eigen::VectorXd::Ones(op.dofs());
@@ -69,8 +71,8 @@ TEST(EvaluationTest, SmoothingWeightsFollowTheOperatorScale) {
 }
 
 TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Eigen::MatrixXd fields = Eigen::MatrixXd::Random(op.dofs(), 2);
   const std::vector<double> lambdas = {0.01, 0.3};
   // U = I: the subspace is the full space, no error.
@@ -107,8 +109,8 @@ TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
 }
 
 TEST(EvaluationTest, InvalidTestFieldOptions) {
-  const TriangleMesh mesh = IcosphereMesh(1);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(1);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   TestFieldOptions options;
   options.count = 0;
   EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);

@@ -10,18 +10,19 @@
 #include "core/operators/reference_solvers.h"
 #include "core/subspace/projection.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using ::fieldspace::testing::DenseU;
-using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::IdentityBasis;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::RelativeDifference;
-using ::fieldspace::testing::TorusMesh;
+using ::fieldspace::testing::Torus;
 
 // Random constraints on distinct faces.
 ModelProblem RandomProblem(int32_t num_faces, int32_t p, int soft, int hard, uint64_t seed,
@@ -85,9 +86,9 @@ Eigen::VectorXd DenseReducedSolution(const FieldOperator& op, const Basis& basis
 }
 
 TEST(ModelProblemTest, IdentityBasisReproducesTheFullSpaceSolve) {
-  const TriangleMesh mesh = IcosphereMesh(2);
+  const TriangleMesh mesh = Icosphere(2);
   for (const FieldType& type : {FieldType::Vector(), FieldType::Tensor()}) {
-    const FieldOperator op = MakeOperator(mesh, type);
+    const FieldOperator op = MustBuildOperator(mesh, type);
     auto sys = ReducedSystem::Build(IdentityBasis(type, op.dofs()), op);
     ASSERT_TRUE(sys.ok()) << sys.status();
     const int p = type.dofs_per_face();
@@ -108,8 +109,8 @@ TEST(ModelProblemTest, IdentityBasisReproducesTheFullSpaceSolve) {
 TEST(ModelProblemTest, SingularEnergyOnTorusIsRegularizedAndRefinedToTheExactSolution) {
   // Genus 1: S has a 2-dimensional kernel (harmonic fields). With U = I and only mu_s, the
   // energy matrix is singular; the soft constraints make the problem well posed.
-  const TriangleMesh mesh = TorusMesh(16, 8);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Torus(16, 8);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
   ASSERT_TRUE(sys.ok());
   const ModelProblem problem = RandomProblem(mesh.num_faces(), 2, 5, 1, 9, 1.0, 0.0, 2.0);
@@ -122,10 +123,10 @@ TEST(ModelProblemTest, SingularEnergyOnTorusIsRegularizedAndRefinedToTheExactSol
 }
 
 TEST(ModelProblemTest, RandomBasisMatchesDenseKkt) {
-  const TriangleMesh mesh = IcosphereMesh(2);
+  const TriangleMesh mesh = Icosphere(2);
   int seed = 0;
   for (const FieldType& type : {FieldType::Vector(), FieldType::NField(3), FieldType::Tensor()}) {
-    const FieldOperator op = MakeOperator(mesh, type);
+    const FieldOperator op = MustBuildOperator(mesh, type);
     auto basis = RandomBasis(type, op.dofs(), 90, 30, 5 + seed);
     auto sys = ReducedSystem::Build(basis, op);
     ASSERT_TRUE(sys.ok());
@@ -149,8 +150,8 @@ TEST(ModelProblemTest, RandomBasisMatchesDenseKkt) {
 }
 
 TEST(ModelProblemTest, InvalidProblems) {
-  const TriangleMesh mesh = IcosphereMesh(1);  // 80 faces
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(1);  // 80 faces
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op.dofs(), 20, 10, 1), op);
   ASSERT_TRUE(sys.ok());
   const ModelProblem good = RandomProblem(mesh.num_faces(), 2, 2, 1, 4, 1.0, 0.0, 1.0);
@@ -200,8 +201,8 @@ TEST(ModelProblemTest, InvalidProblems) {
 }
 
 TEST(ModelProblemTest, CancelledSolveStopsWithCancelled) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
   ASSERT_TRUE(sys.ok());
   const ModelProblem problem = RandomProblem(mesh.num_faces(), 2, 5, 4, 3, 0.5, 0.02, 3.0);

@@ -1,27 +1,30 @@
 #include "core/subspace/projection.h"
 
 #include <atomic>
+#include <cmath>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "Eigen/Dense"
 #include "core/subspace/lift_plan.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using ::fieldspace::testing::DenseU;
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 
 class ProjectionTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(2));
-    op_ = MakeOperator(*mesh_, FieldType::Vector());
+    mesh_ = std::make_unique<TriangleMesh>(Icosphere(2));
+    op_ = MustBuildOperator(*mesh_, FieldType::Vector());
     basis_ = RandomBasis(FieldType::Vector(), op_.dofs(), 80, 25, 21);
     auto sys = ReducedSystem::Build(basis_, op_);
     ASSERT_TRUE(sys.ok()) << sys.status();

@@ -1,9 +1,11 @@
 // The subspace methods on a basis from the real construction (core/basis): invariants that hold
 // for any basis, checked against independent computations, plus loose quality bounds (the tight
 // figures are measured by fieldspace-bench approx / eigen).
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Dense"
@@ -16,20 +18,21 @@
 #include "core/subspace/reduced_system.h"
 #include "core/subspace/spectrum.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RelativeDifference;
 
 class RealBasisTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    mesh_ = new TriangleMesh(IcosphereMesh(4));  // 5120 faces on the unit sphere
-    op_ = new FieldOperator(MakeOperator(*mesh_, FieldType::Vector()));
+    mesh_ = new TriangleMesh(Icosphere(4));  // 5120 faces on the unit sphere
+    op_ = new FieldOperator(MustBuildOperator(*mesh_, FieldType::Vector()));
     BasisOptions options;
     options.params.dimension = 300;
     options.params.seed = 1;

@@ -6,17 +6,18 @@
 
 #include "Eigen/Dense"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using ::fieldspace::testing::DenseU;
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::RelativeDifference;
-using ::fieldspace::testing::TorusMesh;
+using ::fieldspace::testing::Torus;
 
 struct DenseReference {
   Eigen::MatrixXd S, B, M;
@@ -47,9 +48,9 @@ void ExpectMatchesReference(const ReducedSystem& sys, const DenseReference& ref)
 }
 
 TEST(ReducedSystemTest, MatchesDenseProductsForEachFieldType) {
-  const TriangleMesh mesh = IcosphereMesh(2);  // 320 faces
+  const TriangleMesh mesh = Icosphere(2);  // 320 faces
   for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
-    const FieldOperator op = MakeOperator(mesh, type);
+    const FieldOperator op = MustBuildOperator(mesh, type);
     auto basis = RandomBasis(type, op.dofs(), 60, 12, 7);
     auto sys = ReducedSystem::Build(basis, op);
     ASSERT_TRUE(sys.ok()) << sys.status();
@@ -67,8 +68,8 @@ TEST(ReducedSystemTest, MatchesDenseProductsForEachFieldType) {
 }
 
 TEST(ReducedSystemTest, BandedAccumulationAndThreadCountGiveTheSameMatrices) {
-  const TriangleMesh mesh = TorusMesh(24, 12);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Torus(24, 12);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 90, 30, 11);
   auto full = ReducedSystem::Build(basis, op);
   ReducedSystemOptions banded;
@@ -83,8 +84,8 @@ TEST(ReducedSystemTest, BandedAccumulationAndThreadCountGiveTheSameMatrices) {
 }
 
 TEST(ReducedSystemTest, MassFactorSolvesTheReducedMass) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op.dofs(), 50, 20, 3), op);
   ASSERT_TRUE(sys.ok());
   const Eigen::VectorXd b = Eigen::VectorXd::Random(50);
@@ -93,8 +94,8 @@ TEST(ReducedSystemTest, MassFactorSolvesTheReducedMass) {
 }
 
 TEST(ReducedSystemTest, ProgressAndCancellation) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 40, 20, 9);
   std::atomic<int> calls{0};
   std::atomic<bool> saw_end{false};
@@ -116,8 +117,8 @@ TEST(ReducedSystemTest, ProgressAndCancellation) {
 }
 
 TEST(ReducedSystemTest, InvalidInputs) {
-  const TriangleMesh mesh = IcosphereMesh(1);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(1);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 10, 8, 1);
   EXPECT_EQ(ReducedSystem::Build(nullptr, op).status().code(), absl::StatusCode::kInvalidArgument);
   // Basis for another field type.

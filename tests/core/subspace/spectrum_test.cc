@@ -3,25 +3,27 @@
 #include <atomic>
 #include <cmath>
 #include <memory>
+#include <utility>
 
 #include "Eigen/Dense"
 #include "core/basis/basis.h"
 #include "core/operators/reference_solvers.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 
 class SpectrumTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(3));  // 1280 faces
-    op_ = MakeOperator(*mesh_, FieldType::Vector());
+    mesh_ = std::make_unique<TriangleMesh>(Icosphere(3));  // 1280 faces
+    op_ = MustBuildOperator(*mesh_, FieldType::Vector());
     EigenOptions options;
     options.count = 40;
     auto full = ReferenceEigenpairs(op_, options);
