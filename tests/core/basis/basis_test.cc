@@ -10,14 +10,18 @@
 
 #include "Eigen/Eigenvalues"
 #include "core/basis/basis_io.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/reference.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::IsOk;
+using ::fieldspace::testing::StatusIs;
 using testing::ColumnMajor;
 using testing::DenseColumn;
 using testing::DenseRestricted;
@@ -305,7 +309,7 @@ TEST(BasisTest, TinyDimensionStillGivesEveryComponentASample) {
             mesh.face_component()[basis->sample_faces[1]]);
   EXPECT_EQ(basis->dimension(), 3);
   options.params.dimension = 2;  // 1 region for 2 components
-  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildBasis(mesh, op, options), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(BasisTest, MeshesWithBoundary) {
@@ -371,12 +375,12 @@ TEST(BasisTest, ProgressAndCancellation) {
   std::atomic<bool> cancel{true};
   options.cancel = &cancel;
   options.progress = nullptr;
-  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kCancelled);
+  EXPECT_THAT(BuildBasis(mesh, op, options), StatusIs(absl::StatusCode::kCancelled));
   cancel = false;
   options.progress = [&](BasisPhase phase, double) {
     if (phase == BasisPhase::kEigensolve) cancel = true;
   };
-  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kCancelled);
+  EXPECT_THAT(BuildBasis(mesh, op, options), StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(BasisTest, StackBasesConcatenatesColumns) {
@@ -404,10 +408,10 @@ TEST(BasisTest, StackBasesConcatenatesColumns) {
   const TriangleMesh small = Icosphere(2);
   auto other = BuildBasis(small, MustBuildOperator(small, FieldType::Vector()), options);
   ASSERT_TRUE(other.ok());
-  EXPECT_EQ(StackBases(*fine, *other).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(StackBases(*fine, *other), StatusIs(absl::StatusCode::kInvalidArgument));
   auto nfield = BuildBasis(mesh, MustBuildOperator(mesh, FieldType::NField(4)), options);
   ASSERT_TRUE(nfield.ok());
-  EXPECT_EQ(StackBases(*fine, *nfield).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(StackBases(*fine, *nfield), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
@@ -451,61 +455,70 @@ TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
   auto one = BuildTwoLevelBasis(mesh, op, options, 0);
   ASSERT_TRUE(one.ok());
   EXPECT_EQ(Eigen::MatrixXf(one->U), Eigen::MatrixXf(fine->U));
-  EXPECT_EQ(BuildTwoLevelBasis(mesh, op, options, 60).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(BuildTwoLevelBasis(mesh, op, options, -1).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildTwoLevelBasis(mesh, op, options, 60),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(BuildTwoLevelBasis(mesh, op, options, -1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(BasisTest, InvalidParameters) {
   const TriangleMesh mesh = Icosphere(2);  // 320 faces, 640 DOFs
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
-  auto code = [&](auto mutate) {
+  auto status_of = [&](auto mutate) {
     BasisOptions options;
     options.params.dimension = 20;
     mutate(options);
-    return BuildBasis(mesh, op, options).status().code();
+    return BuildBasis(mesh, op, options).status();
   };
   using absl::StatusCode;
-  EXPECT_EQ(code([](BasisOptions&) {}), StatusCode::kOk);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = 0; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = -3; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = 641; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = 0; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = -1; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = std::nan(""); }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = INFINITY; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.fields_per_region = 0; }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.face_weights = Eigen::VectorXd::Ones(319); }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) {
-              o.params.face_weights = Eigen::VectorXd::Ones(320);
-              o.params.face_weights[5] = 0.0;
-            }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) {
-              o.params.face_weights = Eigen::VectorXd::Ones(320);
-              o.params.face_weights[7] = -2.0;
-            }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) {
-              o.params.face_weights = Eigen::VectorXd::Ones(320);
-              o.params.face_weights[9] = std::nan("");
-            }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.threads = -1; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.eigen_tolerance = 0; }), StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of([](BasisOptions&) {}), IsOk());
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.dimension = 0; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.dimension = -3; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.dimension = 641; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.sigma = 0; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.sigma = -1; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.sigma = std::nan(""); }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.sigma = INFINITY; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.fields_per_region = 0; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(
+      status_of([](BasisOptions& o) { o.params.face_weights = Eigen::VectorXd::Ones(319); }),
+      StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) {
+                o.params.face_weights = Eigen::VectorXd::Ones(320);
+                o.params.face_weights[5] = 0.0;
+              }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) {
+                o.params.face_weights = Eigen::VectorXd::Ones(320);
+                o.params.face_weights[7] = -2.0;
+              }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) {
+                o.params.face_weights = Eigen::VectorXd::Ones(320);
+                o.params.face_weights[9] = std::nan("");
+              }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.threads = -1; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.eigen_tolerance = 0; }),
+              StatusIs(StatusCode::kInvalidArgument));
   // Memory limits: the sigma * k estimate, and the exact count.
-  EXPECT_EQ(code([](BasisOptions& o) { o.max_basis_bytes = 1000; }),
-            StatusCode::kResourceExhausted);
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.max_basis_bytes = 1000; }),
+              StatusIs(StatusCode::kResourceExhausted));
   // An operator for another mesh.
   const TriangleMesh other = Icosphere(1);
   const FieldOperator other_op = MustBuildOperator(other, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 10;
-  EXPECT_EQ(BuildBasis(mesh, other_op, options).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildBasis(mesh, other_op, options), StatusIs(StatusCode::kInvalidArgument));
 }
 
 TEST(BasisTest, DimensionEqualToDofCountIsAllowed) {

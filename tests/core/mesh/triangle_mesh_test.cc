@@ -13,6 +13,7 @@
 #include "core/mesh/shapes.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -20,6 +21,7 @@ namespace {
 
 using ::fieldspace::testing::Arrays;
 using ::fieldspace::testing::MustCreate;
+using ::fieldspace::testing::StatusIs;
 using ::testing::HasSubstr;
 
 constexpr double kPi = 3.14159265358979323846;
@@ -120,17 +122,17 @@ TEST(TriangleMeshTest, ShapesHaveTheirGenus) {
 }
 
 TEST(TriangleMeshTest, ShapeParametersAreChecked) {
-  EXPECT_EQ(MakeIcosphere(-1).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeIcosphere(9).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeIcosphere(2, 0.0).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeTorus(1.0, 2.0, 8, 8).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeTorus(2.0, 1.0, 2, 8).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(MakeIcosphere(-1), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeIcosphere(9), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeIcosphere(2, 0.0), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeTorus(1.0, 2.0, 8, 8), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeTorus(2.0, 1.0, 2, 8), StatusIs(absl::StatusCode::kInvalidArgument));
   TorusKnotOptions knot;
   knot.p = 2;
   knot.q = 4;
-  EXPECT_EQ(MakeTorusKnot(knot).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeGenusSurface(-1, 4).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeGenusSurface(2, 0).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(MakeTorusKnot(knot), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeGenusSurface(-1, 4), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeGenusSurface(2, 0), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(TriangleMeshTest, OpenSurfacesHaveBoundaryLoops) {
@@ -203,7 +205,7 @@ TEST(TriangleMeshTest, UnreferencedVerticesAreDroppedAndCounted) {
 void ExpectInvalid(const MeshArrays& arrays, const std::string& message_part) {
   auto mesh = TriangleMesh::Create(arrays);
   ASSERT_FALSE(mesh.ok()) << "expected an error containing '" << message_part << "'";
-  EXPECT_EQ(mesh.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(mesh, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(std::string(mesh.status().message()), HasSubstr(message_part));
 }
 
@@ -326,7 +328,7 @@ TEST(SharedMeshRejectTest, TeapotIsNonManifold) {
   ASSERT_TRUE(read.ok()) << read.status();
   auto mesh = TriangleMesh::Create(std::move(read->arrays));
   ASSERT_FALSE(mesh.ok());
-  EXPECT_EQ(mesh.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(mesh, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(std::string(mesh.status().message()), HasSubstr("non-manifold"));
 }
 

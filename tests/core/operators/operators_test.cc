@@ -17,13 +17,16 @@
 #include "core/operators/nfield_laplacian.h"
 #include "core/operators/tensor_laplacian.h"
 #include "core/operators/vector_laplacian.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
 using ::fieldspace::testing::LoadMesh;
 using ::fieldspace::testing::MaxAbs;
@@ -330,11 +333,11 @@ TEST(FieldTypeTest, ValidateAndToString) {
   EXPECT_TRUE(FieldType::Tensor().Validate().ok());
   EXPECT_TRUE(FieldType::NField(1).Validate().ok());
   EXPECT_TRUE(FieldType::NField(64).Validate().ok());
-  EXPECT_EQ(FieldType::NField(0).Validate().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(FieldType::NField(65).Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(FieldType::NField(0).Validate(), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(FieldType::NField(65).Validate(), StatusIs(absl::StatusCode::kInvalidArgument));
   FieldType bogus;
   bogus.kind = static_cast<FieldKind>(7);
-  EXPECT_EQ(bogus.Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(bogus.Validate(), StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_EQ(FieldType::Vector().ToString(), "vector");
   EXPECT_EQ(FieldType::NField(4).ToString(), "nfield4");
   EXPECT_EQ(FieldType::Tensor().ToString(), "tensor");
@@ -351,7 +354,7 @@ TEST(FieldTypeTest, Parse) {
        {ParseFieldType("nfield"), ParseFieldType("nfield", 0), ParseFieldType("nfield", 65),
         ParseFieldType("nfield4", 3), ParseFieldType("nfieldx"), ParseFieldType("vector", 1),
         ParseFieldType("tensor", 2), ParseFieldType("scalar"), ParseFieldType("")}) {
-    EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_THAT(bad, StatusIs(absl::StatusCode::kInvalidArgument));
   }
 }
 

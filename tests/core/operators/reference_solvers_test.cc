@@ -12,6 +12,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -21,6 +22,7 @@ void PrintTo(const FieldType& type, std::ostream* os) { *os << type.ToString(); 
 
 namespace {
 
+using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
 using ::fieldspace::testing::LoadMesh;
 using ::fieldspace::testing::MaxAbs;
@@ -172,47 +174,46 @@ TEST_P(ReferenceSolversTest, ReferenceEigenpairsAreMOrthonormal) {
 TEST_P(ReferenceSolversTest, ErrorsHaveExactCodes) {
   const int d = GetParam().dofs_per_face();
   const Eigen::VectorXd v = Eigen::VectorXd::Ones(d);
-  auto code = [&](const ModelProblem& p) { return SolveModelProblem(op_, p).status().code(); };
+  auto status_of = [&](const ModelProblem& p) { return SolveModelProblem(op_, p).status(); };
   ModelProblem p;
   p.mu_s = -1;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = {};
   p.mu_b = std::nan("");
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = {};
   p.mu_s = 1;
   p.soft.push_back({mesh_->num_faces(), v, 1.0});
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p.soft = {{0, Eigen::VectorXd::Ones(d + 1), 1.0}};
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p.soft = {{0, v, 0.0}};
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p.soft = {{0, v * std::nan(""), 1.0}};
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p.soft = {};
   p.hard = {{3, v}, {3, v}};
   auto dup = SolveModelProblem(op_, p);
-  EXPECT_EQ(dup.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(dup, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(dup.status().message(), HasSubstr("face 3"));
   p.hard = {{-1, v}};
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   // No energy at all: A = 0 is singular.
   p = {};
   p.mu_c = 0;
   auto singular = SolveModelProblem(op_, p);
-  EXPECT_EQ(singular.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(singular, StatusIs(absl::StatusCode::kFailedPrecondition));
   EXPECT_THAT(singular.status().message(), HasSubstr("singular"));
 
-  EXPECT_EQ(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs()), -1).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs() - 1), 1).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(
-      SmoothField(op_, Eigen::VectorXd::Constant(op_.dofs(), std::nan("")), 1).status().code(),
-      absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs()), -1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs() - 1), 1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(SmoothField(op_, Eigen::VectorXd::Constant(op_.dofs(), std::nan("")), 1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   FieldOperator broken = op_;
   broken.mass.resize(3);
-  EXPECT_EQ(ReferenceEigenpairs(broken).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReferenceEigenpairs(broken), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 INSTANTIATE_TEST_SUITE_P(AllTypes, ReferenceSolversTest,

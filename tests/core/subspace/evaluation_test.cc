@@ -5,8 +5,10 @@
 
 #include "Eigen/Dense"
 #include "core/operators/reference_solvers.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -17,6 +19,7 @@ using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::IdentityBasis;
 using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::StatusIs;
 
 TEST(EvaluationTest, TestFieldsAreConstrainedBiharmonicMinimizers) {
   const TriangleMesh mesh = Icosphere(2);
@@ -67,7 +70,7 @@ TEST(EvaluationTest, SmoothingWeightsFollowTheOperatorScale) {
   ASSERT_EQ(lambdas->size(), 5u);
   for (int j = 0; j < 5; ++j)
     EXPECT_NEAR((*lambdas)[j], 25.0 * (j + 1) * ratio, 1e-12 * (j + 1) * ratio);
-  EXPECT_EQ(SmoothingWeights(op, 0).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SmoothingWeights(op, 0), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
@@ -104,8 +107,8 @@ TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
   const ErrorSummary summary = Summarize(*errors);
   EXPECT_NEAR(summary.mean, errors->mean(), 1e-15);
   EXPECT_EQ(summary.max, errors->maxCoeff());
-  EXPECT_EQ(SmoothingErrors(op, **sys, fields, std::vector<double>{-1.0}).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SmoothingErrors(op, **sys, fields, std::vector<double>{-1.0}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(EvaluationTest, InvalidTestFieldOptions) {
@@ -113,14 +116,14 @@ TEST(EvaluationTest, InvalidTestFieldOptions) {
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   TestFieldOptions options;
   options.count = 0;
-  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(GenerateTestFields(op, options), StatusIs(absl::StatusCode::kInvalidArgument));
   options.count = 1;
   options.min_constraints = 10;
   options.max_constraints = 5;
-  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(GenerateTestFields(op, options), StatusIs(absl::StatusCode::kInvalidArgument));
   options.min_constraints = 10;
   options.max_constraints = 81;  // more than #F = 80
-  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(GenerateTestFields(op, options), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 }  // namespace

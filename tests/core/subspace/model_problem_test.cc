@@ -9,8 +9,10 @@
 #include "Eigen/Dense"
 #include "core/operators/reference_solvers.h"
 #include "core/subspace/projection.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -22,6 +24,7 @@ using ::fieldspace::testing::IdentityBasis;
 using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::RelativeDifference;
+using ::fieldspace::testing::StatusIs;
 using ::fieldspace::testing::Torus;
 
 // Random constraints on distinct faces.
@@ -156,48 +159,48 @@ TEST(ModelProblemTest, InvalidProblems) {
   ASSERT_TRUE(sys.ok());
   const ModelProblem good = RandomProblem(mesh.num_faces(), 2, 2, 1, 4, 1.0, 0.0, 1.0);
   ASSERT_TRUE(SolveReducedModelProblem(**sys, good).ok());
-  const auto code = [&](const ModelProblem& p) {
-    return SolveReducedModelProblem(**sys, p).status().code();
+  const auto solve = [&](const ModelProblem& p) {
+    return SolveReducedModelProblem(**sys, p).status();
   };
   ModelProblem p = good;
   p.mu_s = -1;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.mu_b = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.mu_s = 0;
   p.mu_b = 0;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.mu_c = -2;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.soft[0].face = 80;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.hard[0].face = -3;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.soft[1].value = Eigen::VectorXd::Zero(3);
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.hard[0].value[1] = std::numeric_limits<double>::infinity();
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.soft[0].weight = 0;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   ReducedSolveOptions bad_options;
   bad_options.dependence_tolerance = 0;
-  EXPECT_EQ(SolveReducedModelProblem(**sys, good, bad_options).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SolveReducedModelProblem(**sys, good, bad_options),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // The same face hard-constrained twice: dependent rows.
   p = good;
   p.hard.push_back(p.hard[0]);
-  EXPECT_EQ(code(p), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kFailedPrecondition));
   // More hard DOFs (2 x 11 = 22) than the dimension (20).
   p = RandomProblem(mesh.num_faces(), 2, 0, 11, 5, 1.0, 0.0, 1.0);
-  EXPECT_EQ(code(p), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kFailedPrecondition));
 }
 
 TEST(ModelProblemTest, CancelledSolveStopsWithCancelled) {
@@ -209,8 +212,8 @@ TEST(ModelProblemTest, CancelledSolveStopsWithCancelled) {
   std::atomic<bool> cancel{true};
   ReducedSolveOptions options;
   options.cancel = &cancel;
-  EXPECT_EQ(SolveReducedModelProblem(**sys, problem, options).status().code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_THAT(SolveReducedModelProblem(**sys, problem, options),
+              StatusIs(absl::StatusCode::kCancelled));
   cancel = false;
   EXPECT_TRUE(SolveReducedModelProblem(**sys, problem, options).ok());
 }

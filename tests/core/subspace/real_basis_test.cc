@@ -17,8 +17,10 @@
 #include "core/subspace/projection.h"
 #include "core/subspace/reduced_system.h"
 #include "core/subspace/spectrum.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -27,6 +29,7 @@ namespace {
 using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RelativeDifference;
+using ::fieldspace::testing::StatusIs;
 
 class RealBasisTest : public ::testing::Test {
  protected:
@@ -138,7 +141,7 @@ TEST_F(RealBasisTest, DesignSessionWithBiharmonicEnergyMatchesFreshSolves) {
     const ConstraintKind kind = id % 3 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft;
     const absl::Status st = (*session)->AddConstraint(id, kind, c);
     if (!st.ok()) {
-      EXPECT_EQ(st.code(), absl::StatusCode::kFailedPrecondition);
+      EXPECT_THAT(st, StatusIs(absl::StatusCode::kFailedPrecondition));
       continue;
     }
     if (id % 4 == 3 && (*session)->HasConstraint(id - 1)) {

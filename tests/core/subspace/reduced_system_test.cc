@@ -5,8 +5,10 @@
 #include <memory>
 
 #include "Eigen/Dense"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -17,6 +19,7 @@ using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::RelativeDifference;
+using ::fieldspace::testing::StatusIs;
 using ::fieldspace::testing::Torus;
 
 struct DenseReference {
@@ -112,56 +115,50 @@ TEST(ReducedSystemTest, ProgressAndCancellation) {
   std::atomic<bool> cancel{true};
   ReducedSystemOptions cancelled;
   cancelled.cancel = &cancel;
-  EXPECT_EQ(ReducedSystem::Build(basis, op, cancelled).status().code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_THAT(ReducedSystem::Build(basis, op, cancelled), StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(ReducedSystemTest, InvalidInputs) {
   const TriangleMesh mesh = Icosphere(1);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 10, 8, 1);
-  EXPECT_EQ(ReducedSystem::Build(nullptr, op).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(nullptr, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // Basis for another field type.
   auto tensor_basis = RandomBasis(FieldType::Tensor(), op.dofs(), 10, 8, 1);
-  EXPECT_EQ(ReducedSystem::Build(tensor_basis, op).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(tensor_basis, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // Wrong number of rows.
   auto short_basis = RandomBasis(FieldType::Vector(), op.dofs() - 2, 10, 8, 1);
-  EXPECT_EQ(ReducedSystem::Build(short_basis, op).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(short_basis, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // No columns.
   auto empty = std::make_shared<Basis>();
   empty->U.resize(op.dofs(), 0);
-  EXPECT_EQ(ReducedSystem::Build(empty, op).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(empty, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // Non-finite basis value.
   auto nan_basis = RandomBasis(FieldType::Vector(), op.dofs(), 10, 8, 1);
   nan_basis->U.valuePtr()[5] = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_EQ(ReducedSystem::Build(nan_basis, op).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(nan_basis, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // Non-positive mass.
   FieldOperator bad_mass = op;
   bad_mass.mass[0] = 0;
-  EXPECT_EQ(ReducedSystem::Build(basis, bad_mass).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(basis, bad_mass), StatusIs(absl::StatusCode::kInvalidArgument));
   // Bad options.
   ReducedSystemOptions bad_options;
   bad_options.threads = -1;
-  EXPECT_EQ(ReducedSystem::Build(basis, op, bad_options).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(basis, op, bad_options),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // Linearly dependent columns: U^T M U singular.
   auto dependent = std::make_shared<Basis>(*basis);
   Eigen::MatrixXf dense = Eigen::MatrixXf(dependent->U);
   dense.col(3) = dense.col(4);
   dependent->U = dense.sparseView();
-  EXPECT_EQ(ReducedSystem::Build(dependent, op).status().code(),
-            absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(ReducedSystem::Build(dependent, op), StatusIs(absl::StatusCode::kFailedPrecondition));
   // A zero column.
   dense = Eigen::MatrixXf(basis->U);
   dense.col(2).setZero();
   auto zero_column = std::make_shared<Basis>(*basis);
   zero_column->U = dense.sparseView();
-  EXPECT_EQ(ReducedSystem::Build(zero_column, op).status().code(),
-            absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(ReducedSystem::Build(zero_column, op),
+              StatusIs(absl::StatusCode::kFailedPrecondition));
 }
 
 }  // namespace
