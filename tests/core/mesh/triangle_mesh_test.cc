@@ -58,6 +58,25 @@ void ExpectConsistentTopology(const TriangleMesh& mesh) {
   }
 }
 
+// Every mesh of the catalogue has its known topology and consistent tables: shapes built in code
+// (sphere, torus, genus 2, torus knot, disk, disk with holes, two components) and the shared
+// meshes where present.
+class CatalogueTopologyTest : public testing::MeshCaseTest {};
+
+TEST_P(CatalogueTopologyTest, MatchesKnownTopology) {
+  const testing::MeshCase& c = GetParam();
+  EXPECT_EQ(mesh().genus(), c.genus);
+  EXPECT_EQ(mesh().euler_characteristic(), c.euler_characteristic);
+  EXPECT_EQ(static_cast<int>(mesh().boundary_loops().size()), c.boundary_loops);
+  EXPECT_EQ(mesh().num_components(), c.components);
+  // chi = sum over components of 2 - 2 g - loops.
+  EXPECT_EQ(c.euler_characteristic, 2 * c.components - 2 * c.genus - c.boundary_loops);
+  ExpectConsistentTopology(mesh());
+}
+
+INSTANTIATE_TEST_SUITE_P(Catalogue, CatalogueTopologyTest,
+                         ::testing::ValuesIn(testing::MeshCatalogue()), testing::MeshCaseName);
+
 TEST(TriangleMeshTest, IcosphereCountsAndInvariants) {
   for (int s = 0; s <= 4; ++s) {
     TriangleMesh mesh = MustCreate(MakeIcosphere(s, 2.0));
