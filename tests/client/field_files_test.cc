@@ -9,9 +9,12 @@
 #include "client/json.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/testing/matchers.h"
 
 namespace fieldspace::client {
 namespace {
+
+using ::fieldspace::testing::StatusIs;
 
 namespace v1 = ::fieldspace::v1;
 using ::testing::ElementsAre;
@@ -31,16 +34,15 @@ TEST(FieldTextTest, ParsesCommentsEncodingAndRows) {
 
 TEST(FieldTextTest, ErrorsNameTheLine) {
   auto ragged = ParseFieldText("1 2 3\n4 5\n");
-  EXPECT_EQ(ragged.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ragged, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(ragged.status().message(), HasSubstr("line 2"));
   auto nan = ParseFieldText("1 2 3\n4 nan 6\n");
-  EXPECT_EQ(nan.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(nan, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(nan.status().message(), HasSubstr("line 2"));
-  EXPECT_EQ(ParseFieldText("1 x 3\n").status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseFieldText("# encoding: polar\n1 2 3\n").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseFieldText("# only comments\n").status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ParseFieldText("1 x 3\n"), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseFieldText("# encoding: polar\n1 2 3\n"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseFieldText("# only comments\n"), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(FieldTextTest, WriteThenReadRoundTripsExactly) {
@@ -56,7 +58,7 @@ TEST(FieldTextTest, WriteThenReadRoundTripsExactly) {
   EXPECT_EQ(back->values_per_face, 6);
   EXPECT_EQ(back->values, f.values);  // shortest round-trip formatting
   std::filesystem::remove(path);
-  EXPECT_EQ(ReadFieldFile("/nonexistent/field.txt").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(ReadFieldFile("/nonexistent/field.txt"), StatusIs(absl::StatusCode::kNotFound));
 }
 
 TEST(CoefficientsTest, AcceptsJsonFromSolveArraysAndPlainNumbers) {
@@ -64,12 +66,12 @@ TEST(CoefficientsTest, AcceptsJsonFromSolveArraysAndPlainNumbers) {
               ElementsAre(1, 2.5, -3));
   EXPECT_THAT(*ParseCoefficients("[4, 5]"), ElementsAre(4, 5));
   EXPECT_THAT(*ParseCoefficients("6 7,\n8\n"), ElementsAre(6, 7, 8));
-  EXPECT_EQ(ParseCoefficients(R"({"x": [1]})").status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseCoefficients(R"({"coefficients": [1, "a"]})").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseCoefficients("1 inf").status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseCoefficients("  ").status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseCoefficients("{not json").status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ParseCoefficients(R"({"x": [1]})"), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseCoefficients(R"({"coefficients": [1, "a"]})"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseCoefficients("1 inf"), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseCoefficients("  "), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseCoefficients("{not json"), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(ConstraintsTest, JsonLinesAndArrays) {
@@ -103,23 +105,22 @@ TEST(ConstraintsTest, BadConstraintsNameTheLineAndProblem) {
   auto missing_face = ParseConstraints(
       "\n"
       R"({"vector": [1, 0, 0]})");
-  EXPECT_EQ(missing_face.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(missing_face, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(missing_face.status().message(), HasSubstr("line 2"));
   EXPECT_THAT(missing_face.status().message(), HasSubstr("face"));
-  EXPECT_EQ(ParseConstraints(R"({"face": 1})").status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseConstraints(R"({"face": 1, "vector": [1, 0]})").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseConstraints(R"({"face": 1.5, "vector": [1, 0, 0]})").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseConstraints(R"({"face": 1, "vector": [1, 0, 0], "tensor": [1,2,3,4,5,6]})")
-                .status()
-                .code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseConstraints(R"({"face": 1, "vector": [1, 0, 0], "hard": "yes"})").status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ParseConstraints(R"({"face": 1})"), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseConstraints(R"({"face": 1, "vector": [1, 0]})"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseConstraints(R"({"face": 1.5, "vector": [1, 0, 0]})"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(
+      ParseConstraints(R"({"face": 1, "vector": [1, 0, 0], "tensor": [1,2,3,4,5,6]})").status(),
+      StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseConstraints(R"({"face": 1, "vector": [1, 0, 0], "hard": "yes"})"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   auto unknown = ParseConstraints(R"({"face": 1, "vector": [1, 0, 0], "wieght": 2})");
   EXPECT_THAT(unknown.status().message(), HasSubstr("wieght"));
-  EXPECT_EQ(ParseConstraints("{oops").status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ParseConstraints("{oops"), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(EditScriptTest, ParsesEveryEditOfTheIssueFormat) {
@@ -150,17 +151,16 @@ TEST(EditScriptTest, ParsesEveryEditOfTheIssueFormat) {
 }
 
 TEST(EditScriptTest, Errors) {
-  EXPECT_EQ(ParseEdit(R"({"frobnicate": {}})", "x").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseEdit(R"({"add": {}, "remove": {}})", "x").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseEdit(R"({"remove": {}})", "x").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseEdit(R"({"weights": {"mu_s": 1}})", "x").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseEdit(R"({"watch": {"faces": [0.5]}})", "x").status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ParseEdit("[1, 2]", "x").status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ParseEdit(R"({"frobnicate": {}})", "x"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseEdit(R"({"add": {}, "remove": {}})", "x"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseEdit(R"({"remove": {}})", "x"), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseEdit(R"({"weights": {"mu_s": 1}})", "x"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseEdit(R"({"watch": {"faces": [0.5]}})", "x"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseEdit("[1, 2]", "x"), StatusIs(absl::StatusCode::kInvalidArgument));
   auto bad = ParseEdit(R"({"move": {"id": 1, "vector": [0, 1, 0]}})", "edits.jsonl:7");
   EXPECT_THAT(bad.status().message(), HasSubstr("edits.jsonl:7"));
 }

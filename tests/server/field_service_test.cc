@@ -1229,20 +1229,44 @@ TEST_F(ServiceTest, DesignErrorsEndTheSessionWithExactCodes) {
 }
 
 TEST_F(ServiceTest, ManyConcurrentSessions) {
+  // 16 concurrent sessions share energy factorizations through the server's cache (two weight
+  // sets, so two entries are created under contention); each must give exactly the coefficients
+  // of the same edits in a session of its own.
   const v1::Constraint c = MakeConstraint(20, {1, 0, 0}, v1::FIELD_ENCODING_AMBIENT, false);
+  auto requests = [&](int i) {
+    v1::Constraint ci = c;
+    ci.set_face(10 * i);
+    return std::vector<v1::DesignRequest>{Open(*vector_id_, i % 2 == 0 ? 1 : 2, 0, 1), Add(1, ci)};
+  };
+  // References first, one session at a time: the cache holds entries only while a session uses
+  // them, so every reference factorizes alone and the concurrent sessions start from a cold cache.
+  std::vector<Session> alone(16);
+  for (int i = 0; i < 16; ++i) {
+    alone[i] = RunSession(stub(), requests(i));
+    ASSERT_TRUE(alone[i].status.ok()) << alone[i].status.error_message();
+    ASSERT_EQ(alone[i].updates.size(), 2u);
+  }
   std::vector<std::thread> threads;
   std::vector<Session> sessions(16);
   for (int i = 0; i < 16; ++i) {
-    threads.emplace_back([&, i] {
-      v1::Constraint ci = c;
-      ci.set_face(10 * i);
-      sessions[i] = RunSession(stub(), {Open(*vector_id_, 1, 0, 1), Add(1, ci)});
-    });
+    threads.emplace_back([&, i] { sessions[i] = RunSession(stub(), requests(i)); });
   }
   for (auto& t : threads) t.join();
   for (const Session& s : sessions) {
     EXPECT_TRUE(s.status.ok()) << s.status.error_message();
     EXPECT_EQ(s.updates.size(), 2u);
+  }
+  for (int i = 0; i < 16; ++i) {
+    SCOPED_TRACE(absl::StrFormat("session %d", i));
+    ASSERT_EQ(sessions[i].updates.size(), alone[i].updates.size());
+    for (size_t u = 0; u < alone[i].updates.size(); ++u) {
+      const auto& expected = alone[i].updates[u].coefficients();
+      const auto& actual = sessions[i].updates[u].coefficients();
+      ASSERT_EQ(actual.size(), expected.size()) << "update " << u;
+      EXPECT_LE(MaxAbsDiff(actual, expected), 1e-9 * MaxAbs(expected)) << "update " << u;
+    }
+    // The edit moved the field: the comparison is not between zeros.
+    EXPECT_GT(MaxAbs(alone[i].updates[1].coefficients()), 0);
   }
 }
 

@@ -18,9 +18,12 @@
 #include "server/hash.h"
 #include "server/status_util.h"
 #include "server/store.h"
+#include "tests/testing/matchers.h"
 
 namespace fieldspace::server {
 namespace {
+
+using ::fieldspace::testing::StatusIs;
 
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
@@ -174,7 +177,7 @@ TEST_F(StoreTest, FlippedPayloadByteIsDataLoss) {
   ASSERT_TRUE(store_->SaveMesh(r, V, F).ok());
   FlipByte(store_->MeshPath(r.id), 5);  // inside the face array
   auto loaded = store_->LoadMesh(r.id);
-  EXPECT_EQ(loaded.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(loaded, StatusIs(absl::StatusCode::kDataLoss));
   EXPECT_THAT(loaded.status().message(), HasSubstr("checksum"));
   // The header is intact, so the index still lists it (payload damage shows on load).
   EXPECT_EQ(store_->Scan().meshes.size(), 1u);
@@ -202,27 +205,27 @@ TEST_F(StoreTest, DamagedHeaderTruncationAndForeignFilesAreReportedNotLoaded) {
   EXPECT_TRUE(contents.meshes.empty());
   ASSERT_EQ(contents.damaged.size(), 4u);
   for (const DamagedEntry& d : contents.damaged) {
-    EXPECT_EQ(d.status.code(), absl::StatusCode::kDataLoss) << d.id << ": " << d.status;
+    EXPECT_THAT(d.status, StatusIs(absl::StatusCode::kDataLoss)) << d.id << ": " << d.status;
     EXPECT_FALSE(d.is_basis);
   }
-  EXPECT_EQ(store_->LoadMesh(r.id).status().code(), absl::StatusCode::kDataLoss);
-  EXPECT_EQ(store_->LoadMesh(r2.id).status().code(), absl::StatusCode::kDataLoss);
-  EXPECT_EQ(store_->LoadMesh("m-2222222222222222").status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(store_->LoadMesh(r.id), StatusIs(absl::StatusCode::kDataLoss));
+  EXPECT_THAT(store_->LoadMesh(r2.id), StatusIs(absl::StatusCode::kDataLoss));
+  EXPECT_THAT(store_->LoadMesh("m-2222222222222222"), StatusIs(absl::StatusCode::kDataLoss));
 }
 
 TEST_F(StoreTest, MissingAndInvalidIds) {
-  EXPECT_EQ(store_->LoadMesh("m-0000000000000000").status().code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(store_->LoadMesh("../../etc/passwd").status().code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(store_->LoadBasis("b-0000000000000000").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(store_->LoadMesh("m-0000000000000000"), StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(store_->LoadMesh("../../etc/passwd"), StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(store_->LoadBasis("b-0000000000000000"), StatusIs(absl::StatusCode::kNotFound));
   VertexMatrix V;
   FaceMatrix F;
   Tetrahedron(&V, &F);
   MeshRecord r = Record(V, F);
   r.id = "m-../../x";
-  EXPECT_EQ(store_->SaveMesh(r, V, F).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(store_->SaveMesh(r, V, F), StatusIs(absl::StatusCode::kInvalidArgument));
   r = Record(V, F);
   r.num_faces = 3;
-  EXPECT_EQ(store_->SaveMesh(r, V, F).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(store_->SaveMesh(r, V, F), StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_TRUE(store_->DeleteMesh("m-0000000000000000").ok());
 }
 
@@ -305,8 +308,8 @@ TEST(StatusUtilTest, CodesMapOneToOneAndUnknownNeverLeaves) {
             grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_EQ(ToGrpcStatus(absl::InvalidArgumentError("bad face")).error_message(), "bad face");
   EXPECT_EQ(ToGrpcStatus(absl::UnknownError("?")).error_code(), grpc::StatusCode::INTERNAL);
-  EXPECT_EQ(FromGrpcStatus(grpc::Status(grpc::StatusCode::ABORTED, "a")).code(),
-            absl::StatusCode::kAborted);
+  EXPECT_THAT(FromGrpcStatus(grpc::Status(grpc::StatusCode::ABORTED, "a")),
+              StatusIs(absl::StatusCode::kAborted));
 }
 
 TEST(FieldServerTest, LoopbackDetection) {
@@ -325,17 +328,17 @@ TEST(FieldServerTest, RefusesNonLoopbackWithoutTokenAndBadOptions) {
   options.store_dir = (fs::temp_directory_path() / "fs_refuse_test").string();
   options.listen = "0.0.0.0:0";
   auto server = FieldServer::Start(options);
-  EXPECT_EQ(server.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(server, StatusIs(absl::StatusCode::kFailedPrecondition));
   EXPECT_THAT(server.status().message(), HasSubstr("--auth-token-file"));
   options.listen = "nonsense";
-  EXPECT_EQ(FieldServer::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(FieldServer::Start(options), StatusIs(absl::StatusCode::kInvalidArgument));
   options.listen = "127.0.0.1:0";
   options.store_dir = "";
-  EXPECT_EQ(FieldServer::Start(options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(FieldServer::Start(options), StatusIs(absl::StatusCode::kInvalidArgument));
   options.store_dir = (fs::temp_directory_path() / "fs_refuse_test").string();
   options.design_verify_interval = 0;
   auto bad_interval = FieldServer::Start(options);
-  EXPECT_EQ(bad_interval.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(bad_interval, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(bad_interval.status().message(), HasSubstr("--design-verify-every"));
   fs::remove_all(fs::temp_directory_path() / "fs_refuse_test");
 }

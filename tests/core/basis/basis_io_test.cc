@@ -7,21 +7,27 @@
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <utility>
 
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/basis/basis_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/reference.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::StatusIs;
 using testing::Icosphere;
-using testing::Operator;
+using testing::MustBuildOperator;
 
 class BasisIoTest : public ::testing::Test {
  protected:
   void SetUp() override {
     const TriangleMesh mesh = Icosphere(2);
-    const FieldOperator op = Operator(mesh, FieldType::NField(3));
+    const FieldOperator op = MustBuildOperator(mesh, FieldType::NField(3));
     BasisOptions options;
     options.params.dimension = 31;
     options.params.sigma = 12.5;
@@ -111,13 +117,13 @@ TEST_F(BasisIoTest, EveryFlippedByteIsDetected) {
     damaged[i] = static_cast<char>(damaged[i] ^ 0x5A);
     auto r = DecodeBasis(damaged);
     ASSERT_FALSE(r.ok()) << "byte " << i;
-    EXPECT_EQ(r.status().code(), absl::StatusCode::kDataLoss) << "byte " << i << r.status();
+    EXPECT_THAT(r, StatusIs(absl::StatusCode::kDataLoss)) << "byte " << i << r.status();
   }
   const std::string path = (dir_ / "flip.fsb").string();
   std::string damaged = original;
   damaged[original.size() / 2] ^= 1;
   WriteFile(path, damaged);
-  EXPECT_EQ(LoadBasisFile(path).status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(LoadBasisFile(path), StatusIs(absl::StatusCode::kDataLoss));
 }
 
 TEST_F(BasisIoTest, TruncatedAndExtendedFilesAreDetected) {
@@ -126,27 +132,27 @@ TEST_F(BasisIoTest, TruncatedAndExtendedFilesAreDetected) {
   for (size_t len : {size_t{0}, size_t{5}, size_t{31}, size_t{32}, size_t{100}, bytes->size() / 2,
                      bytes->size() - 1}) {
     auto r = DecodeBasis(std::string_view(*bytes).substr(0, len));
-    EXPECT_EQ(r.status().code(), absl::StatusCode::kDataLoss) << len;
+    EXPECT_THAT(r, StatusIs(absl::StatusCode::kDataLoss)) << len;
   }
-  EXPECT_EQ(DecodeBasis(*bytes + "x").status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(DecodeBasis(*bytes + "x"), StatusIs(absl::StatusCode::kDataLoss));
   const std::string path = (dir_ / "trunc.fsb").string();
   WriteFile(path, bytes->substr(0, bytes->size() - 10));
   auto r = LoadBasisFile(path);
-  EXPECT_EQ(r.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(r, StatusIs(absl::StatusCode::kDataLoss));
   EXPECT_NE(r.status().message().find("truncated"), std::string::npos) << r.status();
   // A foreign file.
   WriteFile(path, std::string(1000, 'z'));
-  EXPECT_EQ(LoadBasisFile(path).status().code(), absl::StatusCode::kDataLoss);
-  EXPECT_EQ(ReadBasisFileInfo(path).status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_THAT(LoadBasisFile(path), StatusIs(absl::StatusCode::kDataLoss));
+  EXPECT_THAT(ReadBasisFileInfo(path), StatusIs(absl::StatusCode::kDataLoss));
 }
 
 TEST_F(BasisIoTest, FileSystemErrors) {
-  EXPECT_EQ(LoadBasisFile((dir_ / "missing.fsb").string()).status().code(),
-            absl::StatusCode::kNotFound);
-  EXPECT_EQ(SaveBasisFile((dir_ / "no_such_dir" / "b.fsb").string(), basis_, "id").code(),
-            absl::StatusCode::kNotFound);
+  EXPECT_THAT(LoadBasisFile((dir_ / "missing.fsb").string()),
+              StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(SaveBasisFile((dir_ / "no_such_dir" / "b.fsb").string(), basis_, "id"),
+              StatusIs(absl::StatusCode::kNotFound));
   Basis empty;
-  EXPECT_EQ(EncodeBasis(empty, "id").status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(EncodeBasis(empty, "id"), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 }  // namespace

@@ -15,8 +15,11 @@
 #include "core/basis/local_eigensolver.h"
 #include "core/basis/regions.h"
 #include "core/basis/sampling.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/basis/basis_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/reference.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -26,9 +29,10 @@ using basis_internal::LocalCholesky;
 using basis_internal::LocalEigenOptions;
 using basis_internal::LocalOperator;
 using basis_internal::UpperCsc;
+using ::fieldspace::testing::StatusIs;
 using testing::DualDistances;
 using testing::Icosphere;
-using testing::LoadMesh;
+using testing::MustLoadMesh;
 using testing::TwoSpheres;
 
 TEST(DualGraphTest, ArcsAndLengths) {
@@ -71,7 +75,7 @@ TEST(DualGraphTest, ArcsAndLengths) {
 
 TEST(DualGraphTest, BoundaryFacesHaveFewerArcs) {
   FS_REQUIRE_SHARED_MESH(path, "camelhead_23k.off");
-  const TriangleMesh mesh = LoadMesh(path);
+  const TriangleMesh mesh = MustLoadMesh(path);
   auto g = BuildDualGraph(mesh, {});
   ASSERT_TRUE(g.ok());
   int64_t interior_edges = 0, arcs = 0;
@@ -83,13 +87,13 @@ TEST(DualGraphTest, BoundaryFacesHaveFewerArcs) {
 
 TEST(DualGraphTest, RejectsBadWeights) {
   const TriangleMesh mesh = Icosphere(1);
-  EXPECT_EQ(BuildDualGraph(mesh, Eigen::VectorXd::Ones(3)).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildDualGraph(mesh, Eigen::VectorXd::Ones(3)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   Eigen::VectorXd w = Eigen::VectorXd::Ones(mesh.num_faces());
   w[3] = -1;
-  EXPECT_EQ(BuildDualGraph(mesh, w).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildDualGraph(mesh, w), StatusIs(absl::StatusCode::kInvalidArgument));
   w[3] = std::numeric_limits<double>::infinity();
-  EXPECT_EQ(BuildDualGraph(mesh, w).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildDualGraph(mesh, w), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(SamplingTest, AllocationProportionalToArea) {
@@ -103,10 +107,9 @@ TEST(SamplingTest, AllocationProportionalToArea) {
   a = AllocateSamplesPerComponent(mesh, 2);
   ASSERT_TRUE(a.ok());
   EXPECT_EQ(*a, (std::vector<int32_t>{1, 1}));
-  EXPECT_EQ(AllocateSamplesPerComponent(mesh, 1).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(AllocateSamplesPerComponent(mesh, mesh.num_faces() + 1).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(AllocateSamplesPerComponent(mesh, 1), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(AllocateSamplesPerComponent(mesh, mesh.num_faces() + 1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // All faces: each component is capped at its face count.
   a = AllocateSamplesPerComponent(mesh, mesh.num_faces());
   ASSERT_TRUE(a.ok());
@@ -140,7 +143,7 @@ TEST(SamplingTest, CancelledThroughPoll) {
   const TriangleMesh mesh = Icosphere(4);
   auto g = BuildDualGraph(mesh, {});
   auto s = FarthestPointSampling(mesh, *g, {50}, 0, [] { return true; });
-  EXPECT_EQ(s.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_THAT(s, StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(RegionsTest, RegionsAreDualDisks) {
@@ -165,8 +168,8 @@ TEST(RegionsTest, RegionsAreDualDisks) {
   regions = GrowRegions(*g, samples, options, nullptr);
   ASSERT_TRUE(regions.ok());
   EXPECT_EQ((*regions)[0].size(), 4u);
-  EXPECT_EQ(GrowRegions(*g, samples, options, [] { return true; }).status().code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_THAT(GrowRegions(*g, samples, options, [] { return true; }),
+              StatusIs(absl::StatusCode::kCancelled));
 }
 
 // A 2D grid Laplacian plus a diagonal: SPD, sparse, with fill.
@@ -224,10 +227,10 @@ TEST(LocalCholeskyTest, RejectsIndefinite) {
   Eigen::MatrixXd dense;
   UpperCsc A = GridMatrix(8, 8, -5.0, &dense);  // diagonal ~ -1: indefinite
   LocalCholesky chol;
-  EXPECT_EQ(chol.Factorize(A, nullptr).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(chol.Factorize(A, nullptr), StatusIs(absl::StatusCode::kFailedPrecondition));
   EXPECT_EQ(GridMatrix(8, 8, 0.1, &dense).n, 64);
-  EXPECT_EQ(chol.Factorize(GridMatrix(30, 30, 0.1, &dense), [] { return true; }).code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_THAT(chol.Factorize(GridMatrix(30, 30, 0.1, &dense), [] { return true; }),
+              StatusIs(absl::StatusCode::kCancelled));
 }
 
 // S = 1D Dirichlet Laplacian (tridiagonal 2, -1): eigenvalues 2 - 2 cos(k pi / (n + 1)).
@@ -285,13 +288,12 @@ TEST(LocalEigensolverTest, LowestEigenpairsOfPathLaplacian) {
   PathOperator op(10, 1.0);
   LocalEigenOptions options;
   options.count = 11;
-  EXPECT_EQ(basis_internal::SolveLocalEigenproblem(op, options, nullptr).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(basis_internal::SolveLocalEigenproblem(op, options, nullptr),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   PathOperator big(500, 1e-3);
   options.count = 2;
-  EXPECT_EQ(
-      basis_internal::SolveLocalEigenproblem(big, options, [] { return true; }).status().code(),
-      absl::StatusCode::kCancelled);
+  EXPECT_THAT(basis_internal::SolveLocalEigenproblem(big, options, [] { return true; }),
+              StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(LocalEigensolverTest, FallsBackToLanczosWhenLobpcgDoesNotConverge) {

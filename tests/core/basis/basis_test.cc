@@ -5,24 +5,30 @@
 #include <cmath>
 #include <limits>
 #include <set>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Eigenvalues"
 #include "core/basis/basis_io.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/basis/basis_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/reference.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::IsOk;
+using ::fieldspace::testing::StatusIs;
 using testing::ColumnMajor;
 using testing::DenseColumn;
 using testing::DenseRestricted;
 using testing::DualDistances;
 using testing::Icosphere;
-using testing::LoadMesh;
-using testing::Operator;
+using testing::MustBuildOperator;
+using testing::MustLoadMesh;
 using testing::RegionFaces;
 using testing::TwoSpheres;
 
@@ -91,8 +97,8 @@ void CheckStructure(const TriangleMesh& mesh, const FieldOperator& op, const Bas
 
 TEST(BasisTest, VectorBasisOnRealMeshHasPaperStructure) {
   FS_REQUIRE_SHARED_MESH(path, "bimba_18k.obj");
-  const TriangleMesh mesh = LoadMesh(path);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = MustLoadMesh(path);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 200);
   CheckStructure(mesh, op, basis, 25);
   // About 0.6 sigma nonzeros per row with dual-graph distances (docs/conventions.md, Basis
@@ -156,7 +162,7 @@ void CheckLocalEigenproblems(const TriangleMesh& mesh, const FieldOperator& op, 
 
 TEST(BasisTest, LocalEigenproblemsMatchDenseSolveVector) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 120, 20.0);
   CheckStructure(mesh, op, basis, 20);
   CheckLocalEigenproblems(mesh, op, basis, 4);
@@ -164,7 +170,7 @@ TEST(BasisTest, LocalEigenproblemsMatchDenseSolveVector) {
 
 TEST(BasisTest, LocalEigenproblemsMatchDenseSolveNField) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
-  const FieldOperator op = Operator(mesh, FieldType::NField(4));
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::NField(4));
   const Basis basis = Build(mesh, op, 120, 20.0);
   CheckStructure(mesh, op, basis, 20);
   CheckLocalEigenproblems(mesh, op, basis, 4);
@@ -172,7 +178,7 @@ TEST(BasisTest, LocalEigenproblemsMatchDenseSolveNField) {
 
 TEST(BasisTest, LocalEigenproblemsMatchDenseSolveTensor) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces; sigma 20 keeps the dense checks fast
-  const FieldOperator op = Operator(mesh, FieldType::Tensor());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Tensor());
   const Basis basis = Build(mesh, op, 120, 20.0);  // 40 regions x 3 fields
   CheckStructure(mesh, op, basis, 20);
   CheckLocalEigenproblems(mesh, op, basis, 4);
@@ -180,7 +186,7 @@ TEST(BasisTest, LocalEigenproblemsMatchDenseSolveTensor) {
 
 TEST(BasisTest, FactoredAndGenericVectorPathsAgree) {
   const TriangleMesh mesh = Icosphere(4);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 60;
   auto fast = BuildBasis(mesh, op, options);
@@ -211,7 +217,7 @@ TEST(BasisTest, FactoredAndGenericVectorPathsAgree) {
 
 TEST(BasisTest, DeterministicAndIndependentOfThreadCount) {
   const TriangleMesh mesh = Icosphere(4);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis a = Build(mesh, op, 80, 40.0, /*threads=*/1, /*seed=*/7);
   const Basis b = Build(mesh, op, 80, 40.0, /*threads=*/1, /*seed=*/7);
   const Basis c = Build(mesh, op, 80, 40.0, /*threads=*/2, /*seed=*/7);
@@ -232,7 +238,7 @@ TEST(BasisTest, DeterministicAndIndependentOfThreadCount) {
 
 TEST(BasisTest, AdaptivityWeightsConcentrateSamples) {
   const TriangleMesh mesh = Icosphere(4);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   // Weight 4 on the cap z > 0.6 (20% of the sphere's area).
   Eigen::VectorXd w = Eigen::VectorXd::Ones(mesh.num_faces());
   double cap_area = 0;
@@ -282,7 +288,7 @@ TEST(BasisTest, AdaptivityWeightsConcentrateSamples) {
 TEST(BasisTest, MultiComponentMeshSamplesEveryComponentByArea) {
   const TriangleMesh mesh = TwoSpheres(3, 2.0);  // areas 1 : 4
   ASSERT_EQ(mesh.num_components(), 2);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 100);  // 50 regions: 10 + 40
   CheckStructure(mesh, op, basis, 50);
   int32_t in_first = 0;
@@ -294,7 +300,7 @@ TEST(BasisTest, MultiComponentMeshSamplesEveryComponentByArea) {
 
 TEST(BasisTest, TinyDimensionStillGivesEveryComponentASample) {
   const TriangleMesh mesh = TwoSpheres(2, 3.0);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 3;  // 2 regions: one per component, the second with one field
   auto basis = BuildBasis(mesh, op, options);
@@ -304,14 +310,14 @@ TEST(BasisTest, TinyDimensionStillGivesEveryComponentASample) {
             mesh.face_component()[basis->sample_faces[1]]);
   EXPECT_EQ(basis->dimension(), 3);
   options.params.dimension = 2;  // 1 region for 2 components
-  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildBasis(mesh, op, options), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(BasisTest, MeshesWithBoundary) {
   for (const char* name : {"camelhead_23k.off", "blade_16k.off"}) {
     FS_REQUIRE_SHARED_MESH(path, name);
-    const TriangleMesh mesh = LoadMesh(path);
-    const FieldOperator op = Operator(mesh, FieldType::Vector());
+    const TriangleMesh mesh = MustLoadMesh(path);
+    const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
     const Basis basis = Build(mesh, op, 150);
     SCOPED_TRACE(name);
     CheckStructure(mesh, op, basis, 15);
@@ -320,7 +326,7 @@ TEST(BasisTest, MeshesWithBoundary) {
 
 TEST(BasisTest, OddDimensionDropsTheLastRegionsSecondField) {
   const TriangleMesh mesh = Icosphere(3);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Basis basis = Build(mesh, op, 41);
   EXPECT_EQ(basis.num_regions(), 21);
   EXPECT_EQ(basis.dimension(), 41);
@@ -334,7 +340,7 @@ TEST(BasisTest, OddDimensionDropsTheLastRegionsSecondField) {
 
 TEST(BasisTest, CustomFieldsPerRegion) {
   const TriangleMesh mesh = Icosphere(3);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 40;
   options.params.sigma = 16.0;  // small regions keep the dense checks fast
@@ -348,7 +354,7 @@ TEST(BasisTest, CustomFieldsPerRegion) {
 
 TEST(BasisTest, ProgressAndCancellation) {
   const TriangleMesh mesh = Icosphere(4);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 100;
   std::vector<std::pair<BasisPhase, double>> calls;
@@ -370,17 +376,17 @@ TEST(BasisTest, ProgressAndCancellation) {
   std::atomic<bool> cancel{true};
   options.cancel = &cancel;
   options.progress = nullptr;
-  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kCancelled);
+  EXPECT_THAT(BuildBasis(mesh, op, options), StatusIs(absl::StatusCode::kCancelled));
   cancel = false;
   options.progress = [&](BasisPhase phase, double) {
     if (phase == BasisPhase::kEigensolve) cancel = true;
   };
-  EXPECT_EQ(BuildBasis(mesh, op, options).status().code(), absl::StatusCode::kCancelled);
+  EXPECT_THAT(BuildBasis(mesh, op, options), StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(BasisTest, StackBasesConcatenatesColumns) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 60;
   auto fine = BuildBasis(mesh, op, options);
@@ -401,17 +407,17 @@ TEST(BasisTest, StackBasesConcatenatesColumns) {
   EXPECT_EQ(s.rightCols(9), Eigen::MatrixXf(coarse->U));
 
   const TriangleMesh small = Icosphere(2);
-  auto other = BuildBasis(small, Operator(small, FieldType::Vector()), options);
+  auto other = BuildBasis(small, MustBuildOperator(small, FieldType::Vector()), options);
   ASSERT_TRUE(other.ok());
-  EXPECT_EQ(StackBases(*fine, *other).status().code(), absl::StatusCode::kInvalidArgument);
-  auto nfield = BuildBasis(mesh, Operator(mesh, FieldType::NField(4)), options);
+  EXPECT_THAT(StackBases(*fine, *other), StatusIs(absl::StatusCode::kInvalidArgument));
+  auto nfield = BuildBasis(mesh, MustBuildOperator(mesh, FieldType::NField(4)), options);
   ASSERT_TRUE(nfield.ok());
-  EXPECT_EQ(StackBases(*fine, *nfield).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(StackBases(*fine, *nfield), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
   const TriangleMesh mesh = Icosphere(3);
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 69;
   std::vector<std::pair<BasisPhase, double>> seen;
@@ -450,66 +456,75 @@ TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
   auto one = BuildTwoLevelBasis(mesh, op, options, 0);
   ASSERT_TRUE(one.ok());
   EXPECT_EQ(Eigen::MatrixXf(one->U), Eigen::MatrixXf(fine->U));
-  EXPECT_EQ(BuildTwoLevelBasis(mesh, op, options, 60).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(BuildTwoLevelBasis(mesh, op, options, -1).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildTwoLevelBasis(mesh, op, options, 60),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(BuildTwoLevelBasis(mesh, op, options, -1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(BasisTest, InvalidParameters) {
   const TriangleMesh mesh = Icosphere(2);  // 320 faces, 640 DOFs
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
-  auto code = [&](auto mutate) {
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  auto status_of = [&](auto mutate) {
     BasisOptions options;
     options.params.dimension = 20;
     mutate(options);
-    return BuildBasis(mesh, op, options).status().code();
+    return BuildBasis(mesh, op, options).status();
   };
   using absl::StatusCode;
-  EXPECT_EQ(code([](BasisOptions&) {}), StatusCode::kOk);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = 0; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = -3; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.dimension = 641; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = 0; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = -1; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = std::nan(""); }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.sigma = INFINITY; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.fields_per_region = 0; }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.params.face_weights = Eigen::VectorXd::Ones(319); }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) {
-              o.params.face_weights = Eigen::VectorXd::Ones(320);
-              o.params.face_weights[5] = 0.0;
-            }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) {
-              o.params.face_weights = Eigen::VectorXd::Ones(320);
-              o.params.face_weights[7] = -2.0;
-            }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) {
-              o.params.face_weights = Eigen::VectorXd::Ones(320);
-              o.params.face_weights[9] = std::nan("");
-            }),
-            StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.threads = -1; }), StatusCode::kInvalidArgument);
-  EXPECT_EQ(code([](BasisOptions& o) { o.eigen_tolerance = 0; }), StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of([](BasisOptions&) {}), IsOk());
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.dimension = 0; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.dimension = -3; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.dimension = 641; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.sigma = 0; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.sigma = -1; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.sigma = std::nan(""); }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.sigma = INFINITY; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.params.fields_per_region = 0; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(
+      status_of([](BasisOptions& o) { o.params.face_weights = Eigen::VectorXd::Ones(319); }),
+      StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) {
+                o.params.face_weights = Eigen::VectorXd::Ones(320);
+                o.params.face_weights[5] = 0.0;
+              }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) {
+                o.params.face_weights = Eigen::VectorXd::Ones(320);
+                o.params.face_weights[7] = -2.0;
+              }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) {
+                o.params.face_weights = Eigen::VectorXd::Ones(320);
+                o.params.face_weights[9] = std::nan("");
+              }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.threads = -1; }),
+              StatusIs(StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.eigen_tolerance = 0; }),
+              StatusIs(StatusCode::kInvalidArgument));
   // Memory limits: the sigma * k estimate, and the exact count.
-  EXPECT_EQ(code([](BasisOptions& o) { o.max_basis_bytes = 1000; }),
-            StatusCode::kResourceExhausted);
+  EXPECT_THAT(status_of([](BasisOptions& o) { o.max_basis_bytes = 1000; }),
+              StatusIs(StatusCode::kResourceExhausted));
   // An operator for another mesh.
   const TriangleMesh other = Icosphere(1);
-  const FieldOperator other_op = Operator(other, FieldType::Vector());
+  const FieldOperator other_op = MustBuildOperator(other, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 10;
-  EXPECT_EQ(BuildBasis(mesh, other_op, options).status().code(), StatusCode::kInvalidArgument);
+  EXPECT_THAT(BuildBasis(mesh, other_op, options), StatusIs(StatusCode::kInvalidArgument));
 }
 
 TEST(BasisTest, DimensionEqualToDofCountIsAllowed) {
   const TriangleMesh mesh = Icosphere(1);  // 80 faces, 160 DOFs
-  const FieldOperator op = Operator(mesh, FieldType::Vector());
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   BasisOptions options;
   options.params.dimension = 160;  // 80 regions: every face a sample
   options.params.sigma = 2.0;

@@ -3,6 +3,7 @@
 // than the matrices, and alpha / beta special cases.
 #include "core/linalg/eigen_blas.h"
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <string>

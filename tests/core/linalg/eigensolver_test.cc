@@ -7,11 +7,13 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/linalg/linalg_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
 using ::fieldspace::testing::GridLaplacian;
 using ::testing::HasSubstr;
@@ -133,37 +135,39 @@ TEST(EigensolverTest, FindsEveryCopyOfRepeatedEigenvalues) {
 TEST(EigensolverTest, InvalidArguments) {
   const SpMat L = PathLaplacian(500);
   const Eigen::VectorXd m = Eigen::VectorXd::Ones(500);
-  auto code = [&](const SpMat& S, const Eigen::VectorXd& mass, const EigenOptions& o) {
-    return LowestEigenpairs(S, mass, o).status().code();
+  auto status_of = [&](const SpMat& S, const Eigen::VectorXd& mass, const EigenOptions& o) {
+    return LowestEigenpairs(S, mass, o).status();
   };
   EigenOptions o;
   o.count = 0;
-  EXPECT_EQ(code(L, m, o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, m, o), StatusIs(absl::StatusCode::kInvalidArgument));
   o.count = 501;
-  EXPECT_EQ(code(L, m, o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, m, o), StatusIs(absl::StatusCode::kInvalidArgument));
   o = {};
-  EXPECT_EQ(code(L, Eigen::VectorXd::Ones(499), o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, Eigen::VectorXd::Ones(499), o),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   Eigen::VectorXd bad_mass = m;
   bad_mass[17] = 0.0;
-  EXPECT_EQ(code(L, bad_mass, o), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(code(SpMat(3, 4), Eigen::VectorXd::Ones(3), o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, bad_mass, o), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(status_of(SpMat(3, 4), Eigen::VectorXd::Ones(3), o),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   SpMat asym = L;
   asym.coeffRef(0, 1) = 5.0;
-  EXPECT_EQ(code(asym, m, o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(asym, m, o), StatusIs(absl::StatusCode::kInvalidArgument));
   o.tolerance = 0;
-  EXPECT_EQ(code(L, m, o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, m, o), StatusIs(absl::StatusCode::kInvalidArgument));
   o = {};
   o.max_iterations = 0;
-  EXPECT_EQ(code(L, m, o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, m, o), StatusIs(absl::StatusCode::kInvalidArgument));
   o = {};
   o.subspace_size = 5;  // must exceed count = 10
-  EXPECT_EQ(code(L, m, o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, m, o), StatusIs(absl::StatusCode::kInvalidArgument));
   o = {};
   o.shift = std::nan("");
-  EXPECT_EQ(code(L, m, o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, m, o), StatusIs(absl::StatusCode::kInvalidArgument));
   o = {};
   o.relative_shift = -1;
-  EXPECT_EQ(code(L, m, o), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(L, m, o), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(EigensolverTest, IndefiniteOrShiftAboveSpectrumIsFailedPrecondition) {
@@ -171,12 +175,12 @@ TEST(EigensolverTest, IndefiniteOrShiftAboveSpectrumIsFailedPrecondition) {
     const int n = grid * grid;
     const Eigen::VectorXd m = Eigen::VectorXd::Ones(n);
     auto r = LowestEigenpairs(GridLaplacian(grid, -0.5), m);
-    EXPECT_EQ(r.status().code(), absl::StatusCode::kFailedPrecondition) << grid;
+    EXPECT_THAT(r, StatusIs(absl::StatusCode::kFailedPrecondition)) << grid;
     EXPECT_THAT(r.status().message(), HasSubstr("not positive definite"));
     EigenOptions o;
     o.shift = 0.5;  // above the zero eigenvalue of the Laplacian
-    EXPECT_EQ(LowestEigenpairs(GridLaplacian(grid, 0.0), m, o).status().code(),
-              absl::StatusCode::kFailedPrecondition)
+    EXPECT_THAT(LowestEigenpairs(GridLaplacian(grid, 0.0), m, o),
+                StatusIs(absl::StatusCode::kFailedPrecondition))
         << grid;
   }
 }
@@ -190,7 +194,7 @@ TEST(EigensolverTest, IterationLimitIsResourceExhausted) {
   o.max_iterations = 1;
   o.tolerance = 1e-14;
   auto r = LowestEigenpairs(L, Eigen::VectorXd::Ones(3600), o);
-  EXPECT_EQ(r.status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(r, StatusIs(absl::StatusCode::kResourceExhausted));
   EXPECT_THAT(r.status().message(), HasSubstr("not converged"));
 }
 

@@ -1,5 +1,6 @@
 #include "core/linalg/matrix_market.h"
 
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -10,10 +11,12 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/testing/matchers.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
@@ -97,8 +100,8 @@ TEST(MatrixMarketTest, ReadsSymmetricAndInteger) {
 }
 
 TEST(MatrixMarketTest, ReadErrors) {
-  EXPECT_EQ(ReadMatrixMarket(TempPath("does_not_exist.mtx")).status().code(),
-            absl::StatusCode::kNotFound);
+  EXPECT_THAT(ReadMatrixMarket(TempPath("does_not_exist.mtx")),
+              StatusIs(absl::StatusCode::kNotFound));
   const std::string path = TempPath("bad.mtx");
   struct Case {
     const char* text;
@@ -117,7 +120,7 @@ TEST(MatrixMarketTest, ReadErrors) {
        }) {
     WriteAll(path, c.text);
     auto r = ReadMatrixMarket(path);
-    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << c.text;
+    EXPECT_THAT(r, StatusIs(absl::StatusCode::kInvalidArgument)) << c.text;
     EXPECT_THAT(r.status().message(), HasSubstr(c.message)) << c.text;
   }
 }
@@ -126,9 +129,9 @@ TEST(MatrixMarketTest, WriteIntoMissingDirectoryIsNotFound) {
   SpMat A(1, 1);
   A.insert(0, 0) = 1;
   const std::string path = TempPath("no_such_dir/x.mtx");
-  EXPECT_EQ(WriteMatrixMarket(path, A).code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(WriteMatrixMarketDiagonal(path, Eigen::VectorXd::Ones(2)).code(),
-            absl::StatusCode::kNotFound);
+  EXPECT_THAT(WriteMatrixMarket(path, A), StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(WriteMatrixMarketDiagonal(path, Eigen::VectorXd::Ones(2)),
+              StatusIs(absl::StatusCode::kNotFound));
 }
 
 }  // namespace

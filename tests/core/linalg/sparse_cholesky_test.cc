@@ -3,15 +3,18 @@
 #include <cmath>
 #include <random>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/linalg/linalg_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
 using ::fieldspace::testing::GridLaplacian;
 using ::testing::HasSubstr;
@@ -65,7 +68,7 @@ TEST_P(CholeskyMethodTest, SolvesToTinyResidual) {
 TEST_P(CholeskyMethodTest, NotPositiveDefiniteIsFailedPrecondition) {
   const SpMat A = GridLaplacian(20, -0.5);  // eigenvalue -0.5 from the constant vector
   auto factor = SparseCholesky::Factorize(A, Options());
-  EXPECT_EQ(factor.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(factor, StatusIs(absl::StatusCode::kFailedPrecondition));
   EXPECT_THAT(factor.status().message(), HasSubstr("not positive definite"));
 }
 
@@ -114,14 +117,14 @@ TEST(SparseCholeskyTest, ShiftedFactorizations) {
   ASSERT_TRUE(x.ok());
   EXPECT_LT((A * *x + 2.0 * (B * *x) - b).norm(), 1e-10 * b.norm());
   // A negative shift below the spectrum fails cleanly.
-  EXPECT_EQ(SparseCholesky::FactorizeShifted(A, -0.01, d).status().code(),
-            absl::StatusCode::kFailedPrecondition);
-  EXPECT_EQ(SparseCholesky::FactorizeShifted(A, 1.0, Eigen::VectorXd::Ones(5)).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(SparseCholesky::FactorizeShifted(A, 1.0, GridLaplacian(5, 1.0)).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(SparseCholesky::FactorizeShifted(A, std::nan(""), d).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SparseCholesky::FactorizeShifted(A, -0.01, d),
+              StatusIs(absl::StatusCode::kFailedPrecondition));
+  EXPECT_THAT(SparseCholesky::FactorizeShifted(A, 1.0, Eigen::VectorXd::Ones(5)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(SparseCholesky::FactorizeShifted(A, 1.0, GridLaplacian(5, 1.0)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(SparseCholesky::FactorizeShifted(A, std::nan(""), d),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(SparseCholeskyTest, RefactorizeSamePattern) {
@@ -138,38 +141,38 @@ TEST(SparseCholeskyTest, RefactorizeSamePattern) {
   SpMat other = A;
   other.coeffRef(0, 624) = 0.1;
   other.coeffRef(624, 0) = 0.1;
-  EXPECT_EQ(factor->Refactorize(other).code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(factor->Refactorize(GridLaplacian(5, 1.0)).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(factor->Refactorize(other), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(factor->Refactorize(GridLaplacian(5, 1.0)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // Indefinite values on the same pattern: FailedPrecondition, and solves refuse afterwards.
-  EXPECT_EQ(factor->Refactorize(GridLaplacian(25, -1.0)).code(),
-            absl::StatusCode::kFailedPrecondition);
-  EXPECT_EQ(factor->Solve(b).status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(factor->Refactorize(GridLaplacian(25, -1.0)),
+              StatusIs(absl::StatusCode::kFailedPrecondition));
+  EXPECT_THAT(factor->Solve(b), StatusIs(absl::StatusCode::kFailedPrecondition));
   ASSERT_TRUE(factor->Refactorize(A).ok());
   EXPECT_TRUE(factor->Solve(b).ok());
 }
 
 TEST(SparseCholeskyTest, InvalidInputs) {
   SpMat rect(3, 4);
-  EXPECT_EQ(SparseCholesky::Factorize(rect).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(SparseCholesky::Factorize(SpMat(0, 0)).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SparseCholesky::Factorize(rect), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(SparseCholesky::Factorize(SpMat(0, 0)), StatusIs(absl::StatusCode::kInvalidArgument));
   SpMat asym = GridLaplacian(4, 1.0);
   asym.coeffRef(0, 1) = -0.5;
   auto a = SparseCholesky::Factorize(asym);
-  EXPECT_EQ(a.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(a, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(a.status().message(), HasSubstr("not symmetric"));
   SpMat nan = GridLaplacian(4, 1.0);
   nan.coeffRef(3, 3) = std::nan("");
-  EXPECT_EQ(SparseCholesky::Factorize(nan).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SparseCholesky::Factorize(nan), StatusIs(absl::StatusCode::kInvalidArgument));
   auto factor = SparseCholesky::Factorize(GridLaplacian(4, 1.0));
   ASSERT_TRUE(factor.ok());
-  EXPECT_EQ(factor->Solve(Eigen::VectorXd::Ones(15)).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(factor->SolveMatrix(Eigen::MatrixXd::Ones(16, 0)).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(factor->Solve(Eigen::VectorXd::Ones(15)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(factor->SolveMatrix(Eigen::MatrixXd::Ones(16, 0)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // The zero matrix (no entries at all) is not positive definite.
-  EXPECT_EQ(SparseCholesky::Factorize(SpMat(5, 5)).status().code(),
-            absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(SparseCholesky::Factorize(SpMat(5, 5)),
+              StatusIs(absl::StatusCode::kFailedPrecondition));
 }
 
 TEST(SparseCholeskyTest, ConcurrentSolvesAgree) {

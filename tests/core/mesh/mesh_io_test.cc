@@ -14,17 +14,21 @@
 #include <limits>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::StatusIs;
+using ::testing::AnyOf;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
@@ -43,8 +47,7 @@ void ExpectError(const std::string& data, MeshFormat format, absl::StatusCode co
                  const std::string& message, const MeshReadOptions& options = {}) {
   absl::StatusOr<MeshReadResult> r = ReadMesh(data, format, options);
   ASSERT_FALSE(r.ok()) << "accepted: " << ::testing::PrintToString(data.substr(0, 200));
-  EXPECT_EQ(r.status().code(), code) << r.status();
-  EXPECT_THAT(std::string(r.status().message()), HasSubstr(message));
+  EXPECT_THAT(r, StatusIs(code, HasSubstr(message)));
 }
 
 VertexMatrix Verts(const std::vector<std::array<double, 3>>& v) {
@@ -135,7 +138,7 @@ TEST(MeshFormatFromPathTest, RecognizesExtensionsCaseInsensitively) {
 TEST(MeshFormatFromPathTest, RejectsUnknownOrMissingExtensions) {
   for (const char* path : {"mesh.stl", "mesh", "dir.obj/mesh", "obj", ""}) {
     absl::StatusOr<MeshFormat> f = MeshFormatFromPath(path);
-    EXPECT_EQ(f.status().code(), absl::StatusCode::kInvalidArgument) << path;
+    EXPECT_THAT(f, StatusIs(absl::StatusCode::kInvalidArgument)) << path;
   }
 }
 
@@ -455,7 +458,7 @@ TEST_P(PlyEncodingTest, EveryTruncationIsAnErrorAndNeverACrash) {
     // Ascii may stop inside the last number and still parse; binary never can.
     if (GetParam() != "ascii" || n < header_end) {
       ASSERT_FALSE(r.ok()) << "truncated at " << n;
-      EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << r.status();
+      EXPECT_THAT(r, StatusIs(absl::StatusCode::kInvalidArgument)) << r.status();
     }
   }
 }
@@ -707,9 +710,8 @@ std::vector<std::pair<std::string, MeshFormat>> ValidSamples() {
 // returns indices >= 0.
 void ExpectSane(const absl::StatusOr<MeshReadResult>& r) {
   if (!r.ok()) {
-    EXPECT_TRUE(r.status().code() == absl::StatusCode::kInvalidArgument ||
-                r.status().code() == absl::StatusCode::kResourceExhausted)
-        << r.status();
+    EXPECT_THAT(r, AnyOf(StatusIs(absl::StatusCode::kInvalidArgument),
+                         StatusIs(absl::StatusCode::kResourceExhausted)));
     return;
   }
   if (r->arrays.faces.size() > 0) {
@@ -770,19 +772,19 @@ TEST(FuzzTest, RandomBytesTruncationsAndMutations) {
 
 TEST(FileTest, MissingFilesAreNotFound) {
   const std::string path = TempPath("does_not_exist.obj");
-  EXPECT_EQ(ReadMeshFile(path).status().code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(ReadFileToString(path).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(ReadMeshFile(path), StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(ReadFileToString(path), StatusIs(absl::StatusCode::kNotFound));
 }
 
 TEST(FileTest, DirectoriesAndUnknownExtensionsAreInvalidArgument) {
   const std::string dir = TempPath("dir.obj");
   std::filesystem::create_directories(dir);
-  EXPECT_EQ(ReadFileToString(dir).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(ReadMeshFile(dir).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReadFileToString(dir), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ReadMeshFile(dir), StatusIs(absl::StatusCode::kInvalidArgument));
   std::filesystem::remove(dir);
   const std::string stl = TempPath("mesh.stl");
   WriteFile(stl, "solid x\n");
-  EXPECT_EQ(ReadMeshFile(stl).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReadMeshFile(stl), StatusIs(absl::StatusCode::kInvalidArgument));
   std::filesystem::remove(stl);
 }
 
@@ -794,13 +796,13 @@ TEST(FileTest, ReadsWholeFilesAndEnforcesTheSizeLimit) {
   absl::StatusOr<std::string> read = ReadFileToString(path);
   ASSERT_TRUE(read.ok()) << read.status();
   EXPECT_EQ(*read, data);
-  EXPECT_EQ(ReadFileToString(path, static_cast<int64_t>(data.size())).status().code(),
-            absl::StatusCode::kOk);
-  EXPECT_EQ(ReadFileToString(path, static_cast<int64_t>(data.size()) - 1).status().code(),
-            absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(ReadFileToString(path, static_cast<int64_t>(data.size())),
+              StatusIs(absl::StatusCode::kOk));
+  EXPECT_THAT(ReadFileToString(path, static_cast<int64_t>(data.size()) - 1),
+              StatusIs(absl::StatusCode::kResourceExhausted));
   MeshReadOptions options;
   options.max_file_bytes = 1000;
-  EXPECT_EQ(ReadMeshFile(path, options).status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(ReadMeshFile(path, options), StatusIs(absl::StatusCode::kResourceExhausted));
   ExpectArrays(*ReadMeshFile(path), Verts({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}), Faces({{0, 1, 2}}));
   std::filesystem::remove(path);
 }
@@ -809,7 +811,7 @@ TEST(FileTest, ErrorsNameTheFile) {
   const std::string path = TempPath("broken.obj");
   WriteFile(path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n");
   absl::StatusOr<MeshReadResult> r = ReadMeshFile(path);
-  EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(r, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_EQ(r.status().message(),
             absl::StrCat("mesh_io_test_", ::getpid(), "_broken.obj line 4: face has 2 vertices"));
   std::filesystem::remove(path);
@@ -878,23 +880,25 @@ TEST(WritePlyTest, InvalidInputsAreRejectedWithoutWriting) {
   const std::string path = TempPath("invalid.ply");
   const VertexMatrix V = Verts({{0, 0, 0}, {1, 0, 0}, {0, 1, 0}});
   const FaceMatrix F = Faces({{0, 1, 2}});
-  EXPECT_EQ(WritePly(path, V, Faces({{0, 1, 3}})).code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(WritePly(path, V, Faces({{-1, 1, 2}})).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(WritePly(path, V, Faces({{0, 1, 3}})), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(WritePly(path, V, Faces({{-1, 1, 2}})), StatusIs(absl::StatusCode::kInvalidArgument));
   for (const std::string name : {"", "two words", "vertex_indices", "tab\tbed"}) {
-    EXPECT_EQ(WritePly(path, V, F, {{name, {1.f}}}).code(), absl::StatusCode::kInvalidArgument)
+    EXPECT_THAT(WritePly(path, V, F, {{name, {1.f}}}), StatusIs(absl::StatusCode::kInvalidArgument))
         << name;
   }
-  EXPECT_EQ(WritePly(path, V, F, {{"a", {1.f, 2.f}}}).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(WritePly(path, V, F, {{"a", {1.f, 2.f}}}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   for (double bad : {1e39, -1e300, std::numeric_limits<double>::quiet_NaN(),
                      std::numeric_limits<double>::infinity()}) {
     VertexMatrix W = V;
     W(1, 2) = bad;
-    EXPECT_EQ(WritePly(path, W, F).code(), absl::StatusCode::kInvalidArgument) << bad;
+    EXPECT_THAT(WritePly(path, W, F), StatusIs(absl::StatusCode::kInvalidArgument)) << bad;
   }
-  EXPECT_EQ(WritePly(path, V, F, {{"a", {1.f}}, {"a", {2.f}}}).code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(WritePly(path, V, F, {{"a", {1.f}}, {"a", {2.f}}}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_FALSE(std::filesystem::exists(path));
-  EXPECT_EQ(WritePly(TempPath("no_such_dir") + "/x.ply", V, F).code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(WritePly(TempPath("no_such_dir") + "/x.ply", V, F),
+              StatusIs(absl::StatusCode::kNotFound));
 }
 
 // ---------------------------------------------------------------------------------------------

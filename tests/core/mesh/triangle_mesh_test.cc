@@ -1,8 +1,11 @@
 #include "core/mesh/triangle_mesh.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Geometry"
@@ -10,30 +13,18 @@
 #include "core/mesh/shapes.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::Arrays;
+using ::fieldspace::testing::MustCreate;
+using ::fieldspace::testing::StatusIs;
 using ::testing::HasSubstr;
 
 constexpr double kPi = 3.14159265358979323846;
-
-MeshArrays Arrays(std::vector<Eigen::Vector3d> v, std::vector<Eigen::Vector3i> f) {
-  MeshArrays a;
-  a.vertices.resize(static_cast<int64_t>(v.size()), 3);
-  for (size_t i = 0; i < v.size(); ++i) a.vertices.row(i) = v[i];
-  a.faces.resize(static_cast<int64_t>(f.size()), 3);
-  for (size_t i = 0; i < f.size(); ++i) a.faces.row(i) = f[i];
-  return a;
-}
-
-TriangleMesh MustCreate(absl::StatusOr<MeshArrays> arrays) {
-  EXPECT_TRUE(arrays.ok()) << arrays.status();
-  auto mesh = TriangleMesh::Create(*std::move(arrays));
-  EXPECT_TRUE(mesh.ok()) << mesh.status();
-  return *std::move(mesh);
-}
 
 // Checks that every table of `mesh` agrees with every other one.
 void ExpectConsistentTopology(const TriangleMesh& mesh) {
@@ -66,6 +57,25 @@ void ExpectConsistentTopology(const TriangleMesh& mesh) {
     }
   }
 }
+
+// Every mesh of the catalogue has its known topology and consistent tables: shapes built in code
+// (sphere, torus, genus 2, torus knot, disk, disk with holes, two components) and the shared
+// meshes where present.
+class CatalogueTopologyTest : public testing::MeshCaseTest {};
+
+TEST_P(CatalogueTopologyTest, MatchesKnownTopology) {
+  const testing::MeshCase& c = GetParam();
+  EXPECT_EQ(mesh().genus(), c.genus);
+  EXPECT_EQ(mesh().euler_characteristic(), c.euler_characteristic);
+  EXPECT_EQ(static_cast<int>(mesh().boundary_loops().size()), c.boundary_loops);
+  EXPECT_EQ(mesh().num_components(), c.components);
+  // chi = sum over components of 2 - 2 g - loops.
+  EXPECT_EQ(c.euler_characteristic, 2 * c.components - 2 * c.genus - c.boundary_loops);
+  ExpectConsistentTopology(mesh());
+}
+
+INSTANTIATE_TEST_SUITE_P(Catalogue, CatalogueTopologyTest,
+                         ::testing::ValuesIn(testing::MeshCatalogue()), testing::MeshCaseName);
 
 TEST(TriangleMeshTest, IcosphereCountsAndInvariants) {
   for (int s = 0; s <= 4; ++s) {
@@ -131,17 +141,17 @@ TEST(TriangleMeshTest, ShapesHaveTheirGenus) {
 }
 
 TEST(TriangleMeshTest, ShapeParametersAreChecked) {
-  EXPECT_EQ(MakeIcosphere(-1).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeIcosphere(9).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeIcosphere(2, 0.0).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeTorus(1.0, 2.0, 8, 8).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeTorus(2.0, 1.0, 2, 8).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(MakeIcosphere(-1), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeIcosphere(9), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeIcosphere(2, 0.0), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeTorus(1.0, 2.0, 8, 8), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeTorus(2.0, 1.0, 2, 8), StatusIs(absl::StatusCode::kInvalidArgument));
   TorusKnotOptions knot;
   knot.p = 2;
   knot.q = 4;
-  EXPECT_EQ(MakeTorusKnot(knot).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeGenusSurface(-1, 4).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(MakeGenusSurface(2, 0).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(MakeTorusKnot(knot), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeGenusSurface(-1, 4), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(MakeGenusSurface(2, 0), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(TriangleMeshTest, OpenSurfacesHaveBoundaryLoops) {
@@ -214,7 +224,7 @@ TEST(TriangleMeshTest, UnreferencedVerticesAreDroppedAndCounted) {
 void ExpectInvalid(const MeshArrays& arrays, const std::string& message_part) {
   auto mesh = TriangleMesh::Create(arrays);
   ASSERT_FALSE(mesh.ok()) << "expected an error containing '" << message_part << "'";
-  EXPECT_EQ(mesh.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(mesh, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(std::string(mesh.status().message()), HasSubstr(message_part));
 }
 
@@ -337,7 +347,7 @@ TEST(SharedMeshRejectTest, TeapotIsNonManifold) {
   ASSERT_TRUE(read.ok()) << read.status();
   auto mesh = TriangleMesh::Create(std::move(read->arrays));
   ASSERT_FALSE(mesh.ok());
-  EXPECT_EQ(mesh.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(mesh, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(std::string(mesh.status().message()), HasSubstr("non-manifold"));
 }
 

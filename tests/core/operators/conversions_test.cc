@@ -1,5 +1,6 @@
 #include "core/operators/conversions.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numbers>
@@ -8,9 +9,11 @@
 #include <vector>
 
 #include "Eigen/Geometry"
+#include "core/mesh/shapes.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -18,6 +21,7 @@ namespace {
 
 using ::fieldspace::testing::LoadMesh;
 using ::fieldspace::testing::MustCreate;
+using ::fieldspace::testing::StatusIs;
 using ::testing::HasSubstr;
 
 class ConversionsTest : public ::testing::Test {
@@ -191,56 +195,51 @@ TEST_F(ConversionsTest, GenericSubsetMatchesWholeMeshConversions) {
 TEST_F(ConversionsTest, ErrorsAreInvalidArgumentNamingTheFace) {
   AmbientVectors v = RandomVectors(5);
   AmbientVectors short_v = v.topRows(nf() - 1);
-  EXPECT_EQ(VectorDofsFromAmbient(mesh(), short_v).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(VectorDofsFromAmbient(mesh(), short_v), StatusIs(absl::StatusCode::kInvalidArgument));
   v(7, 1) = std::numeric_limits<double>::quiet_NaN();
   auto bad = VectorDofsFromAmbient(mesh(), v);
-  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(bad, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(bad.status().message(), HasSubstr("face 7"));
   bad = NFieldDofsFromAmbient(mesh(), 4, v);
-  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(bad, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(bad.status().message(), HasSubstr("face 7"));
-  EXPECT_EQ(NFieldDofsFromAmbient(mesh(), 0, RandomVectors(6)).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(
-      NFieldRepresentativeFromDofs(mesh(), 65, Eigen::VectorXd::Zero(2 * nf())).status().code(),
-      absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(NFieldDofsFromAmbient(mesh(), 0, RandomVectors(6)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(NFieldRepresentativeFromDofs(mesh(), 65, Eigen::VectorXd::Zero(2 * nf())),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 
   Eigen::VectorXd dofs = Eigen::VectorXd::Zero(2 * nf());
-  EXPECT_EQ(AmbientFromVectorDofs(mesh(), dofs.head(2 * nf() - 1)).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(AmbientFromVectorDofs(mesh(), dofs.head(2 * nf() - 1)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   dofs[2 * 11 + 1] = std::numeric_limits<double>::infinity();
   auto bad_back = AmbientFromVectorDofs(mesh(), dofs);
-  EXPECT_EQ(bad_back.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(bad_back, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(bad_back.status().message(), HasSubstr("face 11"));
-  EXPECT_EQ(NFieldDirectionsFromDofs(mesh(), 3, dofs).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(NFieldDirectionsFromDofs(mesh(), 3, dofs),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 
   AmbientTensors t = AmbientTensors::Zero(nf(), 9);
   t(9, 1) = 1.0;  // A01 != A10
   auto asym = TensorDofsFromAmbient(mesh(), t);
-  EXPECT_EQ(asym.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(asym, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(asym.status().message(), HasSubstr("face 9"));
-  EXPECT_EQ(AmbientFromTensorDofs(mesh(), Eigen::VectorXd::Zero(2 * nf())).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(AmbientFromTensorDofs(mesh(), Eigen::VectorXd::Zero(2 * nf())),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 
   const std::vector<int32_t> out_of_range = {0, nf()};
-  EXPECT_EQ(DofsFromAmbient(mesh(), FieldType::Vector(), out_of_range, Eigen::MatrixXd::Zero(2, 3))
-                .status()
-                .code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(
+      DofsFromAmbient(mesh(), FieldType::Vector(), out_of_range, Eigen::MatrixXd::Zero(2, 3))
+          .status(),
+      StatusIs(absl::StatusCode::kInvalidArgument));
   const std::vector<int32_t> two = {0, 1};
-  EXPECT_EQ(DofsFromAmbient(mesh(), FieldType::Tensor(), two, Eigen::MatrixXd::Zero(2, 3))
-                .status()
-                .code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(DofsFromAmbient(mesh(), FieldType::NField(0), two, Eigen::MatrixXd::Zero(2, 3))
-                .status()
-                .code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(
-      AmbientFromDofs(mesh(), FieldType::Vector(), two, Eigen::VectorXd::Zero(3)).status().code(),
-      absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(
+      DofsFromAmbient(mesh(), FieldType::Tensor(), two, Eigen::MatrixXd::Zero(2, 3)).status(),
+      StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(
+      DofsFromAmbient(mesh(), FieldType::NField(0), two, Eigen::MatrixXd::Zero(2, 3)).status(),
+      StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(AmbientFromDofs(mesh(), FieldType::Vector(), two, Eigen::VectorXd::Zero(3)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 }  // namespace

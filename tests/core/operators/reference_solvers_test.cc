@@ -5,11 +5,14 @@
 #include <optional>
 #include <ostream>
 #include <random>
+#include <utility>
 #include <vector>
 
+#include "core/mesh/shapes.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
@@ -23,6 +26,7 @@ FieldConstraint Hard(int32_t face, Eigen::VectorXd value) {
   return {face, std::move(value), 1.0, ConstraintKind::kHard};
 }
 
+using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
 using ::fieldspace::testing::LoadMesh;
 using ::fieldspace::testing::MaxAbs;
@@ -71,8 +75,7 @@ TEST_P(ReferenceSolversTest, SoftConstraintsGiveZeroGradient) {
   p.weights.mu_b = 0.02;
   p.weights.mu_c = 10.0;
   std::uniform_int_distribution<int> face(0, mesh_->num_faces() - 1);
-  for (int i = 0; i < 30; ++i)
-    p.constraints.push_back({face(rng), RandomValue(rng), 0.5 + i * 0.1});
+  for (int i = 0; i < 30; ++i) p.constraints.push_back({face(rng), RandomValue(rng), 0.5 + i * 0.1});
   auto X = SolveModelProblem(op_, p);
   ASSERT_TRUE(X.ok()) << X.status();
   const Eigen::VectorXd g = HalfGradient(p, *X);
@@ -176,46 +179,43 @@ TEST_P(ReferenceSolversTest, ReferenceEigenpairsAreMOrthonormal) {
 TEST_P(ReferenceSolversTest, ErrorsHaveExactCodes) {
   const int d = GetParam().dofs_per_face();
   const Eigen::VectorXd v = Eigen::VectorXd::Ones(d);
-  auto code = [&](const ModelProblem& p) { return SolveModelProblem(op_, p).status().code(); };
+  auto status_of = [&](const ModelProblem& p) { return SolveModelProblem(op_, p).status(); };
   ModelProblem p;
   p.weights.mu_s = -1;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = {};
   p.weights.mu_b = std::nan("");
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = {};
   p.weights.mu_s = 1;
   p.constraints.push_back({mesh_->num_faces(), v, 1.0});
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p.constraints = {{0, Eigen::VectorXd::Ones(d + 1), 1.0}};
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p.constraints = {{0, v, 0.0}};
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p.constraints = {{0, v * std::nan(""), 1.0}};
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p.constraints = {Hard(3, v), Hard(3, v)};
   auto dup = SolveModelProblem(op_, p);
-  EXPECT_EQ(dup.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(dup, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(dup.status().message(), HasSubstr("face 3"));
   p.constraints = {Hard(-1, v)};
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument));
   // No energy at all (A = 0 would be singular): refused by ValidateWeights, naming the weights.
   p = {};
   p.weights = {.mu_s = 0, .mu_b = 0, .mu_c = 0};
-  auto no_energy = SolveModelProblem(op_, p);
-  EXPECT_EQ(no_energy.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_THAT(no_energy.status().message(), HasSubstr("mu_s and mu_b"));
+  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("mu_s and mu_b")));
 
-  EXPECT_EQ(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs()), -1).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs() - 1), 1).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(
-      SmoothField(op_, Eigen::VectorXd::Constant(op_.dofs(), std::nan("")), 1).status().code(),
-      absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs()), -1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs() - 1), 1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(SmoothField(op_, Eigen::VectorXd::Constant(op_.dofs(), std::nan("")), 1),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   FieldOperator broken = op_;
   broken.mass.resize(3);
-  EXPECT_EQ(ReferenceEigenpairs(broken).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReferenceEigenpairs(broken), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 INSTANTIATE_TEST_SUITE_P(AllTypes, ReferenceSolversTest,

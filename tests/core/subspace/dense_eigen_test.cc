@@ -1,17 +1,21 @@
 #include "core/subspace/dense_eigen.h"
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <thread>
 
 #include "Eigen/Eigenvalues"
 #include "Eigen/QR"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/testing/matchers.h"
 
 namespace fieldspace {
 namespace {
 
+using ::fieldspace::testing::StatusIs;
 using ::testing::HasSubstr;
 
 // Q diag(values) Q^T with a random orthogonal Q: a symmetric matrix with a known spectrum.
@@ -101,22 +105,22 @@ TEST(DenseEigenTest, SmallAndDegenerateInputs) {
 TEST(DenseEigenTest, BadInputIsRejected) {
   Eigen::MatrixXd rect(3, 4);
   rect.setZero();
-  EXPECT_EQ(LowestSymmetricEigenpairs(rect, 1, true, nullptr).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(LowestSymmetricEigenpairs(rect, 1, true, nullptr),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   Eigen::MatrixXd a = Eigen::MatrixXd::Identity(3, 3);
-  EXPECT_EQ(LowestSymmetricEigenpairs(a, 0, true, nullptr).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LowestSymmetricEigenpairs(a, 4, true, nullptr).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(LowestSymmetricEigenpairs(a, 0, true, nullptr),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(LowestSymmetricEigenpairs(a, 4, true, nullptr),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   a(2, 0) = std::nan("");
   auto s = LowestSymmetricEigenpairs(a, 1, true, nullptr);
-  EXPECT_EQ(s.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(s, StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(s.status().message(), HasSubstr("non-finite"));
   const Eigen::MatrixXd I = Eigen::MatrixXd::Identity(3, 3);
   Eigen::MatrixXd indefinite = I;
   indefinite(1, 1) = -1;
-  EXPECT_EQ(LowestGeneralizedEigenpairs(I, indefinite, 1, true, nullptr).status().code(),
-            absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(LowestGeneralizedEigenpairs(I, indefinite, 1, true, nullptr),
+              StatusIs(absl::StatusCode::kFailedPrecondition));
 }
 
 TEST(DenseEigenTest, CancellationStopsALargeSolveQuickly) {
@@ -126,8 +130,8 @@ TEST(DenseEigenTest, CancellationStopsALargeSolveQuickly) {
   const Eigen::MatrixXd S = B + B.transpose();
   const Eigen::MatrixXd M = Eigen::MatrixXd::Identity(n, n);
   std::atomic<bool> cancel{true};
-  EXPECT_EQ(LowestGeneralizedEigenpairs(S, M, 10, true, &cancel).status().code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_THAT(LowestGeneralizedEigenpairs(S, M, 10, true, &cancel),
+              StatusIs(absl::StatusCode::kCancelled));
   // Cancelled while running: after 50 ms, in whichever phase the solve is, it returns quickly.
   for (int delay_ms : {50, 400}) {
     cancel = false;
@@ -140,7 +144,7 @@ TEST(DenseEigenTest, CancellationStopsALargeSolveQuickly) {
     auto r = LowestGeneralizedEigenpairs(S, M, n, true, &cancel);
     const auto returned_at = std::chrono::steady_clock::now();
     canceller.join();
-    EXPECT_EQ(r.status().code(), absl::StatusCode::kCancelled) << delay_ms;
+    EXPECT_THAT(r, StatusIs(absl::StatusCode::kCancelled)) << delay_ms;
     // Generous for a loaded CI machine; the phases between checks take about a millisecond.
     EXPECT_LT(returned_at - cancelled_at, std::chrono::milliseconds(500)) << delay_ms;
   }

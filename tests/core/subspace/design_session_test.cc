@@ -1,16 +1,22 @@
 #include "core/subspace/design_session.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
+#include <memory>
 #include <random>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Dense"
 #include "core/subspace/projection.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
@@ -20,17 +26,18 @@ FieldConstraint As(ConstraintKind kind, FieldConstraint c) {
   return c;
 }
 
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::RelativeDifference;
-using ::fieldspace::testing::TorusMesh;
+using ::fieldspace::testing::StatusIs;
+using ::fieldspace::testing::Torus;
 
 class DesignSessionTest : public ::testing::TestWithParam<FieldType> {
  protected:
   void SetUp() override {
-    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(2));
-    op_ = MakeOperator(*mesh_, GetParam());
+    mesh_ = std::make_unique<TriangleMesh>(Icosphere(2));
+    op_ = MustBuildOperator(*mesh_, GetParam());
     basis_ = RandomBasis(GetParam(), op_.dofs(), 150, 30, 17);
     auto sys = ReducedSystem::Build(basis_, op_);
     ASSERT_TRUE(sys.ok()) << sys.status();
@@ -85,7 +92,7 @@ TEST_P(DesignSessionTest, RandomEditSequencesMatchFreshFactorizations) {
         live[next_id] = kind;
       } else {
         // Only a hard constraint landing on an already hard-constrained face may fail.
-        EXPECT_EQ(st.code(), absl::StatusCode::kFailedPrecondition) << st;
+        EXPECT_THAT(st, StatusIs(absl::StatusCode::kFailedPrecondition)) << st;
         EXPECT_EQ(kind, ConstraintKind::kHard);
         ++hard_failures;
       }
@@ -100,7 +107,7 @@ TEST_P(DesignSessionTest, RandomEditSequencesMatchFreshFactorizations) {
       }
       const absl::Status st = s.MoveConstraint(it->first, c);
       if (!st.ok()) {
-        EXPECT_EQ(st.code(), absl::StatusCode::kFailedPrecondition) << st;
+        EXPECT_THAT(st, StatusIs(absl::StatusCode::kFailedPrecondition)) << st;
       }
     } else if (action < 8) {
       auto it = std::next(live.begin(), static_cast<int64_t>(rng() % live.size()));
@@ -162,68 +169,68 @@ TEST_P(DesignSessionTest, ErrorsLeaveTheSessionUnchanged) {
     EXPECT_EQ(s.coefficients(), before);
   };
   // Duplicate id.
-  EXPECT_EQ(s.AddConstraint(7, As(ConstraintKind::kSoft, other)).code(),
-            absl::StatusCode::kAlreadyExists);
+  EXPECT_THAT(s.AddConstraint(7, As(ConstraintKind::kSoft, other)),
+              StatusIs(absl::StatusCode::kAlreadyExists));
   unchanged();
   // Unknown ids.
-  EXPECT_EQ(s.GetConstraint(99).status().code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(s.MoveConstraint(99, c).code(), absl::StatusCode::kNotFound);
-  EXPECT_EQ(s.RemoveConstraint(99).code(), absl::StatusCode::kNotFound);
+  EXPECT_THAT(s.GetConstraint(99), StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(s.MoveConstraint(99, c), StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(s.RemoveConstraint(99), StatusIs(absl::StatusCode::kNotFound));
   unchanged();
   // Bad face ids, sizes, values, weights.
   FieldConstraint bad = c;
   bad.face = mesh_->num_faces();
-  EXPECT_EQ(s.AddConstraint(9, As(ConstraintKind::kSoft, bad)).code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.AddConstraint(9, As(ConstraintKind::kSoft, bad)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   bad.face = -1;
-  EXPECT_EQ(s.MoveConstraint(8, bad).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.MoveConstraint(8, bad), StatusIs(absl::StatusCode::kInvalidArgument));
   bad = c;
   bad.value = Eigen::VectorXd::Zero(GetParam().dofs_per_face() + 1);
-  EXPECT_EQ(s.AddConstraint(9, As(ConstraintKind::kHard, bad)).code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.AddConstraint(9, As(ConstraintKind::kHard, bad)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   bad = c;
   bad.value[0] = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_EQ(s.AddConstraint(9, As(ConstraintKind::kSoft, bad)).code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.AddConstraint(9, As(ConstraintKind::kSoft, bad)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   bad = other;
   bad.weight = 0;
-  EXPECT_EQ(s.AddConstraint(9, As(ConstraintKind::kSoft, bad)).code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.AddConstraint(9, As(ConstraintKind::kSoft, bad)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   bad.weight = -1;
-  EXPECT_EQ(s.MoveConstraint(8, bad).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.MoveConstraint(8, bad), StatusIs(absl::StatusCode::kInvalidArgument));
   unchanged();
   // Non-positive or non-finite energy weights.
-  EXPECT_EQ(s.SetWeights({-1.0, 0.0, 1.0}).code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(s.SetWeights({1.0, 0.0, 0.0}).code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(s.SetWeights({0.0, 0.0, 1.0}).code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(s.SetWeights({1.0, std::numeric_limits<double>::infinity(), 1.0}).code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(s.SetWeights({-1.0, 0.0, 1.0}), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(s.SetWeights({1.0, 0.0, 0.0}), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(s.SetWeights({0.0, 0.0, 1.0}), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(s.SetWeights({1.0, std::numeric_limits<double>::infinity(), 1.0}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   unchanged();
   // A second hard constraint on the same face: dependent.
   FieldConstraint same = c;
   same.value *= 0.5;
-  EXPECT_EQ(s.AddConstraint(9, As(ConstraintKind::kHard, same)).code(),
-            absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(s.AddConstraint(9, As(ConstraintKind::kHard, same)),
+              StatusIs(absl::StatusCode::kFailedPrecondition));
   unchanged();
   EXPECT_FALSE(s.HasConstraint(9));
   // Moving the soft constraint is fine; moving a second hard one onto the first's face is not.
   ASSERT_TRUE(s.AddConstraint(10, As(ConstraintKind::kHard, other)).ok());
   const Eigen::VectorXd with_three = s.coefficients();
-  EXPECT_EQ(s.MoveConstraint(10, same).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(s.MoveConstraint(10, same), StatusIs(absl::StatusCode::kFailedPrecondition));
   EXPECT_EQ(s.coefficients(), with_three);
   ExpectMatchesFreshSolve(s);
   // Creation errors.
-  EXPECT_EQ(DesignSession::Create(nullptr, {}).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(DesignSession::Create(sys_, {1.0, -1.0, 1.0}).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(DesignSession::Create(nullptr, {}), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(DesignSession::Create(sys_, {1.0, -1.0, 1.0}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   DesignSessionOptions bad_options;
   bad_options.solve.max_refinement_steps = -1;
-  EXPECT_EQ(DesignSession::Create(sys_, {}, bad_options).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(DesignSession::Create(sys_, {}, bad_options),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   bad_options = {};
   bad_options.solve.regularization = 1.0;  // above max_regularization
-  EXPECT_EQ(DesignSession::Create(sys_, {}, bad_options).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(DesignSession::Create(sys_, {}, bad_options),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST_P(DesignSessionTest, SessionsWithEqualEnergyWeightsShareOneFactorization) {
@@ -297,8 +304,8 @@ TEST_P(DesignSessionTest, VerifyIntervalChecksSomeSolvesAndKeepsThemExact) {
   EXPECT_FALSE(std::isnan(s.last_backward_error()));
   ExpectMatchesFreshSolve(s);
   options.verify_interval = 0;
-  EXPECT_EQ(DesignSession::Create(sys_, {1.0, 0.05, 4.0}, options).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(DesignSession::Create(sys_, {1.0, 0.05, 4.0}, options),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST_P(DesignSessionTest, ConcurrentOpensWithEqualWeightsFactorizeOnce) {
@@ -333,10 +340,10 @@ TEST_P(DesignSessionTest, ConcurrentSessionsShareTheSystem) {
     for (int64_t id = 0; id < 12; ++id) {
       FieldConstraint c = RandomConstraint(rng);
       c.face = static_cast<int32_t>((id * 23) % mesh_->num_faces());
-      ASSERT_TRUE((*session)
-                      ->AddConstraint(
-                          id, As(id % 4 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft, c))
-                      .ok());
+      ASSERT_TRUE(
+          (*session)
+              ->AddConstraint(id, As(id % 4 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft, c))
+              .ok());
       out->push_back((*session)->coefficients());
     }
   };
@@ -362,8 +369,8 @@ INSTANTIATE_TEST_SUITE_P(FieldTypes, DesignSessionTest,
 TEST(DesignSessionTorusTest, SingularEnergyWithConstraints) {
   // U = I on a torus and mu_B only: the energy has the harmonic fields in its kernel, so the
   // factorization is regularized; with constraints the session still matches the fresh solve.
-  const TriangleMesh mesh = TorusMesh(12, 6);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Torus(12, 6);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(
       ::fieldspace::testing::IdentityBasis(FieldType::Vector(), op.dofs()), op);
   ASSERT_TRUE(sys.ok());
@@ -374,10 +381,9 @@ TEST(DesignSessionTorusTest, SingularEnergyWithConstraints) {
     FieldConstraint c;
     c.face = static_cast<int32_t>((id * 37 + 5) % mesh.num_faces());
     c.value = Eigen::Vector2d(std::cos(id), std::sin(id));
-    ASSERT_TRUE(
-        (*session)
-            ->AddConstraint(id, As(id < 3 ? ConstraintKind::kHard : ConstraintKind::kSoft, c))
-            .ok());
+    ASSERT_TRUE((*session)
+                    ->AddConstraint(id, As(id < 3 ? ConstraintKind::kHard : ConstraintKind::kSoft, c))
+                    .ok());
   }
   auto fresh = SolveReducedModelProblem(**sys, (*session)->problem());
   ASSERT_TRUE(fresh.ok());

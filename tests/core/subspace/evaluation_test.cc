@@ -1,25 +1,30 @@
 #include "core/subspace/evaluation.h"
 
 #include <cmath>
+#include <vector>
 
 #include "Eigen/Dense"
 #include "core/operators/reference_solvers.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using ::fieldspace::testing::DenseU;
-using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::IdentityBasis;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::StatusIs;
 
 TEST(EvaluationTest, TestFieldsAreConstrainedBiharmonicMinimizers) {
-  const TriangleMesh mesh = IcosphereMesh(2);
+  const TriangleMesh mesh = Icosphere(2);
   for (const FieldType& type : {FieldType::Vector(), FieldType::NField(2), FieldType::Tensor()}) {
-    const FieldOperator op = MakeOperator(mesh, type);
+    const FieldOperator op = MustBuildOperator(mesh, type);
     TestFieldOptions options;
     options.count = 3;
     options.min_constraints = 5;
@@ -56,8 +61,8 @@ TEST(EvaluationTest, TestFieldsAreConstrainedBiharmonicMinimizers) {
 }
 
 TEST(EvaluationTest, SmoothingWeightsFollowTheOperatorScale) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto lambdas = SmoothingWeights(op, 5);
   ASSERT_TRUE(lambdas.ok());
   const Eigen::VectorXd ones = Eigen::VectorXd::Ones(op.dofs());
@@ -65,12 +70,12 @@ TEST(EvaluationTest, SmoothingWeightsFollowTheOperatorScale) {
   ASSERT_EQ(lambdas->size(), 5u);
   for (int j = 0; j < 5; ++j)
     EXPECT_NEAR((*lambdas)[j], 25.0 * (j + 1) * ratio, 1e-12 * (j + 1) * ratio);
-  EXPECT_EQ(SmoothingWeights(op, 0).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SmoothingWeights(op, 0), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   const Eigen::MatrixXd fields = Eigen::MatrixXd::Random(op.dofs(), 2);
   const std::vector<double> lambdas = {0.01, 0.3};
   // U = I: the subspace is the full space, no error.
@@ -102,23 +107,23 @@ TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
   const ErrorSummary summary = Summarize(*errors);
   EXPECT_NEAR(summary.mean, errors->mean(), 1e-15);
   EXPECT_EQ(summary.max, errors->maxCoeff());
-  EXPECT_EQ(SmoothingErrors(op, **sys, fields, std::vector<double>{-1.0}).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SmoothingErrors(op, **sys, fields, std::vector<double>{-1.0}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(EvaluationTest, InvalidTestFieldOptions) {
-  const TriangleMesh mesh = IcosphereMesh(1);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(1);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   TestFieldOptions options;
   options.count = 0;
-  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(GenerateTestFields(op, options), StatusIs(absl::StatusCode::kInvalidArgument));
   options.count = 1;
   options.min_constraints = 10;
   options.max_constraints = 5;
-  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(GenerateTestFields(op, options), StatusIs(absl::StatusCode::kInvalidArgument));
   options.min_constraints = 10;
   options.max_constraints = 81;  // more than #F = 80
-  EXPECT_EQ(GenerateTestFields(op, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(GenerateTestFields(op, options), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 }  // namespace

@@ -9,19 +9,23 @@
 #include "Eigen/Dense"
 #include "core/operators/reference_solvers.h"
 #include "core/subspace/projection.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using ::fieldspace::testing::DenseU;
-using ::fieldspace::testing::IcosphereMesh;
+using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::IdentityBasis;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::RelativeDifference;
-using ::fieldspace::testing::TorusMesh;
+using ::fieldspace::testing::StatusIs;
+using ::fieldspace::testing::Torus;
 
 // Random constraints on distinct faces.
 ModelProblem RandomProblem(int32_t num_faces, int32_t p, int soft, int hard, uint64_t seed,
@@ -89,9 +93,9 @@ Eigen::VectorXd DenseReducedSolution(const FieldOperator& op, const Basis& basis
 }
 
 TEST(ModelProblemTest, IdentityBasisReproducesTheFullSpaceSolve) {
-  const TriangleMesh mesh = IcosphereMesh(2);
+  const TriangleMesh mesh = Icosphere(2);
   for (const FieldType& type : {FieldType::Vector(), FieldType::Tensor()}) {
-    const FieldOperator op = MakeOperator(mesh, type);
+    const FieldOperator op = MustBuildOperator(mesh, type);
     auto sys = ReducedSystem::Build(IdentityBasis(type, op.dofs()), op);
     ASSERT_TRUE(sys.ok()) << sys.status();
     const int p = type.dofs_per_face();
@@ -112,8 +116,8 @@ TEST(ModelProblemTest, IdentityBasisReproducesTheFullSpaceSolve) {
 TEST(ModelProblemTest, SingularEnergyOnTorusIsRegularizedAndRefinedToTheExactSolution) {
   // Genus 1: S has a 2-dimensional kernel (harmonic fields). With U = I and only mu_s, the
   // energy matrix is singular; the soft constraints make the problem well posed.
-  const TriangleMesh mesh = TorusMesh(16, 8);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Torus(16, 8);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
   ASSERT_TRUE(sys.ok());
   const ModelProblem problem = RandomProblem(mesh.num_faces(), 2, 5, 1, 9, 1.0, 0.0, 2.0);
@@ -126,10 +130,10 @@ TEST(ModelProblemTest, SingularEnergyOnTorusIsRegularizedAndRefinedToTheExactSol
 }
 
 TEST(ModelProblemTest, RandomBasisMatchesDenseKkt) {
-  const TriangleMesh mesh = IcosphereMesh(2);
+  const TriangleMesh mesh = Icosphere(2);
   int seed = 0;
   for (const FieldType& type : {FieldType::Vector(), FieldType::NField(3), FieldType::Tensor()}) {
-    const FieldOperator op = MakeOperator(mesh, type);
+    const FieldOperator op = MustBuildOperator(mesh, type);
     auto basis = RandomBasis(type, op.dofs(), 90, 30, 5 + seed);
     auto sys = ReducedSystem::Build(basis, op);
     ASSERT_TRUE(sys.ok());
@@ -154,67 +158,67 @@ TEST(ModelProblemTest, RandomBasisMatchesDenseKkt) {
 }
 
 TEST(ModelProblemTest, InvalidProblems) {
-  const TriangleMesh mesh = IcosphereMesh(1);  // 80 faces
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(1);  // 80 faces
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op.dofs(), 20, 10, 1), op);
   ASSERT_TRUE(sys.ok());
   const ModelProblem good = RandomProblem(mesh.num_faces(), 2, 2, 1, 4, 1.0, 0.0, 1.0);
   ASSERT_TRUE(SolveReducedModelProblem(**sys, good).ok());
-  const auto code = [&](const ModelProblem& p) {
-    return SolveReducedModelProblem(**sys, p).status().code();
+  const auto solve = [&](const ModelProblem& p) {
+    return SolveReducedModelProblem(**sys, p).status();
   };
   ModelProblem p = good;
   p.weights.mu_s = -1;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.weights.mu_b = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.weights.mu_s = 0;
   p.weights.mu_b = 0;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.weights.mu_c = -2;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.constraints[0].face = 80;  // soft
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.constraints[2].face = -3;  // hard
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.constraints[1].value = Eigen::VectorXd::Zero(3);
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.constraints[2].value[1] = std::numeric_limits<double>::infinity();
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   p = good;
   p.constraints[0].weight = 0;
-  EXPECT_EQ(code(p), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kInvalidArgument));
   ReducedSolveOptions bad_options;
   bad_options.dependence_tolerance = 0;
-  EXPECT_EQ(SolveReducedModelProblem(**sys, good, bad_options).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(SolveReducedModelProblem(**sys, good, bad_options),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // The same face hard-constrained twice: dependent rows.
   p = good;
   p.constraints.push_back(p.constraints[2]);
-  EXPECT_EQ(code(p), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kFailedPrecondition));
   // More hard DOFs (2 x 11 = 22) than the dimension (20).
   p = RandomProblem(mesh.num_faces(), 2, 0, 11, 5, 1.0, 0.0, 1.0);
-  EXPECT_EQ(code(p), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(solve(p), StatusIs(absl::StatusCode::kFailedPrecondition));
 }
 
 TEST(ModelProblemTest, CancelledSolveStopsWithCancelled) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
   ASSERT_TRUE(sys.ok());
   const ModelProblem problem = RandomProblem(mesh.num_faces(), 2, 5, 4, 3, 0.5, 0.02, 3.0);
   std::atomic<bool> cancel{true};
   ReducedSolveOptions options;
   options.cancel = &cancel;
-  EXPECT_EQ(SolveReducedModelProblem(**sys, problem, options).status().code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_THAT(SolveReducedModelProblem(**sys, problem, options),
+              StatusIs(absl::StatusCode::kCancelled));
   cancel = false;
   EXPECT_TRUE(SolveReducedModelProblem(**sys, problem, options).ok());
 }

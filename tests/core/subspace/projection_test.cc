@@ -1,27 +1,33 @@
 #include "core/subspace/projection.h"
 
 #include <atomic>
+#include <cmath>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "Eigen/Dense"
 #include "core/subspace/lift_plan.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using ::fieldspace::testing::DenseU;
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::StatusIs;
 
 class ProjectionTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(2));
-    op_ = MakeOperator(*mesh_, FieldType::Vector());
+    mesh_ = std::make_unique<TriangleMesh>(Icosphere(2));
+    op_ = MustBuildOperator(*mesh_, FieldType::Vector());
     basis_ = RandomBasis(FieldType::Vector(), op_.dofs(), 80, 25, 21);
     auto sys = ReducedSystem::Build(basis_, op_);
     ASSERT_TRUE(sys.ok()) << sys.status();
@@ -137,45 +143,45 @@ TEST(LiftPlanTest, TensorRowsWithDifferentSupportsAndWideIndices) {
 
 TEST_F(ProjectionTest, InvalidInputs) {
   const Eigen::VectorXd x = Eigen::VectorXd::Random(80);
-  EXPECT_EQ(Lift(*basis_, Eigen::VectorXd::Zero(79)).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(Lift(*basis_, Eigen::VectorXd::Zero(79)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   Eigen::VectorXd nan_x = x;
   nan_x[4] = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_EQ(Lift(*basis_, nan_x).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LiftFaces(*basis_, x, std::vector<int32_t>{320}).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LiftFaces(*basis_, x, std::vector<int32_t>{-1}).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(Lift(*basis_, nan_x), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(LiftFaces(*basis_, x, std::vector<int32_t>{320}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(LiftFaces(*basis_, x, std::vector<int32_t>{-1}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   std::vector<double> small(5);
-  EXPECT_EQ(LiftInto(*basis_, x, absl::MakeSpan(small)).code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LiftFacesInto(*basis_, x, std::vector<int32_t>{1, 2}, absl::MakeSpan(small)).code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(Lift(*sys_, Eigen::VectorXd::Zero(81)).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(Lift(*sys_, nan_x).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LiftFaces(*sys_, x, std::vector<int32_t>{320}).status().code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LiftInto(*sys_, x, absl::MakeSpan(small)).code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(LiftFacesInto(*sys_, x, std::vector<int32_t>{1}, absl::MakeSpan(small)).code(),
-            absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(Project(*sys_, Eigen::VectorXd::Zero(op_.dofs() + 1)).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(LiftInto(*basis_, x, absl::MakeSpan(small)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(LiftFacesInto(*basis_, x, std::vector<int32_t>{1, 2}, absl::MakeSpan(small)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(Lift(*sys_, Eigen::VectorXd::Zero(81)), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(Lift(*sys_, nan_x), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(LiftFaces(*sys_, x, std::vector<int32_t>{320}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(LiftInto(*sys_, x, absl::MakeSpan(small)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(LiftFacesInto(*sys_, x, std::vector<int32_t>{1}, absl::MakeSpan(small)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(Project(*sys_, Eigen::VectorXd::Zero(op_.dofs() + 1)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   Eigen::VectorXd nan_field = Eigen::VectorXd::Zero(op_.dofs());
   nan_field[9] = std::numeric_limits<double>::infinity();
-  EXPECT_EQ(Project(*sys_, nan_field).status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(
+  EXPECT_THAT(Project(*sys_, nan_field), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(
       RelativeResiduals(*sys_, Eigen::MatrixXd::Zero(op_.dofs(), 2), Eigen::MatrixXd::Zero(80, 3))
-          .status()
-          .code(),
-      absl::StatusCode::kInvalidArgument);
+          .status(),
+      StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST_F(ProjectionTest, CancelledProjectionStopsWithCancelled) {
   const Eigen::VectorXd X = Eigen::VectorXd::Random(op_.dofs());
   std::atomic<bool> cancel{true};
-  EXPECT_EQ(Project(*sys_, X, &cancel).status().code(), absl::StatusCode::kCancelled);
-  EXPECT_EQ(RelativeResiduals(*sys_, X, Eigen::VectorXd::Zero(80), &cancel).status().code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_THAT(Project(*sys_, X, &cancel), StatusIs(absl::StatusCode::kCancelled));
+  EXPECT_THAT(RelativeResiduals(*sys_, X, Eigen::VectorXd::Zero(80), &cancel),
+              StatusIs(absl::StatusCode::kCancelled));
   cancel = false;
   auto p = Project(*sys_, X, &cancel);
   ASSERT_TRUE(p.ok());

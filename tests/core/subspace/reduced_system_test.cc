@@ -5,18 +5,22 @@
 #include <memory>
 
 #include "Eigen/Dense"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
 using ::fieldspace::testing::DenseU;
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::RelativeDifference;
-using ::fieldspace::testing::TorusMesh;
+using ::fieldspace::testing::StatusIs;
+using ::fieldspace::testing::Torus;
 
 struct DenseReference {
   Eigen::MatrixXd S, B, M;
@@ -47,9 +51,9 @@ void ExpectMatchesReference(const ReducedSystem& sys, const DenseReference& ref)
 }
 
 TEST(ReducedSystemTest, MatchesDenseProductsForEachFieldType) {
-  const TriangleMesh mesh = IcosphereMesh(2);  // 320 faces
+  const TriangleMesh mesh = Icosphere(2);  // 320 faces
   for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
-    const FieldOperator op = MakeOperator(mesh, type);
+    const FieldOperator op = MustBuildOperator(mesh, type);
     auto basis = RandomBasis(type, op.dofs(), 60, 12, 7);
     auto sys = ReducedSystem::Build(basis, op);
     ASSERT_TRUE(sys.ok()) << sys.status();
@@ -67,8 +71,8 @@ TEST(ReducedSystemTest, MatchesDenseProductsForEachFieldType) {
 }
 
 TEST(ReducedSystemTest, BandedAccumulationAndThreadCountGiveTheSameMatrices) {
-  const TriangleMesh mesh = TorusMesh(24, 12);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Torus(24, 12);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 90, 30, 11);
   auto full = ReducedSystem::Build(basis, op);
   ReducedSystemOptions banded;
@@ -83,8 +87,8 @@ TEST(ReducedSystemTest, BandedAccumulationAndThreadCountGiveTheSameMatrices) {
 }
 
 TEST(ReducedSystemTest, MassFactorSolvesTheReducedMass) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op.dofs(), 50, 20, 3), op);
   ASSERT_TRUE(sys.ok());
   const Eigen::VectorXd b = Eigen::VectorXd::Random(50);
@@ -93,8 +97,8 @@ TEST(ReducedSystemTest, MassFactorSolvesTheReducedMass) {
 }
 
 TEST(ReducedSystemTest, ProgressAndCancellation) {
-  const TriangleMesh mesh = IcosphereMesh(2);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 40, 20, 9);
   std::atomic<int> calls{0};
   std::atomic<bool> saw_end{false};
@@ -111,56 +115,50 @@ TEST(ReducedSystemTest, ProgressAndCancellation) {
   std::atomic<bool> cancel{true};
   ReducedSystemOptions cancelled;
   cancelled.cancel = &cancel;
-  EXPECT_EQ(ReducedSystem::Build(basis, op, cancelled).status().code(),
-            absl::StatusCode::kCancelled);
+  EXPECT_THAT(ReducedSystem::Build(basis, op, cancelled), StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(ReducedSystemTest, InvalidInputs) {
-  const TriangleMesh mesh = IcosphereMesh(1);
-  const FieldOperator op = MakeOperator(mesh, FieldType::Vector());
+  const TriangleMesh mesh = Icosphere(1);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
   auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 10, 8, 1);
-  EXPECT_EQ(ReducedSystem::Build(nullptr, op).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(nullptr, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // Basis for another field type.
   auto tensor_basis = RandomBasis(FieldType::Tensor(), op.dofs(), 10, 8, 1);
-  EXPECT_EQ(ReducedSystem::Build(tensor_basis, op).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(tensor_basis, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // Wrong number of rows.
   auto short_basis = RandomBasis(FieldType::Vector(), op.dofs() - 2, 10, 8, 1);
-  EXPECT_EQ(ReducedSystem::Build(short_basis, op).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(short_basis, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // No columns.
   auto empty = std::make_shared<Basis>();
   empty->U.resize(op.dofs(), 0);
-  EXPECT_EQ(ReducedSystem::Build(empty, op).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(empty, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // Non-finite basis value.
   auto nan_basis = RandomBasis(FieldType::Vector(), op.dofs(), 10, 8, 1);
   nan_basis->U.valuePtr()[5] = std::numeric_limits<float>::quiet_NaN();
-  EXPECT_EQ(ReducedSystem::Build(nan_basis, op).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(nan_basis, op), StatusIs(absl::StatusCode::kInvalidArgument));
   // Non-positive mass.
   FieldOperator bad_mass = op;
   bad_mass.mass[0] = 0;
-  EXPECT_EQ(ReducedSystem::Build(basis, bad_mass).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(basis, bad_mass), StatusIs(absl::StatusCode::kInvalidArgument));
   // Bad options.
   ReducedSystemOptions bad_options;
   bad_options.threads = -1;
-  EXPECT_EQ(ReducedSystem::Build(basis, op, bad_options).status().code(),
-            absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedSystem::Build(basis, op, bad_options),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // Linearly dependent columns: U^T M U singular.
   auto dependent = std::make_shared<Basis>(*basis);
   Eigen::MatrixXf dense = Eigen::MatrixXf(dependent->U);
   dense.col(3) = dense.col(4);
   dependent->U = dense.sparseView();
-  EXPECT_EQ(ReducedSystem::Build(dependent, op).status().code(),
-            absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(ReducedSystem::Build(dependent, op), StatusIs(absl::StatusCode::kFailedPrecondition));
   // A zero column.
   dense = Eigen::MatrixXf(basis->U);
   dense.col(2).setZero();
   auto zero_column = std::make_shared<Basis>(*basis);
   zero_column->U = dense.sparseView();
-  EXPECT_EQ(ReducedSystem::Build(zero_column, op).status().code(),
-            absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(ReducedSystem::Build(zero_column, op),
+              StatusIs(absl::StatusCode::kFailedPrecondition));
 }
 
 }  // namespace

@@ -3,25 +3,30 @@
 #include <atomic>
 #include <cmath>
 #include <memory>
+#include <utility>
 
 #include "Eigen/Dense"
 #include "core/basis/basis.h"
 #include "core/operators/reference_solvers.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/subspace/subspace_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
 
-using ::fieldspace::testing::IcosphereMesh;
-using ::fieldspace::testing::MakeOperator;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::StatusIs;
 
 class SpectrumTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    mesh_ = std::make_unique<TriangleMesh>(IcosphereMesh(3));  // 1280 faces
-    op_ = MakeOperator(*mesh_, FieldType::Vector());
+    mesh_ = std::make_unique<TriangleMesh>(Icosphere(3));  // 1280 faces
+    op_ = MustBuildOperator(*mesh_, FieldType::Vector());
     EigenOptions options;
     options.count = 40;
     auto full = ReferenceEigenpairs(op_, options);
@@ -135,13 +140,13 @@ TEST_F(SpectrumTest, InvalidCounts) {
   ASSERT_TRUE(sys.ok());
   ReducedEigenOptions options;
   options.count = 0;
-  EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedEigenpairs(**sys, options), StatusIs(absl::StatusCode::kInvalidArgument));
   options.count = 51;
-  EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedEigenpairs(**sys, options), StatusIs(absl::StatusCode::kInvalidArgument));
   options.count = 50;  // all of them: fine (dense)
   EXPECT_TRUE(ReducedEigenpairs(**sys, options).ok());
   options.method = ReducedEigenMethod::kSparse;  // needs a Lanczos basis larger than K <= d
-  EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(ReducedEigenpairs(**sys, options), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST_F(SpectrumTest, CancelledSolvesStopWithCancelled) {
@@ -154,7 +159,7 @@ TEST_F(SpectrumTest, CancelledSolvesStopWithCancelled) {
     options.method = method;
     options.cancel = &cancel;
     cancel = true;
-    EXPECT_EQ(ReducedEigenpairs(**sys, options).status().code(), absl::StatusCode::kCancelled);
+    EXPECT_THAT(ReducedEigenpairs(**sys, options), StatusIs(absl::StatusCode::kCancelled));
     cancel = false;  // the same call, not cancelled, runs to the end
     EXPECT_TRUE(ReducedEigenpairs(**sys, options).ok());
   }
