@@ -7,8 +7,8 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
-#include "core/basis/local_cholesky.h"
 #include "core/basis/local_eigensolver.h"
+#include "core/linalg/local_cholesky.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_operator.h"
 

@@ -10,10 +10,10 @@
 #include "Eigen/SparseCore"
 #include "absl/status/statusor.h"
 #include "core/basis/basis.h"
+#include "core/linalg/supernodal_cholesky.h"
 #include "core/operators/field_operator.h"
 #include "core/operators/field_type.h"
 #include "core/subspace/lift_plan.h"
-#include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace {
 

@@ -11,9 +11,9 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
 #include "core/common/status_macros.h"
+#include "core/linalg/supernodal_cholesky.h"
 #include "core/operators/reference_solvers.h"
 #include "core/subspace/dense_eigen.h"
-#include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace {
 namespace {

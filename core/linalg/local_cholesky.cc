@@ -1,4 +1,4 @@
-#include "core/basis/local_cholesky.h"
+#include "core/linalg/local_cholesky.h"
 
 #include <cholmod.h>
 
@@ -10,7 +10,7 @@
 #include "Eigen/Core"
 #include "absl/strings/str_format.h"
 
-namespace fieldspace::basis_internal {
+namespace fieldspace {
 namespace {
 
 using MatrixMap = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
@@ -343,4 +343,4 @@ void LocalCholesky::SolveInPlace(double* X, int32_t p) {
   }
 }
 
-}  // namespace fieldspace::basis_internal
+}  // namespace fieldspace

@@ -1,5 +1,5 @@
-#ifndef FIELDSPACE_CORE_BASIS_LOCAL_CHOLESKY_H_
-#define FIELDSPACE_CORE_BASIS_LOCAL_CHOLESKY_H_
+#ifndef FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_
+#define FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_
 
 #include <cstdint>
 #include <functional>
@@ -10,7 +10,7 @@
 struct cholmod_common_struct;
 struct cholmod_factor_struct;
 
-namespace fieldspace::basis_internal {
+namespace fieldspace {
 
 // A symmetric positive definite matrix in compressed sparse columns, upper triangle only (every
 // stored entry has row <= column; each column holds its diagonal), int32 indices. Rows within a
@@ -64,6 +64,6 @@ class LocalCholesky {
   std::vector<double> c_values_, lx_, update_, xp_;
 };
 
-}  // namespace fieldspace::basis_internal
+}  // namespace fieldspace
 
-#endif  // FIELDSPACE_CORE_BASIS_LOCAL_CHOLESKY_H_
+#endif  // FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_
