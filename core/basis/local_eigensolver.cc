@@ -95,7 +95,7 @@ absl::StatusOr<LocalEigenResult> SolveLanczos(LocalOperator& op, int32_t m, doub
 
 absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
                                                         const LocalEigenOptions& options,
-                                                        const std::function<bool()>& poll) {
+                                                        const CancelToken& cancel) {
   const int32_t n = op.size();
   const int32_t m = options.count;
   if (m < 1 || m > n) {
@@ -105,7 +105,7 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   const int32_t p = m + std::max(0, options.guard);
   if (n <= std::max(options.dense_max_size, 3 * p)) return SolveDense(op, m);
 
-  absl::Status prepared = op.PrepareShiftInverse(poll);
+  absl::Status prepared = op.PrepareShiftInverse(cancel);
   if (!prepared.ok()) return prepared;
   const double tau = op.shift();
 
@@ -133,7 +133,7 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   LocalEigenResult result;
   bool verified = false;  // SX recomputed exactly since the last update
   for (int32_t it = 1; it <= options.max_iterations; ++it) {
-    if (poll && poll()) return absl::CancelledError("basis construction cancelled");
+    if (cancel.Check()) return absl::CancelledError("basis construction cancelled");
     R = SX - X * theta.asDiagonal();
     auto converged = [&] {
       for (int32_t i = 0; i < m; ++i) {
@@ -213,7 +213,7 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
     if (!solved) break;  // hand over to Lanczos
     verified = false;
   }
-  if (poll && poll()) return absl::CancelledError("basis construction cancelled");
+  if (cancel.Check()) return absl::CancelledError("basis construction cancelled");
   return SolveLanczos(op, m, options.tolerance);
 }
 

@@ -109,7 +109,7 @@ void LocalCholesky::FreeSymbolic() {
   symbolic_ = nullptr;
 }
 
-absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<bool()>& poll) {
+absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& cancel) {
   FreeSymbolic();
   n_ = A.n;
   const int32_t n = A.n;
@@ -286,7 +286,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<boo
       next_[s] = head_[s2];
       head_[s2] = s;
     }
-    if ((s & 255) == 0 && poll && poll()) {
+    if ((s & 255) == 0 && cancel.Check()) {
       FreeSymbolic();
       return absl::CancelledError("basis construction cancelled");
     }

@@ -2,10 +2,10 @@
 #define FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_
 
 #include <cstdint>
-#include <functional>
 #include <vector>
 
 #include "absl/status/status.h"
+#include "core/common/cancel.h"
 
 struct cholmod_common_struct;
 struct cholmod_factor_struct;
@@ -39,9 +39,9 @@ class LocalCholesky {
   LocalCholesky& operator=(const LocalCholesky&) = delete;
 
   // Orders, analyzes and factors `A`. FailedPrecondition when A is not numerically positive
-  // definite, ResourceExhausted when CHOLMOD runs out of memory, Cancelled when `poll` (called
-  // every few hundred supernodes) returns true.
-  absl::Status Factorize(const UpperCsc& A, const std::function<bool()>& poll);
+  // definite, ResourceExhausted when CHOLMOD runs out of memory, Cancelled when `cancel` (checked
+  // every few hundred supernodes) is set.
+  absl::Status Factorize(const UpperCsc& A, const CancelToken& cancel);
 
   // X <- A^-1 X in place; X is n x p, column-major with leading dimension n.
   void SolveInPlace(double* X, int32_t p);

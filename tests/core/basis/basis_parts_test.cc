@@ -1,6 +1,7 @@
 // Tests of the pieces of the basis construction: dual graph, sample allocation, farthest point
 // sampling, region growth and the local eigensolver.
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <set>
@@ -14,6 +15,7 @@
 #include "core/basis/local_eigensolver.h"
 #include "core/basis/regions.h"
 #include "core/basis/sampling.h"
+#include "core/common/cancel.h"
 #include "gtest/gtest.h"
 #include "tests/core/basis/basis_test_util.h"
 #include "tests/testing/test_meshes.h"
@@ -27,6 +29,9 @@ using testing::DualDistances;
 using testing::Icosphere;
 using testing::LoadMesh;
 using testing::TwoSpheres;
+
+// A flag that is already set: the cancellation paths return at their first check.
+const CancelFlag kCancelled{true};
 
 TEST(DualGraphTest, ArcsAndLengths) {
   const TriangleMesh mesh = Icosphere(2);
@@ -136,7 +141,7 @@ TEST(SamplingTest, EachSampleIsTheFarthestFace) {
 TEST(SamplingTest, CancelledThroughPoll) {
   const TriangleMesh mesh = Icosphere(4);
   auto g = BuildDualGraph(mesh, {});
-  auto s = FarthestPointSampling(mesh, *g, {50}, 0, [] { return true; });
+  auto s = FarthestPointSampling(mesh, *g, {50}, 0, &kCancelled);
   EXPECT_EQ(s.status().code(), absl::StatusCode::kCancelled);
 }
 
@@ -162,7 +167,7 @@ TEST(RegionsTest, RegionsAreDualDisks) {
   regions = GrowRegions(*g, samples, options, nullptr);
   ASSERT_TRUE(regions.ok());
   EXPECT_EQ((*regions)[0].size(), 4u);
-  EXPECT_EQ(GrowRegions(*g, samples, options, [] { return true; }).status().code(),
+  EXPECT_EQ(GrowRegions(*g, samples, options, &kCancelled).status().code(),
             absl::StatusCode::kCancelled);
 }
 
@@ -179,7 +184,7 @@ class PathOperator : public LocalOperator {
   }
   int32_t size() const override { return n_; }
   void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override { *Y = dense_ * X; }
-  absl::Status PrepareShiftInverse(const std::function<bool()>&) override {
+  absl::Status PrepareShiftInverse(const CancelToken&) override {
     llt_.compute(dense_ + tau_ * Eigen::MatrixXd::Identity(n_, n_));
     prepared_ = true;
     return absl::OkStatus();
@@ -225,9 +230,8 @@ TEST(LocalEigensolverTest, LowestEigenpairsOfPathLaplacian) {
             absl::StatusCode::kInvalidArgument);
   PathOperator big(500, 1e-3);
   options.count = 2;
-  EXPECT_EQ(
-      basis_internal::SolveLocalEigenproblem(big, options, [] { return true; }).status().code(),
-      absl::StatusCode::kCancelled);
+  EXPECT_EQ(basis_internal::SolveLocalEigenproblem(big, options, &kCancelled).status().code(),
+            absl::StatusCode::kCancelled);
 }
 
 TEST(LocalEigensolverTest, FallsBackToLanczosWhenLobpcgDoesNotConverge) {
