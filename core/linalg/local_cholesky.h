@@ -2,15 +2,18 @@
 #define FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "absl/status/status.h"
 #include "core/common/cancel.h"
 
-struct cholmod_common_struct;
 struct cholmod_factor_struct;
 
 namespace fieldspace {
+namespace linalg_internal {
+class CholmodCommon;
+}  // namespace linalg_internal
 
 // A symmetric positive definite matrix in compressed sparse columns, upper triangle only (every
 // stored entry has row <= column; each column holds its diagonal), int32 indices. Rows within a
@@ -55,7 +58,7 @@ class LocalCholesky {
  private:
   void FreeSymbolic();
 
-  cholmod_common_struct* common_ = nullptr;
+  std::unique_ptr<linalg_internal::CholmodCommon> common_;
   cholmod_factor_struct* symbolic_ = nullptr;
   int32_t n_ = 0;
   double flops_ = 0;
