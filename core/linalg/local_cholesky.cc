@@ -75,6 +75,24 @@ void BackwardSolve(int32_t p_runtime, int32_t nsuper, const int32_t* super, cons
 }
 using ConstMatrixMap = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 
+// The supernodal structure of a CHOLMOD symbolic factor (CHOLMOD_INT indices): the fill-reducing
+// permutation, the first column of each supernode, the offsets of its row indices (in ls) and of
+// its values (in lx), and the number of supernodes.
+struct Layout {
+  const int32_t* perm;
+  const int32_t* super;
+  const int32_t* lpi;
+  const int32_t* lpx;
+  const int32_t* ls;
+  int32_t nsuper;
+};
+
+Layout LayoutOf(const cholmod_factor* L) {
+  return {static_cast<const int32_t*>(L->Perm), static_cast<const int32_t*>(L->super),
+          static_cast<const int32_t*>(L->pi),   static_cast<const int32_t*>(L->px),
+          static_cast<const int32_t*>(L->s),    static_cast<int32_t>(L->nsuper)};
+}
+
 // L L^T x = b on p row-major right-hand sides (as ForwardSolve and BackwardSolve).
 template <int P>
 void Substitute(int32_t p, int32_t nsuper, const int32_t* super, const int32_t* lpi,
@@ -128,13 +146,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
   if (!symbolic.ok()) return symbolic.status();
   symbolic_ = *symbolic;
   flops_ = (*common_)->fl;
-  const cholmod_factor* L = symbolic_;
-  const int32_t* perm = static_cast<const int32_t*>(L->Perm);
-  const int32_t* super = static_cast<const int32_t*>(L->super);
-  const int32_t* lpi = static_cast<const int32_t*>(L->pi);
-  const int32_t* lpx = static_cast<const int32_t*>(L->px);
-  const int32_t* ls = static_cast<const int32_t*>(L->s);
-  const int32_t nsuper = static_cast<int32_t>(L->nsuper);
+  const auto [perm, super, lpi, lpx, ls, nsuper] = LayoutOf(symbolic_);
 
   // C = P A P^T, lower triangle, by counting sort on the permuted column.
   pinv_.resize(n);
@@ -170,7 +182,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
   head_.assign(nsuper, -1);
   next_.assign(nsuper, -1);
   lpos_.assign(nsuper, 0);
-  lx_.resize(L->xsize);
+  lx_.resize(symbolic_->xsize);
   for (int32_t s = 0; s < nsuper; ++s) {
     const int32_t k1 = super[s];
     const int32_t k2 = super[s + 1];
@@ -287,13 +299,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
 void LocalCholesky::SolveInPlace(double* X, int32_t p) {
   const int32_t n = n_;
   if (n == 0 || p == 0) return;
-  const cholmod_factor* L = symbolic_;
-  const int32_t* perm = static_cast<const int32_t*>(L->Perm);
-  const int32_t* super = static_cast<const int32_t*>(L->super);
-  const int32_t* lpi = static_cast<const int32_t*>(L->pi);
-  const int32_t* lpx = static_cast<const int32_t*>(L->px);
-  const int32_t* ls = static_cast<const int32_t*>(L->s);
-  const int32_t nsuper = static_cast<int32_t>(L->nsuper);
+  const auto [perm, super, lpi, lpx, ls, nsuper] = LayoutOf(symbolic_);
   // Permuted right-hand sides, row-major (row k at xp + k p): the updates of a supernode touch
   // whole rows, one cache line each for small p.
   for (int32_t c0 = 0; c0 < p; c0 += 64) {
