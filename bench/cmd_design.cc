@@ -26,12 +26,12 @@
 #include "bench/cmd_subspace.h"
 #include "bench/commands.h"
 #include "core/linalg/sparse_cholesky.h"
+#include "core/linalg/supernodal_cholesky.h"
 #include "core/operators/field_operator.h"
 #include "core/operators/reference_solvers.h"
 #include "core/subspace/design_session.h"
 #include "core/subspace/projection.h"
 #include "core/subspace/reduced_system.h"
-#include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace::bench {
 namespace {

@@ -172,7 +172,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   const int32_t dpf = op.type.dofs_per_face();
   const int64_t k = op.dofs();
   const int32_t num_regions = static_cast<int32_t>((static_cast<int64_t>(d) + m - 1) / m);
-  auto poll = [&ticker] { return ticker.Poll(); };
+  const CancelToken cancel = ticker.token();
 
   Basis basis;
   basis.type = op.type;
@@ -188,7 +188,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
       AllocateSamplesPerComponent(mesh, num_regions);
   if (!per_component.ok()) return per_component.status();
   absl::StatusOr<SamplingResult> sampling =
-      FarthestPointSampling(mesh, *graph, *per_component, params.seed, poll);
+      FarthestPointSampling(mesh, *graph, *per_component, params.seed, cancel);
   if (!sampling.ok()) return sampling.status();
   basis.sample_faces = std::move(sampling->samples);
   basis.coverage_radius = sampling->coverage_radius;
@@ -203,7 +203,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   region_options.radius = basis.radius;
   region_options.min_faces = (m + dpf - 1) / dpf;
   absl::StatusOr<std::vector<std::vector<int32_t>>> regions =
-      GrowRegions(*graph, basis.sample_faces, region_options, poll);
+      GrowRegions(*graph, basis.sample_faces, region_options, cancel);
   if (!regions.ok()) return regions.status();
   graph = DualGraph();  // free it
   auto fields_of = [&](int32_t r) { return r + 1 < num_regions ? m : d - m * (num_regions - 1); };
@@ -229,7 +229,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     }
     max_region = std::max<int64_t>(max_region, faces.size());
     sum_region += faces.size();
-    if ((r & 63) == 0 && ticker.Poll()) return ProgressTicker::CancelledError();
+    if ((r & 63) == 0 && cancel.Check()) return ProgressTicker::CancelledError();
   }
   int64_t nnz = 0;
   for (int32_t f = 0; f < nf; ++f) {
@@ -273,7 +273,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   HodgeFactorData hodge;
   if (op.type.kind == FieldKind::kVector && options.use_factored_vector_operator) {
     hodge = basis_internal::BuildHodgeFactorData(mesh);
-    absl::StatusOr<bool> matches = basis_internal::HodgeFactorMatches(mesh, op, hodge, poll);
+    absl::StatusOr<bool> matches = basis_internal::HodgeFactorMatches(mesh, op, hodge, cancel);
     if (!matches.ok()) return matches.status();
     basis.stats.hodge_factor_used = *matches;
   }
@@ -319,7 +319,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
         local = std::make_unique<RestrictedLocalOperator>(op, inv_sqrt_mass, faces,
                                                           0.01 * tau_scale * lambda, ws);
       }
-      res = SolveLocalEigenproblem(*local, eo, poll);
+      res = SolveLocalEigenproblem(*local, eo, cancel);
       if (res.ok() || !absl::IsFailedPrecondition(res.status())) break;
     }
     if (!res.ok()) {
@@ -367,7 +367,7 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
             return;
           }
           ticker.SetFraction(static_cast<double>(done.fetch_add(1) + 1) / num_regions);
-          if (ticker.Poll()) {
+          if (cancel.Check()) {
             failed.store(true, std::memory_order_relaxed);
             return;
           }

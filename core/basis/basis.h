@@ -1,7 +1,6 @@
 #ifndef FIELDSPACE_CORE_BASIS_BASIS_H_
 #define FIELDSPACE_CORE_BASIS_BASIS_H_
 
-#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <optional>
@@ -11,6 +10,7 @@
 #include "Eigen/Core"
 #include "Eigen/SparseCore"
 #include "absl/status/statusor.h"
+#include "core/common/cancel.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_operator.h"
 
@@ -36,7 +36,7 @@ struct BasisOptions {
   // Called from any thread, at least every 100 ms while building; fraction in [0, 1].
   std::function<void(BasisPhase phase, double fraction)> progress;
   // Checked at least every 100 ms; when it becomes true the build returns Cancelled.
-  const std::atomic<bool>* cancel = nullptr;
+  const CancelFlag* cancel = nullptr;
   // Refuse (ResourceExhausted) when U would need more than this many bytes: estimated as
   // sigma * k nonzeros before building, exact after the regions are known (8 bytes a nonzero).
   int64_t max_basis_bytes = int64_t{16} << 30;

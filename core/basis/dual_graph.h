@@ -9,6 +9,7 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
+#include "core/common/cancel.h"
 #include "core/mesh/triangle_mesh.h"
 
 namespace fieldspace {
@@ -52,11 +53,10 @@ class DijkstraScratch {
   // The nodes within graph distance `radius` of node `source` (inclusive), in order of
   // increasing distance, each with its distance. If fewer than `min_nodes` nodes are that close,
   // the growth continues past the radius until `min_nodes` nodes (or the whole component) are
-  // reached. `poll` is called every few thousand steps; when it returns true the growth stops
+  // reached. `cancel` is checked every few thousand steps; once it is set the growth stops
   // early and the function returns false.
-  template <typename Poll>
   bool Grow(const DualGraph& graph, int32_t source, double radius, int32_t min_nodes,
-            std::vector<std::pair<int32_t, double>>* visited, Poll&& poll);
+            std::vector<std::pair<int32_t, double>>* visited, const CancelToken& cancel);
 
   // Restores all distances to +infinity.
   void Reset() {
@@ -70,9 +70,10 @@ class DijkstraScratch {
   std::vector<std::pair<double, int32_t>> heap_;  // min-heap via std::greater
 };
 
-template <typename Poll>
-bool DijkstraScratch::Grow(const DualGraph& graph, int32_t source, double radius, int32_t min_nodes,
-                           std::vector<std::pair<int32_t, double>>* visited, Poll&& poll) {
+inline bool DijkstraScratch::Grow(const DualGraph& graph, int32_t source, double radius,
+                                  int32_t min_nodes,
+                                  std::vector<std::pair<int32_t, double>>* visited,
+                                  const CancelToken& cancel) {
   visited->clear();
   heap_.clear();
   dist_[source] = 0.0;
@@ -101,7 +102,7 @@ bool DijkstraScratch::Grow(const DualGraph& graph, int32_t source, double radius
         std::push_heap(heap_.begin(), heap_.end(), greater);
       }
     }
-    if ((++steps & 4095) == 0 && poll()) {
+    if ((++steps & 4095) == 0 && cancel.Check()) {
       completed = false;
       break;
     }

@@ -1,15 +1,14 @@
 #include "core/basis/local_eigensolver.h"
 
-#include <Spectra/SymEigsShiftSolver.h>
-
 #include <algorithm>
 #include <cmath>
-#include <exception>
 
 #include "Eigen/Cholesky"
 #include "Eigen/Eigenvalues"
 #include "Eigen/QR"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/linalg/lanczos.h"
 
 namespace fieldspace::basis_internal {
 namespace {
@@ -56,58 +55,47 @@ absl::StatusOr<LocalEigenResult> SolveDense(LocalOperator& op, int32_t m) {
   return result;
 }
 
-// Spectra adapter: the shift-inverse of the local operator as a Spectra shift-solve operation.
-class ShiftInverseOp {
- public:
-  using Scalar = double;
-  explicit ShiftInverseOp(LocalOperator& op) : op_(op), x_(op.size(), 1) {}
-  Eigen::Index rows() const { return op_.size(); }
-  Eigen::Index cols() const { return op_.size(); }
-  void set_shift(double) {}  // the factorization is of S_bar + tau I, i.e. sigma = -tau
-  void perform_op(const double* x_in, double* y_out) const {
-    x_ = Eigen::Map<const Eigen::VectorXd>(x_in, op_.size());
-    op_.ApplyShiftInverse(x_, &y_);
-    Eigen::Map<Eigen::VectorXd>(y_out, op_.size()) = y_.col(0);
-  }
-
- private:
-  LocalOperator& op_;
-  mutable Eigen::MatrixXd x_, y_;
-};
-
 absl::StatusOr<LocalEigenResult> SolveLanczos(LocalOperator& op, int32_t m, double tolerance) {
   const int32_t n = op.size();
-  ShiftInverseOp sop(op);
-  const int32_t ncv = std::min(n, std::max(2 * m + 1, 20));
-  try {
-    Spectra::SymEigsShiftSolver<ShiftInverseOp> eigs(sop, m, ncv, -op.shift());
-    eigs.init();
-    eigs.compute(Spectra::SortRule::LargestMagn, 1000, std::min(1e-10, tolerance * tolerance),
-                 Spectra::SortRule::SmallestAlge);
-    if (eigs.info() != Spectra::CompInfo::Successful) {
-      return absl::InternalError("local eigenproblem: Spectra's Lanczos did not converge");
-    }
-    LocalEigenResult result;
-    const Eigen::MatrixXd X = Orthonormalize(eigs.eigenvectors());
-    Eigen::MatrixXd SX;
-    op.ApplyStiffness(X, &SX);
-    Eigen::MatrixXd H = X.transpose() * SX;
-    H = 0.5 * (H + H.transpose()).eval();
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(H);
-    result.values = es.eigenvalues();
-    result.vectors = X * es.eigenvectors();
-    result.lanczos_fallback = true;
-    return result;
-  } catch (const std::exception& e) {
-    return absl::InternalError(absl::StrFormat("local eigenproblem: Spectra failed: %s", e.what()));
+  Eigen::MatrixXd x(n, 1), y;
+  // The factorization is of S_bar + tau I, i.e. sigma = -tau.
+  auto inverse = [&](const double* x_in, double* y_out) {
+    x = Eigen::Map<const Eigen::VectorXd>(x_in, n);
+    op.ApplyShiftInverse(x, &y);
+    Eigen::Map<Eigen::VectorXd>(y_out, n) = y.col(0);
+    return absl::OkStatus();
+  };
+  LanczosOptions lanczos;
+  lanczos.count = m;
+  lanczos.subspace_size = std::min(n, std::max(2 * m + 1, 20));
+  lanczos.max_iterations = 1000;
+  lanczos.tolerance = std::min(1e-10, tolerance * tolerance);
+  lanczos.context = "local eigenproblem";
+  absl::StatusOr<LanczosResult> run = ShiftInvertEigenpairs(n, inverse, -op.shift(), lanczos);
+  if (absl::IsResourceExhausted(run.status())) {
+    // This is the fallback: when it does not converge either, nothing did.
+    return absl::InternalError(absl::StrCat(
+        "local eigenproblem: Spectra's Lanczos did not converge: ", run.status().message()));
   }
+  if (!run.ok()) return run.status();
+  LocalEigenResult result;
+  const Eigen::MatrixXd X = Orthonormalize(run->vectors);
+  Eigen::MatrixXd SX;
+  op.ApplyStiffness(X, &SX);
+  Eigen::MatrixXd H = X.transpose() * SX;
+  H = 0.5 * (H + H.transpose()).eval();
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(H);
+  result.values = es.eigenvalues();
+  result.vectors = X * es.eigenvectors();
+  result.lanczos_fallback = true;
+  return result;
 }
 
 }  // namespace
 
 absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
                                                         const LocalEigenOptions& options,
-                                                        const std::function<bool()>& poll) {
+                                                        const CancelToken& cancel) {
   const int32_t n = op.size();
   const int32_t m = options.count;
   if (m < 1 || m > n) {
@@ -117,7 +105,7 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   const int32_t p = m + std::max(0, options.guard);
   if (n <= std::max(options.dense_max_size, 3 * p)) return SolveDense(op, m);
 
-  absl::Status prepared = op.PrepareShiftInverse(poll);
+  absl::Status prepared = op.PrepareShiftInverse(cancel);
   if (!prepared.ok()) return prepared;
   const double tau = op.shift();
 
@@ -145,7 +133,7 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   LocalEigenResult result;
   bool verified = false;  // SX recomputed exactly since the last update
   for (int32_t it = 1; it <= options.max_iterations; ++it) {
-    if (poll && poll()) return absl::CancelledError("basis construction cancelled");
+    if (cancel.Check()) return absl::CancelledError("basis construction cancelled");
     R = SX - X * theta.asDiagonal();
     auto converged = [&] {
       for (int32_t i = 0; i < m; ++i) {
@@ -225,7 +213,7 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
     if (!solved) break;  // hand over to Lanczos
     verified = false;
   }
-  if (poll && poll()) return absl::CancelledError("basis construction cancelled");
+  if (cancel.Check()) return absl::CancelledError("basis construction cancelled");
   return SolveLanczos(op, m, options.tolerance);
 }
 

@@ -2,11 +2,11 @@
 #define FIELDSPACE_CORE_BASIS_LOCAL_EIGENSOLVER_H_
 
 #include <cstdint>
-#include <functional>
 
 #include "Eigen/Core"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "core/common/cancel.h"
 
 namespace fieldspace::basis_internal {
 
@@ -21,7 +21,7 @@ class LocalOperator {
   virtual void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) = 0;
   // Prepares ApplyShiftInverse (typically a sparse Cholesky factorization); called once, and
   // only for problems too big for the dense path.
-  virtual absl::Status PrepareShiftInverse(const std::function<bool()>& poll) = 0;
+  virtual absl::Status PrepareShiftInverse(const CancelToken& cancel) = 0;
   // Y = (S_bar + tau I)^-1 X (up to rounding) for X n x p, tau = shift() > 0.
   virtual void ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) = 0;
   // Y = (S_bar + tau I)^-1 X and SY = S_bar Y. Operators that get S_bar Y as a by-product
@@ -63,10 +63,10 @@ struct LocalEigenResult {
 // LOBPCG (block size m + guard) preconditioned with the exact shift-inverse (S_bar + tau I)^-1,
 // which converges in ~8-12 iterations to 1e-5 on mesh regions; if it has not converged within
 // max_iterations, Spectra's shift-invert Lanczos with the same inverse. Errors: Cancelled when
-// `poll` returns true, errors of PrepareShiftInverse, Internal when nothing converged.
+// `cancel` is set, errors of PrepareShiftInverse, Internal when nothing converged.
 absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
                                                         const LocalEigenOptions& options,
-                                                        const std::function<bool()>& poll);
+                                                        const CancelToken& cancel);
 
 }  // namespace fieldspace::basis_internal
 

@@ -131,7 +131,7 @@ void RestrictedLocalOperator::ApplyStiffness(const Eigen::MatrixXd& X, Eigen::Ma
   *Y = yr;
 }
 
-absl::Status RestrictedLocalOperator::PrepareShiftInverse(const std::function<bool()>& poll) {
+absl::Status RestrictedLocalOperator::PrepareShiftInverse(const CancelToken& cancel) {
   std::vector<int32_t> cols, rows;
   std::vector<double> vals;
   cols.reserve(inner_.size() / 2 + n_);
@@ -148,7 +148,7 @@ absl::Status RestrictedLocalOperator::PrepareShiftInverse(const std::function<bo
   if (ws_.marker.size() < static_cast<size_t>(n_)) ws_.marker.resize(n_, -1);
   UpperCsc A;
   AssembleUpper(n_, cols, rows, vals, tau_, ws_.marker, &A);
-  return ws_.cholesky.Factorize(A, poll);
+  return ws_.cholesky.Factorize(A, cancel);
 }
 
 void RestrictedLocalOperator::ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) {
@@ -179,8 +179,7 @@ HodgeFactorData BuildHodgeFactorData(const TriangleMesh& mesh) {
 }
 
 absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOperator& op,
-                                        const HodgeFactorData& data,
-                                        const std::function<bool()>& poll) {
+                                        const HodgeFactorData& data, const CancelToken& cancel) {
   const int32_t nf = mesh.num_faces();
   const int64_t k = 2 * static_cast<int64_t>(nf);
   const Eigen::SparseMatrix<double>& S = op.stiffness;
@@ -200,7 +199,7 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, k, 16384),
                       [&](const tbb::blocked_range<int64_t>& r) {
                         if (cancelled.load(std::memory_order_relaxed)) return;
-                        if (poll && poll()) cancelled.store(true);
+                        if (cancel.Check()) cancelled.store(true);
                         for (int64_t j = r.begin(); j != r.end(); ++j) {
                           double s = 0.0, a = 0.0;
                           for (Eigen::SparseMatrix<double>::InnerIterator it(S, j); it; ++it) {
@@ -211,13 +210,13 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
                           scale[j] = a;
                         }
                       });
-    if (cancelled.load() || (poll && poll())) {
+    if (cancelled.load() || cancel.Check()) {
       return absl::CancelledError("basis construction cancelled");
     }
     // z = B^T x (vertex part, edge part), then y2 = B z.
     std::vector<double> zv(mesh.num_vertices(), 0.0), ze(mesh.num_edges(), 0.0);
     for (int32_t f = 0; f < nf; ++f) {
-      if ((f & 0xffff) == 0 && poll && poll()) {
+      if ((f & 0xffff) == 0 && cancel.Check()) {
         return absl::CancelledError("basis construction cancelled");
       }
       for (int kk = 0; kk < 3; ++kk) {
@@ -232,7 +231,7 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
     std::atomic<bool> mismatch{false};
     tbb::parallel_for(tbb::blocked_range<int32_t>(0, nf, 8192),
                       [&](const tbb::blocked_range<int32_t>& r) {
-                        if (poll) poll();  // progress only; cancellation checked below
+                        cancel.Check();  // progress only; cancellation checked below
                         for (int32_t f = r.begin(); f != r.end(); ++f) {
                           double y2[2] = {0.0, 0.0};
                           for (int kk = 0; kk < 3; ++kk) {
@@ -375,7 +374,7 @@ void HodgeLocalOperator::ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixX
   ApplyB(z_, Y, /*subtract=*/false);
 }
 
-absl::Status HodgeLocalOperator::PrepareShiftInverse(const std::function<bool()>& poll) {
+absl::Status HodgeLocalOperator::PrepareShiftInverse(const CancelToken& cancel) {
   // K = tau I + B_D^T B_D from each face's 2 x 6 block: vertex-vertex and edge-edge products
   // always, vertex-edge products only for region-boundary edges (elsewhere the two faces of the
   // edge cancel exactly: the discrete gradients and co-gradients are orthogonal), and never for
@@ -412,7 +411,7 @@ absl::Status HodgeLocalOperator::PrepareShiftInverse(const std::function<bool()>
   if (ws_.marker.size() < static_cast<size_t>(num_nodes_)) ws_.marker.resize(num_nodes_, -1);
   UpperCsc K;
   AssembleUpper(num_nodes_, cols, rows, vals, tau_, ws_.marker, &K);
-  return ws_.cholesky.Factorize(K, poll);
+  return ws_.cholesky.Factorize(K, cancel);
 }
 
 void HodgeLocalOperator::ApplyShiftInverseAndStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y,

@@ -2,13 +2,13 @@
 #define FIELDSPACE_CORE_BASIS_LOCAL_PROBLEM_H_
 
 #include <cstdint>
-#include <functional>
 #include <vector>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
-#include "core/basis/local_cholesky.h"
 #include "core/basis/local_eigensolver.h"
+#include "core/common/cancel.h"
+#include "core/linalg/local_cholesky.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_operator.h"
 
@@ -45,7 +45,7 @@ class RestrictedLocalOperator final : public LocalOperator {
 
   int32_t size() const override { return n_; }
   void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;
-  absl::Status PrepareShiftInverse(const std::function<bool()>& poll) override;
+  absl::Status PrepareShiftInverse(const CancelToken& cancel) override;
   void ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;
   double shift() const override { return tau_; }
 
@@ -71,8 +71,7 @@ HodgeFactorData BuildHodgeFactorData(const TriangleMesh& mesh);
 // Whether op.stiffness equals B B^T (to rounding): tested on a random vector, entrywise
 // relative to |S| |x|. Only then may the Woodbury operator below stand in for S_bar.
 absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOperator& op,
-                                        const HodgeFactorData& data,
-                                        const std::function<bool()>& poll);
+                                        const HodgeFactorData& data, const CancelToken& cancel);
 
 // The vector local problem through the factor: S_bar = B_D B_D^T, B_D = V^T B restricted to the
 // region's rows (n x N, N the region's vertices plus edges). Its shift-inverse by Woodbury,
@@ -88,7 +87,7 @@ class HodgeLocalOperator final : public LocalOperator {
 
   int32_t size() const override { return n_; }
   void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;
-  absl::Status PrepareShiftInverse(const std::function<bool()>& poll) override;
+  absl::Status PrepareShiftInverse(const CancelToken& cancel) override;
   void ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;
   // With z = K^-1 B_D^T x: (S_bar + tau I)^-1 x = (x - B_D z) / tau and, since
   // B_D^T (x - B_D z) / tau = z, S_bar (S_bar + tau I)^-1 x = B_D z: one pass over B_D each way.

@@ -13,7 +13,7 @@ namespace fieldspace {
 absl::StatusOr<std::vector<std::vector<int32_t>>> GrowRegions(const DualGraph& graph,
                                                               const std::vector<int32_t>& samples,
                                                               const RegionOptions& options,
-                                                              const std::function<bool()>& poll) {
+                                                              const CancelToken& cancel) {
   const int32_t nr = static_cast<int32_t>(samples.size());
   std::vector<std::vector<int32_t>> regions(nr);
   struct Scratch {
@@ -36,10 +36,9 @@ absl::StatusOr<std::vector<std::vector<int32_t>>> GrowRegions(const DualGraph& g
         for (int32_t oi = r.begin(); oi != r.end(); ++oi) {
           const int32_t i = order[oi];
           if (cancelled.load(std::memory_order_relaxed)) return;
-          const bool done =
-              s.dijkstra.Grow(graph, graph.face_node[samples[i]], options.radius, options.min_faces,
-                              &s.visited, [&] { return poll && poll(); });
-          if (!done || (poll && poll())) {
+          const bool done = s.dijkstra.Grow(graph, graph.face_node[samples[i]], options.radius,
+                                            options.min_faces, &s.visited, cancel);
+          if (!done || cancel.Check()) {
             cancelled.store(true, std::memory_order_relaxed);
             return;
           }

@@ -2,11 +2,11 @@
 #define FIELDSPACE_CORE_BASIS_REGIONS_H_
 
 #include <cstdint>
-#include <functional>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "core/basis/dual_graph.h"
+#include "core/common/cancel.h"
 
 namespace fieldspace {
 
@@ -18,11 +18,11 @@ struct RegionOptions {
 // The support region of each sample (paper section 4): the faces within dual-graph distance
 // `radius` of the sample (Dijkstra truncated at r), as ascending face indices. Regions are grown
 // in parallel (run inside the caller's task arena) with per-thread scratch, O(region size) each.
-// `poll` is called regularly from worker threads; true aborts with Cancelled.
+// `cancel` is checked regularly from worker threads; Cancelled once it is set.
 absl::StatusOr<std::vector<std::vector<int32_t>>> GrowRegions(const DualGraph& graph,
                                                               const std::vector<int32_t>& samples,
                                                               const RegionOptions& options,
-                                                              const std::function<bool()>& poll);
+                                                              const CancelToken& cancel);
 
 }  // namespace fieldspace
 

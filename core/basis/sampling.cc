@@ -95,8 +95,7 @@ absl::StatusOr<std::vector<int32_t>> AllocateSamplesPerComponent(const TriangleM
 absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
                                                      const DualGraph& graph,
                                                      const std::vector<int32_t>& per_component,
-                                                     uint64_t seed,
-                                                     const std::function<bool()>& poll) {
+                                                     uint64_t seed, const CancelToken& cancel) {
   const int32_t nf = mesh.num_faces();
   const int32_t nc = mesh.num_components();
   if (static_cast<int32_t>(per_component.size()) != nc) {
@@ -168,7 +167,7 @@ absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
           }
         }
       }
-      if ((++steps & 4095) == 0 && poll && poll()) {
+      if ((++steps & 4095) == 0 && cancel.Check()) {
         cancelled = true;
         return;
       }

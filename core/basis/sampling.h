@@ -2,11 +2,11 @@
 #define FIELDSPACE_CORE_BASIS_SAMPLING_H_
 
 #include <cstdint>
-#include <functional>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "core/basis/dual_graph.h"
+#include "core/common/cancel.h"
 #include "core/mesh/triangle_mesh.h"
 
 namespace fieldspace {
@@ -30,13 +30,12 @@ struct SamplingResult {
 // a face chosen by `seed`, every next one the face farthest (in dual-graph distance) from the
 // samples so far (ties: the larger face index). Incremental: after each new sample a Dijkstra
 // from it relaxes only the faces whose distance decreases, and a bucket queue over distances
-// yields the farthest face without scanning all faces. `poll` is called every few thousand
-// steps; true aborts with Cancelled.
+// yields the farthest face without scanning all faces. `cancel` is checked every few
+// thousand steps; Cancelled once it is set.
 absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
                                                      const DualGraph& graph,
                                                      const std::vector<int32_t>& per_component,
-                                                     uint64_t seed,
-                                                     const std::function<bool()>& poll);
+                                                     uint64_t seed, const CancelToken& cancel);
 
 }  // namespace fieldspace
 

@@ -2,17 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
-#include <exception>
-#include <stdexcept>
 #include <utility>
 #include <vector>
 
 #include "Eigen/Eigenvalues"
 #include "Eigen/QR"
-#include "Spectra/SymEigsShiftSolver.h"
-#include "Spectra/SymEigsSolver.h"
 #include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
+#include "core/linalg/lanczos.h"
 #include "core/linalg/sparse_checks.h"
 
 namespace fieldspace {
@@ -23,85 +20,46 @@ using SpMat = Eigen::SparseMatrix<double>;
 // Problems beyond this size are never solved densely (k^2 doubles).
 constexpr int64_t kDenseHardLimit = 8192;
 
-// Carries a Status out of Spectra's callback, which cannot return one.
-class StatusException : public std::exception {
- public:
-  explicit StatusException(absl::Status status) : status_(std::move(status)) {}
-  const char* what() const noexcept override { return "status exception"; }
-  const absl::Status& status() const { return status_; }
-
- private:
-  absl::Status status_;
-};
-
 // y = (A - sigma I)^-1 x with A = M^-1/2 S M^-1/2, i.e. y = M^1/2 (S - sigma M)^-1 M^1/2 x: the
-// operator Spectra's SymEigsShiftSolver expects (its "shift-solve" interface).
+// shift-inverted operator that Lanczos runs on. x and y: n values each.
 class ShiftInvertOp {
  public:
-  using Scalar = double;
-
-  ShiftInvertOp(const SparseCholesky& factor, const Eigen::VectorXd& sqrt_mass, double sigma)
-      : factor_(factor), sqrt_mass_(sqrt_mass), sigma_(sigma) {}
+  ShiftInvertOp(const SparseCholesky& factor, const Eigen::VectorXd& sqrt_mass)
+      : factor_(factor), sqrt_mass_(sqrt_mass) {}
 
   Eigen::Index rows() const { return sqrt_mass_.size(); }
 
-  // The factorization was built for sigma_; Spectra passes the same value back.
-  void set_shift(const Scalar& sigma) {
-    if (sigma != sigma_) {
-      throw StatusException(absl::InternalError("eigensolver: shift mismatch"));
-    }
-  }
-
-  void perform_op(const Scalar* x_in, Scalar* y_out) const {
+  absl::Status Apply(const double* x_in, double* y_out) const {
     Eigen::Map<const Eigen::VectorXd> x(x_in, rows());
     Eigen::Map<Eigen::VectorXd> y(y_out, rows());
     const Eigen::VectorXd rhs = sqrt_mass_.cwiseProduct(x);
     absl::StatusOr<Eigen::VectorXd> solved = factor_.Solve(rhs);
-    if (!solved.ok()) throw StatusException(solved.status());
+    if (!solved.ok()) return solved.status();
     y = sqrt_mass_.cwiseProduct(*solved);
+    return absl::OkStatus();
   }
 
  private:
   const SparseCholesky& factor_;
   const Eigen::VectorXd& sqrt_mass_;
-  const double sigma_;
-};
-
-// P T P with P = I - Y Y^T (Y orthonormal): T restricted to the complement of the pairs found,
-// whose largest eigenvalues are the ones the first Lanczos run missed.
-class DeflatedOp {
- public:
-  using Scalar = double;
-
-  DeflatedOp(const ShiftInvertOp& op, const Eigen::MatrixXd& Y) : op_(op), Y_(Y) {}
-
-  Eigen::Index rows() const { return op_.rows(); }
-
-  void perform_op(const Scalar* x_in, Scalar* y_out) const {
-    Eigen::Map<const Eigen::VectorXd> x(x_in, rows());
-    Eigen::Map<Eigen::VectorXd> y(y_out, rows());
-    const Eigen::VectorXd projected = x - Y_ * (Y_.transpose() * x);
-    op_.perform_op(projected.data(), y_out);
-    y -= Y_ * (Y_.transpose() * y);
-  }
-
- private:
-  const ShiftInvertOp& op_;
-  const Eigen::MatrixXd& Y_;
 };
 
 // Applies `op` to every column of X.
-Eigen::MatrixXd ApplyColumns(const ShiftInvertOp& op, const Eigen::MatrixXd& X) {
+absl::StatusOr<Eigen::MatrixXd> ApplyColumns(const ShiftInvertOp& op, const Eigen::MatrixXd& X) {
   Eigen::MatrixXd Y(X.rows(), X.cols());
-  for (Eigen::Index j = 0; j < X.cols(); ++j) op.perform_op(X.col(j).data(), Y.col(j).data());
+  for (Eigen::Index j = 0; j < X.cols(); ++j) {
+    RETURN_IF_ERROR(op.Apply(X.col(j).data(), Y.col(j).data()));
+  }
   return Y;
 }
 
 // Looks for eigenpairs of T = (A - sigma I)^-1 that the first run missed: any eigenvalue of the
-// deflated operator above the smallest accepted nu (i.e. any lambda below the K-th) is merged
-// into (Y, nu) by Rayleigh-Ritz on span[Y, Z], keeping the K largest nu. Throws StatusException.
-int32_t RecoverMissedPairs(const ShiftInvertOp& op, const EigenOptions& options, Eigen::MatrixXd* Y,
-                           Eigen::VectorXd* nu, int64_t* operations) {
+// deflated operator P T P, P = I - Y Y^T (T restricted to the complement of the pairs found),
+// above the smallest accepted nu (i.e. any lambda below the K-th) is merged into (Y, nu) by
+// Rayleigh-Ritz on span[Y, Z], keeping the K largest nu. Returns the number of pairs recovered.
+absl::StatusOr<int32_t> RecoverMissedPairs(const ShiftInvertOp& op, const EigenOptions& options,
+                                           Eigen::MatrixXd* Y, Eigen::VectorXd* nu,
+                                           int64_t* operations) {
   constexpr int kMaxRounds = 6;
   const int64_t k = op.rows();
   const int64_t K = Y->cols();
@@ -114,19 +72,34 @@ int32_t RecoverMissedPairs(const ShiftInvertOp& op, const EigenOptions& options,
     if (m < 1) break;
     const int64_t ncv = std::min<int64_t>(k - K, 20);
     if (ncv <= m) break;
-    DeflatedOp deflated(op, *Y);
-    Spectra::SymEigsSolver<DeflatedOp> solver(deflated, m, ncv);
-    solver.init();
-    solver.compute(Spectra::SortRule::LargestAlge, options.max_iterations,
-                   std::max(options.tolerance, 1e-6), Spectra::SortRule::LargestAlge);
-    *operations += solver.num_operations();
-    // Best effort: an unconverged check leaves the (converged) first result as it is.
-    if (solver.info() != Spectra::CompInfo::Successful) break;
+    const Eigen::MatrixXd& Yd = *Y;
+    absl::Status op_status;
+    auto deflated = [&](const double* x_in, double* y_out) {
+      Eigen::Map<const Eigen::VectorXd> x(x_in, k);
+      Eigen::Map<Eigen::VectorXd> y(y_out, k);
+      const Eigen::VectorXd projected = x - Yd * (Yd.transpose() * x);
+      op_status = op.Apply(projected.data(), y_out);
+      if (op_status.ok()) y -= Yd * (Yd.transpose() * y);
+      return op_status;
+    };
+    LanczosOptions lanczos;
+    lanczos.count = m;
+    lanczos.subspace_size = ncv;
+    lanczos.max_iterations = options.max_iterations;
+    lanczos.tolerance = std::max(options.tolerance, 1e-6);
+    lanczos.context = "eigensolver";
+    absl::StatusOr<LanczosResult> run = LargestEigenpairs(k, deflated, lanczos);
+    if (!run.ok()) {
+      if (!op_status.ok()) return op_status;
+      // Best effort: an unconverged check leaves the (converged) first result as it is.
+      break;
+    }
+    *operations += run->operations;
     // Missing values equal to the K-th one are interchangeable with it: only strictly smaller
     // lambda (larger nu, beyond the solver's accuracy) count as missed.
     const double threshold = nu->minCoeff() * (1.0 + std::max(1e-8, 100.0 * options.tolerance));
-    const Eigen::VectorXd found = solver.eigenvalues();
-    const Eigen::MatrixXd Z = solver.eigenvectors();
+    const Eigen::VectorXd& found = run->values;
+    const Eigen::MatrixXd& Z = run->vectors;
     std::vector<Eigen::Index> keep;
     for (Eigen::Index i = 0; i < found.size(); ++i) {
       if (found[i] > threshold) keep.push_back(i);
@@ -139,7 +112,7 @@ int32_t RecoverMissedPairs(const ShiftInvertOp& op, const EigenOptions& options,
     // Re-orthonormalize (Z is orthogonal to Y only up to the solver tolerance).
     Eigen::HouseholderQR<Eigen::MatrixXd> qr(W);
     W = qr.householderQ() * Eigen::MatrixXd::Identity(W.rows(), W.cols());
-    const Eigen::MatrixXd TW = ApplyColumns(op, W);
+    ASSIGN_OR_RETURN(const Eigen::MatrixXd TW, ApplyColumns(op, W));
     *operations += W.cols();
     Eigen::MatrixXd H = W.transpose() * TW;
     H = 0.5 * (H + H.transpose()).eval();
@@ -255,43 +228,31 @@ absl::StatusOr<EigenResult> LowestEigenpairs(const SpMat& S, const Eigen::Vector
       options.subspace_size != 0
           ? options.subspace_size
           : std::min<int64_t>(k, std::max<int64_t>(2 * options.count + 1, options.count + 20));
-  ShiftInvertOp op(*factor, sqrt_mass, sigma);
+  ShiftInvertOp op(*factor, sqrt_mass);
+  LanczosOptions lanczos;
+  lanczos.count = options.count;
+  lanczos.subspace_size = ncv;
+  lanczos.max_iterations = options.max_iterations;
+  lanczos.tolerance = options.tolerance;
+  lanczos.context = "eigensolver";
+  ASSIGN_OR_RETURN(
+      LanczosResult run,
+      ShiftInvertEigenpairs(
+          k, [&op](const double* x, double* y) { return op.Apply(x, y); }, sigma, lanczos));
   EigenResult result;
   result.shift = sigma;
-  try {
-    Spectra::SymEigsShiftSolver<ShiftInvertOp> solver(op, options.count, ncv, sigma);
-    solver.init();
-    solver.compute(Spectra::SortRule::LargestMagn, options.max_iterations, options.tolerance,
-                   Spectra::SortRule::SmallestAlge);
-    result.iterations = solver.num_iterations();
-    result.operations = solver.num_operations();
-    if (solver.info() == Spectra::CompInfo::NotConverging) {
-      return absl::ResourceExhaustedError(absl::StrFormat(
-          "eigensolver: %d of %d eigenpairs not converged after %d iterations (tolerance %g)",
-          options.count - solver.eigenvalues().size(), options.count, options.max_iterations,
-          options.tolerance));
-    }
-    if (solver.info() != Spectra::CompInfo::Successful) {
-      return absl::InternalError("eigensolver: Spectra reported a numerical failure");
-    }
-    // Ritz values of T = (A - sigma I)^-1 and its orthonormal eigenvectors; Spectra has already
-    // mapped the values back to lambda = sigma + 1 / nu.
-    const Eigen::VectorXd lambda = solver.eigenvalues();
-    if (lambda.size() != options.count) {
-      return absl::InternalError("eigensolver: Spectra returned the wrong number of eigenvalues");
-    }
-    Eigen::VectorXd nu = (lambda.array() - sigma).inverse().matrix();
-    Eigen::MatrixXd Y = solver.eigenvectors();
-    if (options.verify_multiplicities) {
-      result.recovered = RecoverMissedPairs(op, options, &Y, &nu, &result.operations);
-    }
-    result.values = (sigma + nu.array().inverse()).matrix();
-    if (options.compute_vectors) result.vectors = inv_sqrt_mass.asDiagonal() * Y;
-  } catch (const StatusException& e) {
-    return e.status();
-  } catch (const std::exception& e) {
-    return absl::InternalError(absl::StrFormat("eigensolver: Spectra failed: %s", e.what()));
+  result.iterations = run.iterations;
+  result.operations = run.operations;
+  // Ritz values of T = (A - sigma I)^-1 and its orthonormal eigenvectors (the adapter has already
+  // mapped the values back to lambda = sigma + 1 / nu).
+  Eigen::VectorXd nu = (run.values.array() - sigma).inverse().matrix();
+  Eigen::MatrixXd Y = std::move(run.vectors);
+  if (options.verify_multiplicities) {
+    ASSIGN_OR_RETURN(result.recovered,
+                     RecoverMissedPairs(op, options, &Y, &nu, &result.operations));
   }
+  result.values = (sigma + nu.array().inverse()).matrix();
+  if (options.compute_vectors) result.vectors = inv_sqrt_mass.asDiagonal() * Y;
   // Ascending lambda (the Rayleigh-Ritz merge returns them in nu order).
   std::vector<int> order(result.values.size());
   for (int i = 0; i < static_cast<int>(order.size()); ++i) order[i] = i;

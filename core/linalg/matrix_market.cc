@@ -17,6 +17,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/string_view.h"
+#include "core/linalg/sparse_checks.h"
 #include "tbb/parallel_for.h"
 
 namespace fieldspace {
@@ -100,12 +101,7 @@ absl::Status WriteCoordinate(const std::string& path, int64_t rows, int64_t cols
 
 absl::Status WriteMatrixMarket(const std::string& path, const SpMat& A_in) {
   SpMat compressed;
-  const SpMat* A = &A_in;
-  if (!A_in.isCompressed()) {
-    compressed = A_in;
-    compressed.makeCompressed();
-    A = &compressed;
-  }
+  const SpMat* A = &CompressedOrCopy(A_in, &compressed);
   std::vector<int64_t> column_start(A->cols() + 1);
   for (Eigen::Index j = 0; j <= A->cols(); ++j) column_start[j] = A->outerIndexPtr()[j];
   const int* inner = A->innerIndexPtr();

@@ -104,4 +104,12 @@ absl::Status CheckPositiveVector(const Eigen::VectorXd& v, Eigen::Index size,
   return absl::OkStatus();
 }
 
+const Eigen::SparseMatrix<double>& CompressedOrCopy(const Eigen::SparseMatrix<double>& A,
+                                                    Eigen::SparseMatrix<double>* storage) {
+  if (A.isCompressed()) return A;
+  *storage = A;
+  storage->makeCompressed();
+  return *storage;
+}
+
 }  // namespace fieldspace

@@ -26,6 +26,11 @@ absl::Status CheckSymmetric(const Eigen::SparseMatrix<double>& A, double relativ
 absl::Status CheckPositiveVector(const Eigen::VectorXd& v, Eigen::Index size,
                                  std::string_view what);
 
+// `A` itself when it is compressed (packed, as CHOLMOD and the Matrix Market writer read it), else
+// a compressed copy stored in `*storage`, which must outlive the returned reference.
+const Eigen::SparseMatrix<double>& CompressedOrCopy(const Eigen::SparseMatrix<double>& A,
+                                                    Eigen::SparseMatrix<double>* storage);
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_LINALG_SPARSE_CHECKS_H_

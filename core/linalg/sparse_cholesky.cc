@@ -9,60 +9,22 @@
 #include "absl/strings/str_format.h"
 #include "cholmod.h"
 #include "core/common/status_macros.h"
+#include "core/linalg/cholmod_util.h"
 #include "core/linalg/eigen_blas.h"
 #include "core/linalg/sparse_checks.h"
 
 namespace fieldspace {
 namespace {
 
+using linalg_internal::Analyze;
+using linalg_internal::CholmodCommon;
+using linalg_internal::StatusFromCholmod;
+using linalg_internal::UpperView;
 using SpMat = Eigen::SparseMatrix<double>;
 
-// A cholmod_common configured for silence: CHOLMOD reports through Common->status only.
-void StartCommon(cholmod_common* c) {
-  cholmod_start(c);
-  c->print = 0;
-  c->error_handler = nullptr;
-}
-
-// Non-owning CHOLMOD view of a compressed Eigen matrix (CHOLMOD_INT indices, as Eigen's default
-// StorageIndex). stype = 1: CHOLMOD reads only the upper triangle and treats A as symmetric.
+// Non-owning CHOLMOD view of a compressed Eigen matrix; CHOLMOD reads only its upper triangle.
 cholmod_sparse ViewOf(const SpMat& A) {
-  cholmod_sparse s;
-  std::memset(&s, 0, sizeof(s));
-  s.nrow = static_cast<size_t>(A.rows());
-  s.ncol = static_cast<size_t>(A.cols());
-  s.nzmax = static_cast<size_t>(A.nonZeros());
-  s.p = const_cast<int*>(A.outerIndexPtr());
-  s.i = const_cast<int*>(A.innerIndexPtr());
-  s.nz = nullptr;
-  s.x = const_cast<double*>(A.valuePtr());
-  s.z = nullptr;
-  s.stype = 1;
-  s.itype = CHOLMOD_INT;
-  s.xtype = CHOLMOD_REAL;
-  s.dtype = CHOLMOD_DOUBLE;
-  s.sorted = 1;
-  s.packed = 1;
-  return s;
-}
-
-absl::Status StatusFromCholmod(const cholmod_common& c, const char* during) {
-  switch (c.status) {
-    case CHOLMOD_OK:
-      return absl::OkStatus();
-    case CHOLMOD_OUT_OF_MEMORY:
-      return absl::ResourceExhaustedError(absl::StrFormat("CHOLMOD %s: out of memory", during));
-    case CHOLMOD_TOO_LARGE:
-      return absl::ResourceExhaustedError(
-          absl::StrFormat("CHOLMOD %s: problem too large for 32-bit indices", during));
-    case CHOLMOD_NOT_POSDEF:
-      return absl::FailedPreconditionError(
-          absl::StrFormat("CHOLMOD %s: matrix is not positive definite", during));
-    default:
-      if (c.status > 0) return absl::OkStatus();  // other warnings (e.g. tiny diagonal) are benign
-      return absl::InternalError(
-          absl::StrFormat("CHOLMOD %s failed (status %d)", during, c.status));
-  }
+  return UpperView(A.rows(), A.outerIndexPtr(), A.innerIndexPtr(), A.valuePtr(), /*sorted=*/true);
 }
 
 absl::Status ValidateInput(const SpMat& A, const CholeskyOptions& options) {
@@ -81,7 +43,7 @@ absl::Status ValidateInput(const SpMat& A, const CholeskyOptions& options) {
 }  // namespace
 
 struct SparseCholesky::Impl {
-  cholmod_common common;
+  CholmodCommon common;
   cholmod_factor* factor = nullptr;
   int64_t n = 0;
   int64_t lnz = 0;
@@ -90,23 +52,22 @@ struct SparseCholesky::Impl {
   std::vector<int> outer;
   std::vector<int> inner;
 
-  Impl() { StartCommon(&common); }
+  Impl() = default;
   ~Impl() {
-    if (factor != nullptr) cholmod_free_factor(&factor, &common);
-    cholmod_finish(&common);
+    if (factor != nullptr) cholmod_free_factor(&factor, common.get());
   }
   Impl(const Impl&) = delete;
   Impl& operator=(const Impl&) = delete;
 
   // Numeric factorization of `view` into `factor`.
   absl::Status Numeric(cholmod_sparse* view) {
-    cholmod_factorize(view, factor, &common);
-    if (common.status == CHOLMOD_NOT_POSDEF || factor->minor < factor->n) {
+    cholmod_factorize(view, factor, common.get());
+    if (common->status == CHOLMOD_NOT_POSDEF || factor->minor < factor->n) {
       return absl::FailedPreconditionError(absl::StrFormat(
           "Cholesky: matrix is not positive definite (non-positive pivot at column %d of %d)",
           static_cast<int64_t>(factor->minor), n));
     }
-    return StatusFromCholmod(common, "factorize");
+    return StatusFromCholmod(*common, "Cholesky", "factorize");
   }
 };
 
@@ -120,12 +81,7 @@ absl::StatusOr<SparseCholesky> SparseCholesky::Factorize(const SpMat& A_in,
   RETURN_IF_ERROR(ValidateInput(A_in, options));
   // CHOLMOD needs packed storage; copy only when the caller's matrix is not compressed.
   SpMat compressed;
-  const SpMat* A = &A_in;
-  if (!A_in.isCompressed()) {
-    compressed = A_in;
-    compressed.makeCompressed();
-    A = &compressed;
-  }
+  const SpMat* A = &CompressedOrCopy(A_in, &compressed);
 
   // CHOLMOD rejects the null index arrays of an entry-free matrix as invalid input.
   if (A->nonZeros() == 0) {
@@ -136,7 +92,7 @@ absl::StatusOr<SparseCholesky> SparseCholesky::Factorize(const SpMat& A_in,
   [[maybe_unused]] static const bool eigen_blas = linalg_internal::EigenBlasLinked();
   auto impl = std::make_unique<Impl>();
   impl->n = A->rows();
-  cholmod_common& c = impl->common;
+  cholmod_common& c = *impl->common;
   switch (options.method) {
     case CholeskyMethod::kSupernodal:
       c.supernodal = CHOLMOD_SUPERNODAL;
@@ -175,11 +131,7 @@ absl::StatusOr<SparseCholesky> SparseCholesky::Factorize(const SpMat& A_in,
   c.quick_return_if_not_posdef = 1;
 
   cholmod_sparse view = ViewOf(*A);
-  impl->factor = cholmod_analyze(&view, &c);
-  if (impl->factor == nullptr) {
-    RETURN_IF_ERROR(StatusFromCholmod(c, "analyze"));
-    return absl::InternalError("CHOLMOD analyze returned no factor");
-  }
+  ASSIGN_OR_RETURN(impl->factor, Analyze(&view, &c, "Cholesky"));
   RETURN_IF_ERROR(impl->Numeric(&view));
   impl->lnz = static_cast<int64_t>(c.lnz);
   impl->outer.assign(A->outerIndexPtr(), A->outerIndexPtr() + A->cols() + 1);
@@ -225,12 +177,7 @@ absl::Status SparseCholesky::Refactorize(const SpMat& A_in) {
                         A_in.rows(), A_in.cols(), impl_->n, impl_->n));
   }
   SpMat compressed;
-  const SpMat* A = &A_in;
-  if (!A_in.isCompressed()) {
-    compressed = A_in;
-    compressed.makeCompressed();
-    A = &compressed;
-  }
+  const SpMat* A = &CompressedOrCopy(A_in, &compressed);
   if (A->nonZeros() != static_cast<int64_t>(impl_->inner.size()) ||
       !std::equal(impl_->outer.begin(), impl_->outer.end(), A->outerIndexPtr()) ||
       !std::equal(impl_->inner.begin(), impl_->inner.end(), A->innerIndexPtr())) {
@@ -248,8 +195,8 @@ absl::Status SparseCholesky::SolveRaw(const double* b, double* x, int64_t column
   }
   // A private cholmod_common per call: CHOLMOD writes status and workspace into its common, so
   // sharing the factor's common between threads would race. The factor itself is only read.
-  cholmod_common c;
-  StartCommon(&c);
+  CholmodCommon common;
+  cholmod_common& c = *common;
   cholmod_dense rhs;
   std::memset(&rhs, 0, sizeof(rhs));
   rhs.nrow = static_cast<size_t>(impl_->n);
@@ -267,7 +214,7 @@ absl::Status SparseCholesky::SolveRaw(const double* b, double* x, int64_t column
                                 &work_y, &work_e, &c);
   absl::Status status;
   if (!ok || solution == nullptr) {
-    status = StatusFromCholmod(c, "solve");
+    status = StatusFromCholmod(c, "Cholesky", "solve");
     if (status.ok()) status = absl::InternalError("CHOLMOD solve failed");
   } else {
     std::memcpy(x, solution->x, sizeof(double) * rhs.nzmax);
@@ -275,7 +222,6 @@ absl::Status SparseCholesky::SolveRaw(const double* b, double* x, int64_t column
   cholmod_free_dense(&solution, &c);
   cholmod_free_dense(&work_y, &c);
   cholmod_free_dense(&work_e, &c);
-  cholmod_finish(&c);
   return status;
 }
 

@@ -22,8 +22,7 @@ constexpr Eigen::Index kBlock = 64;  // columns per cancellable block of a BLAS-
 }  // namespace
 
 absl::StatusOr<DenseEigenResult> LowestSymmetricEigenpairs(Eigen::MatrixXd& a, int64_t count,
-                                                           bool vectors,
-                                                           const std::atomic<bool>* cancel) {
+                                                           bool vectors, const CancelFlag* cancel) {
   const Eigen::Index n = a.rows();
   if (a.cols() != n || n < 1) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -130,7 +129,7 @@ absl::StatusOr<DenseEigenResult> LowestSymmetricEigenpairs(Eigen::MatrixXd& a, i
 absl::StatusOr<DenseEigenResult> LowestGeneralizedEigenpairs(const Eigen::MatrixXd& S,
                                                              const Eigen::MatrixXd& M,
                                                              int64_t count, bool vectors,
-                                                             const std::atomic<bool>* cancel) {
+                                                             const CancelFlag* cancel) {
   const Eigen::Index n = S.rows();
   if (S.cols() != n || M.rows() != n || M.cols() != n) {
     return absl::InvalidArgumentError("dense eigensolve: S and M must be square of equal size");

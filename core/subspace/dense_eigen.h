@@ -1,11 +1,11 @@
 #ifndef FIELDSPACE_CORE_SUBSPACE_DENSE_EIGEN_H_
 #define FIELDSPACE_CORE_SUBSPACE_DENSE_EIGEN_H_
 
-#include <atomic>
 #include <cstdint>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
+#include "core/common/cancel.h"
 
 namespace fieldspace {
 
@@ -25,8 +25,7 @@ struct DenseEigenResult {
 // [1, n] or non-finite entries; Cancelled when *cancel becomes true; Internal when QR does not
 // converge.
 absl::StatusOr<DenseEigenResult> LowestSymmetricEigenpairs(Eigen::MatrixXd& a, int64_t count,
-                                                           bool vectors,
-                                                           const std::atomic<bool>* cancel);
+                                                           bool vectors, const CancelFlag* cancel);
 
 // Lowest `count` solutions of S y = lambda M y (S symmetric, M symmetric positive definite; lower
 // triangles read), vectors M-orthonormal. Errors as above, and FailedPrecondition when M is not
@@ -34,7 +33,7 @@ absl::StatusOr<DenseEigenResult> LowestSymmetricEigenpairs(Eigen::MatrixXd& a, i
 absl::StatusOr<DenseEigenResult> LowestGeneralizedEigenpairs(const Eigen::MatrixXd& S,
                                                              const Eigen::MatrixXd& M,
                                                              int64_t count, bool vectors,
-                                                             const std::atomic<bool>* cancel);
+                                                             const CancelFlag* cancel);
 
 }  // namespace fieldspace
 

@@ -12,9 +12,9 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
+#include "core/linalg/supernodal_cholesky.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/reduced_system.h"
-#include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace {
 

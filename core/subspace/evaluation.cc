@@ -9,8 +9,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
+#include "core/linalg/supernodal_cholesky.h"
 #include "core/subspace/projection.h"
-#include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace {
 namespace {

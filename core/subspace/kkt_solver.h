@@ -12,8 +12,8 @@
 #include "Eigen/SparseCore"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "core/linalg/supernodal_cholesky.h"
 #include "core/subspace/model_problem.h"
-#include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace {
 

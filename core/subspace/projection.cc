@@ -56,7 +56,7 @@ inline double RowDot(const BasisRow& row, const double* x) {
 
 absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
     const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields,
-    const std::atomic<bool>* cancel) {
+    const CancelFlag* cancel) {
   RETURN_IF_ERROR(CheckFields(system, fields, "MassWeightedProducts"));
   const BasisMatrix& U = system.basis().U;
   const int64_t d = U.cols();
@@ -86,7 +86,7 @@ absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
 
 absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
     const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields,
-    const Eigen::Ref<const Eigen::MatrixXd>& coefficients, const std::atomic<bool>* cancel) {
+    const Eigen::Ref<const Eigen::MatrixXd>& coefficients, const CancelFlag* cancel) {
   RETURN_IF_ERROR(CheckFields(system, fields, "RelativeResiduals"));
   const BasisMatrix& U = system.basis().U;
   if (coefficients.rows() != U.cols() || coefficients.cols() != fields.cols()) {
@@ -135,7 +135,7 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
 
 absl::StatusOr<ProjectionBatch> ProjectMany(const ReducedSystem& system,
                                             const Eigen::Ref<const Eigen::MatrixXd>& fields,
-                                            const std::atomic<bool>* cancel) {
+                                            const CancelFlag* cancel) {
   ASSIGN_OR_RETURN(Eigen::MatrixXd rhs, MassWeightedProducts(system, fields, cancel));
   system.mass_factor().SolveInPlace(rhs);
   ProjectionBatch batch;
@@ -146,7 +146,7 @@ absl::StatusOr<ProjectionBatch> ProjectMany(const ReducedSystem& system,
 
 absl::StatusOr<ProjectionResult> Project(const ReducedSystem& system,
                                          const Eigen::Ref<const Eigen::VectorXd>& field,
-                                         const std::atomic<bool>* cancel) {
+                                         const CancelFlag* cancel) {
   ASSIGN_OR_RETURN(ProjectionBatch batch, ProjectMany(system, field, cancel));
   ProjectionResult result;
   result.coefficients = batch.coefficients.col(0);

@@ -1,13 +1,13 @@
 #ifndef FIELDSPACE_CORE_SUBSPACE_PROJECTION_H_
 #define FIELDSPACE_CORE_SUBSPACE_PROJECTION_H_
 
-#include <atomic>
 #include <cstdint>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
 #include "core/basis/basis.h"
+#include "core/common/cancel.h"
 #include "core/subspace/reduced_system.h"
 
 namespace fieldspace {
@@ -27,7 +27,7 @@ struct ProjectionResult {
 // it is true. The same holds for the functions below.
 absl::StatusOr<ProjectionResult> Project(const ReducedSystem& system,
                                          const Eigen::Ref<const Eigen::VectorXd>& field,
-                                         const std::atomic<bool>* cancel = nullptr);
+                                         const CancelFlag* cancel = nullptr);
 
 struct ProjectionBatch {
   Eigen::MatrixXd coefficients;     // d x m
@@ -36,20 +36,19 @@ struct ProjectionBatch {
 // Projects the m columns of `fields` (k x m) in one pass over U.
 absl::StatusOr<ProjectionBatch> ProjectMany(const ReducedSystem& system,
                                             const Eigen::Ref<const Eigen::MatrixXd>& fields,
-                                            const std::atomic<bool>* cancel = nullptr);
+                                            const CancelFlag* cancel = nullptr);
 
 // U^T M X (d x m) for fields X (k x m): the right-hand side of eq. 13 and of data terms
 // weighted by M. InvalidArgument for a wrong row count or non-finite values.
 absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
     const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields,
-    const std::atomic<bool>* cancel = nullptr);
+    const CancelFlag* cancel = nullptr);
 
 // ||X - U x||_M / ||X||_M for each column (X: k x m fields, x: d x m coefficients), without
 // forming U x. 0 for a zero field. InvalidArgument for mismatched sizes.
 absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
     const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields,
-    const Eigen::Ref<const Eigen::MatrixXd>& coefficients,
-    const std::atomic<bool>* cancel = nullptr);
+    const Eigen::Ref<const Eigen::MatrixXd>& coefficients, const CancelFlag* cancel = nullptr);
 
 // X = U x for all faces: k values. InvalidArgument unless x has d finite entries.
 absl::StatusOr<Eigen::VectorXd> Lift(const Basis& basis,

@@ -1,7 +1,6 @@
 #ifndef FIELDSPACE_CORE_SUBSPACE_REDUCED_SYSTEM_H_
 #define FIELDSPACE_CORE_SUBSPACE_REDUCED_SYSTEM_H_
 
-#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -10,10 +9,11 @@
 #include "Eigen/SparseCore"
 #include "absl/status/statusor.h"
 #include "core/basis/basis.h"
+#include "core/common/cancel.h"
+#include "core/linalg/supernodal_cholesky.h"
 #include "core/operators/field_operator.h"
 #include "core/operators/field_type.h"
 #include "core/subspace/lift_plan.h"
-#include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace {
 
@@ -29,7 +29,7 @@ struct ReducedSystemOptions {
   bool thorough_ordering = true;
   // Checked while the reduced matrices are computed; when it becomes true Build returns
   // Cancelled.
-  const std::atomic<bool>* cancel = nullptr;
+  const CancelFlag* cancel = nullptr;
   // Called from any thread with the fraction of the product pass done (about 100 calls).
   std::function<void(double fraction)> progress;
 };

@@ -2,82 +2,19 @@
 
 #include <algorithm>
 #include <cmath>
-#include <exception>
-#include <memory>
 #include <utility>
 #include <vector>
 
-#include "Spectra/SymGEigsShiftSolver.h"
 #include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
 #include "core/common/status_macros.h"
+#include "core/linalg/lanczos.h"
+#include "core/linalg/supernodal_cholesky.h"
 #include "core/operators/reference_solvers.h"
 #include "core/subspace/dense_eigen.h"
-#include "core/subspace/supernodal_cholesky.h"
 
 namespace fieldspace {
 namespace {
-
-// Thrown out of Spectra (from perform_op) to stop a cancelled solve.
-struct LanczosCancelled {};
-
-// (S - sigma M)^-1 for Spectra, factorized on the system's shared pattern.
-class ShiftInvertOp {
- public:
-  using Scalar = double;
-  ShiftInvertOp(const ReducedSystem& system, const std::atomic<bool>* cancel)
-      : system_(system), cancel_(cancel) {}
-
-  Eigen::Index rows() const { return system_.dimension(); }
-  Eigen::Index cols() const { return system_.dimension(); }
-  void set_shift(double sigma) {
-    const Eigen::SparseMatrix<double>& S = system_.stiffness();
-    const Eigen::SparseMatrix<double>& M = system_.mass_matrix();
-    std::vector<double> values(S.nonZeros());
-    for (int64_t p = 0; p < S.nonZeros(); ++p) {
-      values[p] = S.valuePtr()[p] - sigma * M.valuePtr()[p];
-    }
-    SupernodalFactorOptions factor_options;
-    factor_options.cancel = cancel_;
-    auto factor = SupernodalFactor::Factorize(system_.pattern_symbolic(), values, factor_options);
-    if (factor.ok()) {
-      factor_ = std::make_unique<SupernodalFactor>(*std::move(factor));
-      status_ = absl::OkStatus();
-    } else {
-      factor_.reset();
-      status_ = factor.status();
-    }
-  }
-  void perform_op(const double* x_in, double* y_out) const {
-    if (IsCancelled(cancel_)) throw LanczosCancelled{};
-    Eigen::Map<Eigen::VectorXd> y(y_out, rows());
-    y = Eigen::Map<const Eigen::VectorXd>(x_in, rows());
-    factor_->SolveInPlace(y);
-  }
-  const absl::Status& status() const { return status_; }
-
- private:
-  const ReducedSystem& system_;
-  const std::atomic<bool>* const cancel_;
-  std::unique_ptr<SupernodalFactor> factor_;
-  absl::Status status_ = absl::FailedPreconditionError("shift not set");
-};
-
-// y = (U^T M U) x for Spectra.
-class MassOp {
- public:
-  using Scalar = double;
-  explicit MassOp(const Eigen::SparseMatrix<double>& M) : M_(M) {}
-  Eigen::Index rows() const { return M_.rows(); }
-  Eigen::Index cols() const { return M_.cols(); }
-  void perform_op(const double* x_in, double* y_out) const {
-    Eigen::Map<Eigen::VectorXd>(y_out, M_.rows()) =
-        M_ * Eigen::Map<const Eigen::VectorXd>(x_in, M_.cols());
-  }
-
- private:
-  const Eigen::SparseMatrix<double>& M_;
-};
 
 absl::StatusOr<ReducedEigenResult> DenseEigenpairs(const ReducedSystem& system,
                                                    const ReducedEigenOptions& options) {
@@ -118,32 +55,41 @@ absl::StatusOr<ReducedEigenResult> SparseEigenpairs(const ReducedSystem& system,
   double scale = 0;
   for (int64_t i = 0; i < d; ++i) scale = std::max(scale, sd[i] / md[i]);
   const double sigma = -1e-8 * std::max(scale, 1e-300);
-  ShiftInvertOp op(system, options.cancel);
-  MassOp bop(system.mass_matrix());
-  try {
-    Spectra::SymGEigsShiftSolver<ShiftInvertOp, MassOp, Spectra::GEigsMode::ShiftInvert> solver(
-        op, bop, K, ncv, sigma);
-    if (!op.status().ok()) return op.status();
-    solver.init();
-    solver.compute(Spectra::SortRule::LargestMagn, options.max_iterations, options.tolerance,
-                   Spectra::SortRule::SmallestAlge);
-    if (solver.info() == Spectra::CompInfo::NotConverging) {
-      return absl::ResourceExhaustedError(absl::StrCat(
-          "ReducedEigenpairs: Lanczos did not converge in ", options.max_iterations, " restarts"));
-    }
-    if (solver.info() != Spectra::CompInfo::Successful) {
-      return absl::InternalError("ReducedEigenpairs: Spectra failed");
-    }
-    ReducedEigenResult result;
-    result.method = ReducedEigenMethod::kSparse;
-    result.values = solver.eigenvalues();
-    if (options.compute_vectors) result.coefficients = solver.eigenvectors();
-    return result;
-  } catch (const LanczosCancelled&) {
-    return absl::CancelledError("ReducedEigenpairs: cancelled");
-  } catch (const std::exception& e) {
-    return absl::InternalError(absl::StrCat("ReducedEigenpairs: Spectra: ", e.what()));
+  // (S - sigma M)^-1, factorized on the system's shared pattern.
+  const Eigen::SparseMatrix<double>& S = system.stiffness();
+  const Eigen::SparseMatrix<double>& M = system.mass_matrix();
+  std::vector<double> values(S.nonZeros());
+  for (int64_t p = 0; p < S.nonZeros(); ++p) {
+    values[p] = S.valuePtr()[p] - sigma * M.valuePtr()[p];
   }
+  SupernodalFactorOptions factor_options;
+  factor_options.cancel = options.cancel;
+  ASSIGN_OR_RETURN(const SupernodalFactor factor,
+                   SupernodalFactor::Factorize(system.pattern_symbolic(), values, factor_options));
+  auto inverse = [&](const double* x, double* y) {
+    if (IsCancelled(options.cancel)) return absl::CancelledError("ReducedEigenpairs: cancelled");
+    Eigen::Map<Eigen::VectorXd> yv(y, d);
+    yv = Eigen::Map<const Eigen::VectorXd>(x, d);
+    factor.SolveInPlace(yv);
+    return absl::OkStatus();
+  };
+  auto mass = [&](const double* x, double* y) {
+    Eigen::Map<Eigen::VectorXd>(y, d) = M * Eigen::Map<const Eigen::VectorXd>(x, d);
+    return absl::OkStatus();
+  };
+  LanczosOptions lanczos;
+  lanczos.count = K;
+  lanczos.subspace_size = ncv;
+  lanczos.max_iterations = options.max_iterations;
+  lanczos.tolerance = options.tolerance;
+  lanczos.context = "ReducedEigenpairs";
+  ASSIGN_OR_RETURN(LanczosResult run,
+                   GeneralizedShiftInvertEigenpairs(d, inverse, mass, sigma, lanczos));
+  ReducedEigenResult result;
+  result.method = ReducedEigenMethod::kSparse;
+  result.values = std::move(run.values);
+  if (options.compute_vectors) result.coefficients = std::move(run.vectors);
+  return result;
 }
 
 }  // namespace

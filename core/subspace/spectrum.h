@@ -1,13 +1,13 @@
 #ifndef FIELDSPACE_CORE_SUBSPACE_SPECTRUM_H_
 #define FIELDSPACE_CORE_SUBSPACE_SPECTRUM_H_
 
-#include <atomic>
 #include <cstdint>
 #include <string>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/basis/basis.h"
+#include "core/common/cancel.h"
 #include "core/operators/field_operator.h"
 #include "core/subspace/reduced_system.h"
 
@@ -31,7 +31,7 @@ struct ReducedEigenOptions {
   int32_t max_iterations = 1000;
   // Checked at every Lanczos step (sparse) and every column / QR step / block (dense): the solve
   // returns Cancelled within milliseconds of *cancel becoming true. Not owned; may be null.
-  const std::atomic<bool>* cancel = nullptr;
+  const CancelFlag* cancel = nullptr;
 };
 
 struct ReducedEigenResult {

@@ -1,6 +1,7 @@
 // Tests of the pieces of the basis construction: dual graph, sample allocation, farthest point
-// sampling, region growth, the local sparse Cholesky and the local eigensolver.
+// sampling, region growth and the local eigensolver.
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <set>
@@ -11,11 +12,11 @@
 #include "Eigen/SparseCore"
 #include "core/basis/crc32c.h"
 #include "core/basis/dual_graph.h"
-#include "core/basis/local_cholesky.h"
 #include "core/basis/local_eigensolver.h"
 #include "core/basis/regions.h"
 #include "core/basis/sampling.h"
 #include "gmock/gmock.h"
+#include "core/common/cancel.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
 #include "tests/testing/matchers.h"
@@ -25,15 +26,16 @@
 namespace fieldspace {
 namespace {
 
-using basis_internal::LocalCholesky;
 using basis_internal::LocalEigenOptions;
 using basis_internal::LocalOperator;
-using basis_internal::UpperCsc;
 using ::fieldspace::testing::StatusIs;
 using testing::DualDistances;
 using testing::Icosphere;
 using testing::MustLoadMesh;
 using testing::TwoSpheres;
+
+// A flag that is already set: the cancellation paths return at their first check.
+const CancelFlag kCancelled{true};
 
 TEST(DualGraphTest, ArcsAndLengths) {
   const TriangleMesh mesh = Icosphere(2);
@@ -142,7 +144,7 @@ TEST(SamplingTest, EachSampleIsTheFarthestFace) {
 TEST(SamplingTest, CancelledThroughPoll) {
   const TriangleMesh mesh = Icosphere(4);
   auto g = BuildDualGraph(mesh, {});
-  auto s = FarthestPointSampling(mesh, *g, {50}, 0, [] { return true; });
+  auto s = FarthestPointSampling(mesh, *g, {50}, 0, &kCancelled);
   EXPECT_THAT(s, StatusIs(absl::StatusCode::kCancelled));
 }
 
@@ -168,69 +170,7 @@ TEST(RegionsTest, RegionsAreDualDisks) {
   regions = GrowRegions(*g, samples, options, nullptr);
   ASSERT_TRUE(regions.ok());
   EXPECT_EQ((*regions)[0].size(), 4u);
-  EXPECT_THAT(GrowRegions(*g, samples, options, [] { return true; }),
-              StatusIs(absl::StatusCode::kCancelled));
-}
-
-// A 2D grid Laplacian plus a diagonal: SPD, sparse, with fill.
-UpperCsc GridMatrix(int nx, int ny, double shift, Eigen::MatrixXd* dense) {
-  const int n = nx * ny;
-  dense->setZero(n, n);
-  for (int y = 0; y < ny; ++y) {
-    for (int x = 0; x < nx; ++x) {
-      const int i = y * nx + x;
-      (*dense)(i, i) = 4.0 + shift + 0.01 * (i % 7);
-      if (x + 1 < nx) (*dense)(i, i + 1) = (*dense)(i + 1, i) = -1.0;
-      if (y + 1 < ny) (*dense)(i, i + nx) = (*dense)(i + nx, i) = -1.0;
-    }
-  }
-  UpperCsc A;
-  A.n = n;
-  A.outer.push_back(0);
-  for (int j = 0; j < n; ++j) {
-    // Upper triangle, unsorted rows on purpose: descending, the diagonal last.
-    for (int i = j - 1; i >= 0; --i) {
-      if ((*dense)(i, j) != 0.0) {
-        A.inner.push_back(i);
-        A.values.push_back((*dense)(i, j));
-      }
-    }
-    A.inner.push_back(j);
-    A.values.push_back((*dense)(j, j));
-    A.outer.push_back(static_cast<int32_t>(A.inner.size()));
-  }
-  return A;
-}
-
-TEST(LocalCholeskyTest, SolvesLikeDense) {
-  Eigen::MatrixXd dense;
-  const UpperCsc A = GridMatrix(37, 29, 0.05, &dense);
-  LocalCholesky chol;
-  ASSERT_TRUE(chol.Factorize(A, nullptr).ok());
-  EXPECT_GT(chol.flops(), 0);
-  const Eigen::MatrixXd B = Eigen::MatrixXd::Random(A.n, 3);
-  Eigen::MatrixXd X = B;
-  chol.SolveInPlace(X.data(), 3);
-  const Eigen::MatrixXd ref = dense.llt().solve(B);
-  EXPECT_LT((X - ref).norm() / ref.norm(), 1e-12);
-  // Reuse for another matrix of another size.
-  Eigen::MatrixXd dense2;
-  const UpperCsc A2 = GridMatrix(10, 50, 1.0, &dense2);
-  ASSERT_TRUE(chol.Factorize(A2, nullptr).ok());
-  Eigen::VectorXd b = Eigen::VectorXd::Random(A2.n);
-  Eigen::VectorXd x = b;
-  chol.SolveInPlace(x.data(), 1);
-  EXPECT_LT((dense2 * x - b).norm() / b.norm(), 1e-12);
-}
-
-TEST(LocalCholeskyTest, RejectsIndefinite) {
-  Eigen::MatrixXd dense;
-  UpperCsc A = GridMatrix(8, 8, -5.0, &dense);  // diagonal ~ -1: indefinite
-  LocalCholesky chol;
-  EXPECT_THAT(chol.Factorize(A, nullptr), StatusIs(absl::StatusCode::kFailedPrecondition));
-  EXPECT_EQ(GridMatrix(8, 8, 0.1, &dense).n, 64);
-  EXPECT_THAT(chol.Factorize(GridMatrix(30, 30, 0.1, &dense), [] { return true; }),
-              StatusIs(absl::StatusCode::kCancelled));
+  EXPECT_THAT(GrowRegions(*g, samples, options, &kCancelled), StatusIs(absl::StatusCode::kCancelled));
 }
 
 // S = 1D Dirichlet Laplacian (tridiagonal 2, -1): eigenvalues 2 - 2 cos(k pi / (n + 1)).
@@ -246,7 +186,7 @@ class PathOperator : public LocalOperator {
   }
   int32_t size() const override { return n_; }
   void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override { *Y = dense_ * X; }
-  absl::Status PrepareShiftInverse(const std::function<bool()>&) override {
+  absl::Status PrepareShiftInverse(const CancelToken&) override {
     llt_.compute(dense_ + tau_ * Eigen::MatrixXd::Identity(n_, n_));
     prepared_ = true;
     return absl::OkStatus();
@@ -292,8 +232,7 @@ TEST(LocalEigensolverTest, LowestEigenpairsOfPathLaplacian) {
               StatusIs(absl::StatusCode::kInvalidArgument));
   PathOperator big(500, 1e-3);
   options.count = 2;
-  EXPECT_THAT(basis_internal::SolveLocalEigenproblem(big, options, [] { return true; }),
-              StatusIs(absl::StatusCode::kCancelled));
+  EXPECT_THAT(basis_internal::SolveLocalEigenproblem(big, options, &kCancelled), StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(LocalEigensolverTest, FallsBackToLanczosWhenLobpcgDoesNotConverge) {

@@ -1,16 +1,16 @@
-#include "core/basis/local_cholesky.h"
+#include "core/linalg/local_cholesky.h"
 
 #include <cholmod.h>
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 
 #include "Eigen/Cholesky"
 #include "Eigen/Core"
-#include "absl/strings/str_format.h"
+#include "absl/status/statusor.h"
+#include "core/linalg/cholmod_util.h"
 
-namespace fieldspace::basis_internal {
+namespace fieldspace {
 namespace {
 
 using MatrixMap = Eigen::Map<Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
@@ -75,76 +75,78 @@ void BackwardSolve(int32_t p_runtime, int32_t nsuper, const int32_t* super, cons
 }
 using ConstMatrixMap = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 
+// The supernodal structure of a CHOLMOD symbolic factor (CHOLMOD_INT indices): the fill-reducing
+// permutation, the first column of each supernode, the offsets of its row indices (in ls) and of
+// its values (in lx), and the number of supernodes.
+struct Layout {
+  const int32_t* perm;
+  const int32_t* super;
+  const int32_t* lpi;
+  const int32_t* lpx;
+  const int32_t* ls;
+  int32_t nsuper;
+};
+
+Layout LayoutOf(const cholmod_factor* L) {
+  return {static_cast<const int32_t*>(L->Perm), static_cast<const int32_t*>(L->super),
+          static_cast<const int32_t*>(L->pi),   static_cast<const int32_t*>(L->px),
+          static_cast<const int32_t*>(L->s),    static_cast<int32_t>(L->nsuper)};
+}
+
+// L L^T x = b on p row-major right-hand sides (as ForwardSolve and BackwardSolve).
+template <int P>
+void Substitute(int32_t p, int32_t nsuper, const int32_t* super, const int32_t* lpi,
+                const int32_t* lpx, const int32_t* ls, const double* lx, double* x) {
+  ForwardSolve<P>(p, nsuper, super, lpi, lpx, ls, lx, x);
+  BackwardSolve<P>(p, nsuper, super, lpi, lpx, ls, lx, x);
+}
+
+// Substitute<p> for the common small p (one to four fields per region solve), Substitute<0>
+// (p at run time) otherwise.
+constexpr int32_t kNumSubstitute = 5;
+constexpr decltype(&Substitute<0>) kSubstitute[kNumSubstitute] = {
+    Substitute<0>, Substitute<1>, Substitute<2>, Substitute<3>, Substitute<4>};
+
 }  // namespace
 
-LocalCholesky::LocalCholesky() {
-  common_ = new cholmod_common;
-  cholmod_start(common_);
-  common_->print = 0;
-  common_->error_handler = nullptr;
+LocalCholesky::LocalCholesky() : common_(std::make_unique<linalg_internal::CholmodCommon>()) {
+  cholmod_common& c = **common_;
   // AMD only (METIS gives ~40% fewer flops here but its ordering costs more than it saves),
   // postordered, supernodal structure with CHOLMOD's default relaxed amalgamation.
-  common_->nmethods = 1;
-  common_->method[0].ordering = CHOLMOD_AMD;
-  common_->postorder = 1;
-  common_->supernodal = CHOLMOD_SUPERNODAL;
-  common_->final_ll = 1;
+  c.nmethods = 1;
+  c.method[0].ordering = CHOLMOD_AMD;
+  c.postorder = 1;
+  c.supernodal = CHOLMOD_SUPERNODAL;
+  c.final_ll = 1;
   // Fundamental supernodes only (no relaxed amalgamation): the kernels below are efficient on
   // small supernodes, and the explicit zeros that amalgamation adds cost more in the many solves
   // than they save in the factorization (measured: ~12% faster per region overall).
   for (int i = 0; i < 3; ++i) {
-    common_->nrelax[i] = 0;
-    common_->zrelax[i] = 0.0;
+    c.nrelax[i] = 0;
+    c.zrelax[i] = 0.0;
   }
 }
 
-LocalCholesky::~LocalCholesky() {
-  FreeSymbolic();
-  cholmod_finish(common_);
-  delete common_;
-}
+LocalCholesky::~LocalCholesky() { FreeSymbolic(); }
 
 void LocalCholesky::FreeSymbolic() {
-  if (symbolic_ != nullptr) cholmod_free_factor(&symbolic_, common_);
+  if (symbolic_ != nullptr) cholmod_free_factor(&symbolic_, common_->get());
   symbolic_ = nullptr;
 }
 
-absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<bool()>& poll) {
+absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& cancel) {
   FreeSymbolic();
   n_ = A.n;
   const int32_t n = A.n;
   if (n == 0) return absl::OkStatus();
-  cholmod_sparse a;
-  std::memset(&a, 0, sizeof(a));
-  a.nrow = n;
-  a.ncol = n;
-  a.nzmax = A.inner.size();
-  a.p = const_cast<int32_t*>(A.outer.data());
-  a.i = const_cast<int32_t*>(A.inner.data());
-  a.x = const_cast<double*>(A.values.data());
-  a.stype = 1;  // upper triangle stored
-  a.itype = CHOLMOD_INT;
-  a.xtype = CHOLMOD_REAL;
-  a.dtype = CHOLMOD_DOUBLE;
-  a.sorted = 0;
-  a.packed = 1;
-  symbolic_ = cholmod_analyze(&a, common_);
-  if (symbolic_ == nullptr || common_->status < CHOLMOD_OK) {
-    FreeSymbolic();
-    if (common_->status == CHOLMOD_OUT_OF_MEMORY) {
-      return absl::ResourceExhaustedError("CHOLMOD ran out of memory analyzing a local system");
-    }
-    return absl::InternalError(
-        absl::StrFormat("CHOLMOD analysis of a local system failed (status %d)", common_->status));
-  }
-  flops_ = common_->fl;
-  const cholmod_factor* L = symbolic_;
-  const int32_t* perm = static_cast<const int32_t*>(L->Perm);
-  const int32_t* super = static_cast<const int32_t*>(L->super);
-  const int32_t* lpi = static_cast<const int32_t*>(L->pi);
-  const int32_t* lpx = static_cast<const int32_t*>(L->px);
-  const int32_t* ls = static_cast<const int32_t*>(L->s);
-  const int32_t nsuper = static_cast<int32_t>(L->nsuper);
+  cholmod_sparse a = linalg_internal::UpperView(n, A.outer.data(), A.inner.data(), A.values.data(),
+                                                /*sorted=*/false);
+  absl::StatusOr<cholmod_factor*> symbolic =
+      linalg_internal::Analyze(&a, common_->get(), "local system");
+  if (!symbolic.ok()) return symbolic.status();
+  symbolic_ = *symbolic;
+  flops_ = (*common_)->fl;
+  const auto [perm, super, lpi, lpx, ls, nsuper] = LayoutOf(symbolic_);
 
   // C = P A P^T, lower triangle, by counting sort on the permuted column.
   pinv_.resize(n);
@@ -180,7 +182,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<boo
   head_.assign(nsuper, -1);
   next_.assign(nsuper, -1);
   lpos_.assign(nsuper, 0);
-  lx_.resize(L->xsize);
+  lx_.resize(symbolic_->xsize);
   for (int32_t s = 0; s < nsuper; ++s) {
     const int32_t k1 = super[s];
     const int32_t k2 = super[s + 1];
@@ -286,7 +288,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<boo
       next_[s] = head_[s2];
       head_[s2] = s;
     }
-    if ((s & 255) == 0 && poll && poll()) {
+    if ((s & 255) == 0 && cancel.Check()) {
       FreeSymbolic();
       return absl::CancelledError("basis construction cancelled");
     }
@@ -297,13 +299,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const std::function<boo
 void LocalCholesky::SolveInPlace(double* X, int32_t p) {
   const int32_t n = n_;
   if (n == 0 || p == 0) return;
-  const cholmod_factor* L = symbolic_;
-  const int32_t* perm = static_cast<const int32_t*>(L->Perm);
-  const int32_t* super = static_cast<const int32_t*>(L->super);
-  const int32_t* lpi = static_cast<const int32_t*>(L->pi);
-  const int32_t* lpx = static_cast<const int32_t*>(L->px);
-  const int32_t* ls = static_cast<const int32_t*>(L->s);
-  const int32_t nsuper = static_cast<int32_t>(L->nsuper);
+  const auto [perm, super, lpi, lpx, ls, nsuper] = LayoutOf(symbolic_);
   // Permuted right-hand sides, row-major (row k at xp + k p): the updates of a supernode touch
   // whole rows, one cache line each for small p.
   for (int32_t c0 = 0; c0 < p; c0 += 64) {
@@ -314,28 +310,7 @@ void LocalCholesky::SolveInPlace(double* X, int32_t p) {
       for (int32_t c = 0; c < pc; ++c)
         xp[static_cast<int64_t>(k) * pc + c] = X[static_cast<int64_t>(c0 + c) * n + perm[k]];
     }
-    switch (pc) {
-      case 1:
-        ForwardSolve<1>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        BackwardSolve<1>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        break;
-      case 2:
-        ForwardSolve<2>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        BackwardSolve<2>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        break;
-      case 3:
-        ForwardSolve<3>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        BackwardSolve<3>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        break;
-      case 4:
-        ForwardSolve<4>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        BackwardSolve<4>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        break;
-      default:
-        ForwardSolve<0>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        BackwardSolve<0>(pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
-        break;
-    }
+    kSubstitute[pc < kNumSubstitute ? pc : 0](pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
     for (int32_t k = 0; k < n; ++k) {
       for (int32_t c = 0; c < pc; ++c)
         X[static_cast<int64_t>(c0 + c) * n + perm[k]] = xp[static_cast<int64_t>(k) * pc + c];
@@ -343,4 +318,4 @@ void LocalCholesky::SolveInPlace(double* X, int32_t p) {
   }
 }
 
-}  // namespace fieldspace::basis_internal
+}  // namespace fieldspace

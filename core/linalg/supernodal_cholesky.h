@@ -1,7 +1,6 @@
-#ifndef FIELDSPACE_CORE_SUBSPACE_SUPERNODAL_CHOLESKY_H_
-#define FIELDSPACE_CORE_SUBSPACE_SUPERNODAL_CHOLESKY_H_
+#ifndef FIELDSPACE_CORE_LINALG_SUPERNODAL_CHOLESKY_H_
+#define FIELDSPACE_CORE_LINALG_SUPERNODAL_CHOLESKY_H_
 
-#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -11,6 +10,7 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
+#include "core/common/cancel.h"
 
 namespace fieldspace {
 
@@ -111,7 +111,7 @@ struct SupernodalFactorOptions {
   double diagonal_shift = 0.0;
   bool parallel = true;  // oneTBB over the supernodal tree and inside large fronts
   // Checked before each front: Cancelled (and an unusable factor) once *cancel is true. Not owned.
-  const std::atomic<bool>* cancel = nullptr;
+  const CancelFlag* cancel = nullptr;
 };
 
 // Numeric factorization P A P^T = L L^T of a symmetric positive definite matrix with an analyzed
@@ -205,4 +205,4 @@ class SupernodalMatrix {
 
 }  // namespace fieldspace
 
-#endif  // FIELDSPACE_CORE_SUBSPACE_SUPERNODAL_CHOLESKY_H_
+#endif  // FIELDSPACE_CORE_LINALG_SUPERNODAL_CHOLESKY_H_

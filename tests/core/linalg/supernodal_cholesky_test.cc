@@ -1,4 +1,4 @@
-#include "core/subspace/supernodal_cholesky.h"
+#include "core/linalg/supernodal_cholesky.h"
 
 #include <atomic>
 #include <cmath>

@@ -1,16 +1,19 @@
-#ifndef FIELDSPACE_CORE_BASIS_LOCAL_CHOLESKY_H_
-#define FIELDSPACE_CORE_BASIS_LOCAL_CHOLESKY_H_
+#ifndef FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_
+#define FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_
 
 #include <cstdint>
-#include <functional>
+#include <memory>
 #include <vector>
 
 #include "absl/status/status.h"
+#include "core/common/cancel.h"
 
-struct cholmod_common_struct;
 struct cholmod_factor_struct;
 
-namespace fieldspace::basis_internal {
+namespace fieldspace {
+namespace linalg_internal {
+class CholmodCommon;
+}  // namespace linalg_internal
 
 // A symmetric positive definite matrix in compressed sparse columns, upper triangle only (every
 // stored entry has row <= column; each column holds its diagonal), int32 indices. Rows within a
@@ -39,9 +42,9 @@ class LocalCholesky {
   LocalCholesky& operator=(const LocalCholesky&) = delete;
 
   // Orders, analyzes and factors `A`. FailedPrecondition when A is not numerically positive
-  // definite, ResourceExhausted when CHOLMOD runs out of memory, Cancelled when `poll` (called
-  // every few hundred supernodes) returns true.
-  absl::Status Factorize(const UpperCsc& A, const std::function<bool()>& poll);
+  // definite, ResourceExhausted when CHOLMOD runs out of memory, Cancelled when `cancel` (checked
+  // every few hundred supernodes) is set.
+  absl::Status Factorize(const UpperCsc& A, const CancelToken& cancel);
 
   // X <- A^-1 X in place; X is n x p, column-major with leading dimension n.
   void SolveInPlace(double* X, int32_t p);
@@ -55,7 +58,7 @@ class LocalCholesky {
  private:
   void FreeSymbolic();
 
-  cholmod_common_struct* common_ = nullptr;
+  std::unique_ptr<linalg_internal::CholmodCommon> common_;
   cholmod_factor_struct* symbolic_ = nullptr;
   int32_t n_ = 0;
   double flops_ = 0;
@@ -64,6 +67,6 @@ class LocalCholesky {
   std::vector<double> c_values_, lx_, update_, xp_;
 };
 
-}  // namespace fieldspace::basis_internal
+}  // namespace fieldspace
 
-#endif  // FIELDSPACE_CORE_BASIS_LOCAL_CHOLESKY_H_
+#endif  // FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_

@@ -1,4 +1,4 @@
-#include "core/subspace/supernodal_cholesky.h"
+#include "core/linalg/supernodal_cholesky.h"
 
 #include <algorithm>
 #include <atomic>
@@ -13,12 +13,9 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
 #include "core/common/status_macros.h"
+#include "core/linalg/cholmod_util.h"
 #include "oneapi/tbb/blocked_range.h"
 #include "oneapi/tbb/parallel_for.h"
-
-extern "C" {
-#include "cholmod.h"
-}
 
 namespace fieldspace {
 namespace {
@@ -106,16 +103,6 @@ int64_t PartialCholesky(double* F, int64_t nr, int64_t nc, bool parallel) {
   return -1;
 }
 
-struct CholmodCommon {
-  cholmod_common c;
-  CholmodCommon() {
-    cholmod_start(&c);
-    c.print = 0;
-    c.error_handler = nullptr;
-  }
-  ~CholmodCommon() { cholmod_finish(&c); }
-};
-
 }  // namespace
 
 absl::StatusOr<std::shared_ptr<const SupernodalSymbolic>> SupernodalSymbolic::Analyze(
@@ -178,37 +165,19 @@ absl::StatusOr<std::shared_ptr<const SupernodalSymbolic>> SupernodalSymbolic::An
     for (int p = outer[j]; p < outer[j + 1] && inner[p] <= j; ++p) up_i.push_back(inner[p]);
     up_p[j + 1] = static_cast<int>(up_i.size());
   }
-  cholmod_sparse A{};
-  A.nrow = n;
-  A.ncol = n;
-  A.nzmax = up_i.size();
-  A.p = up_p.data();
-  A.i = up_i.data();
-  A.stype = 1;
-  A.itype = CHOLMOD_INT;
-  A.xtype = CHOLMOD_PATTERN;
-  A.dtype = CHOLMOD_DOUBLE;
-  A.sorted = 1;
-  A.packed = 1;
-
-  CholmodCommon common;
-  common.c.supernodal = CHOLMOD_SUPERNODAL;
-  common.c.postorder = 1;
-  if (options.thorough) common.c.nmethods = 9;
-  cholmod_factor* L = cholmod_analyze(&A, &common.c);
-  if (L == nullptr || common.c.status < CHOLMOD_OK) {
-    if (L != nullptr) cholmod_free_factor(&L, &common.c);
-    if (common.c.status == CHOLMOD_OUT_OF_MEMORY) {
-      return absl::ResourceExhaustedError("SupernodalSymbolic: CHOLMOD ran out of memory");
-    }
-    return absl::InternalError(
-        absl::StrCat("SupernodalSymbolic: cholmod_analyze failed, status ", common.c.status));
-  }
+  cholmod_sparse A = linalg_internal::UpperView(n, up_p.data(), up_i.data(), /*values=*/nullptr,
+                                                /*sorted=*/true);
+  linalg_internal::CholmodCommon common;
+  common->supernodal = CHOLMOD_SUPERNODAL;
+  common->postorder = 1;
+  if (options.thorough) common->nmethods = 9;
+  ASSIGN_OR_RETURN(cholmod_factor * L,
+                   linalg_internal::Analyze(&A, common.get(), "SupernodalSymbolic"));
   struct FactorGuard {
     cholmod_factor** L;
     cholmod_common* c;
     ~FactorGuard() { cholmod_free_factor(L, c); }
-  } guard{&L, &common.c};
+  } guard{&L, common.get()};
   if (!L->is_super) {
     return absl::InternalError("SupernodalSymbolic: CHOLMOD returned a simplicial analysis");
   }
