@@ -152,8 +152,9 @@ class DesignStream {
   absl::StatusOr<fieldspace::v1::DesignUpdate> Edit(const fieldspace::v1::DesignRequest& request);
   absl::Status SendEdit(const fieldspace::v1::DesignRequest& request);
   absl::StatusOr<fieldspace::v1::DesignUpdate> ReadUpdate();
-  // Half-closes the stream and returns the call's final status (OK after a clean session). The
-  // same status on every call.
+  // Half-closes the stream and returns the call's final status (OK after a clean session); read
+  // the updates of all sent edits first. The same status on every call; calls after it are
+  // FailedPrecondition.
   absl::Status Close();
 
  private:
