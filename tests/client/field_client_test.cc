@@ -3,6 +3,9 @@
 
 #include "client/field_client.h"
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -320,15 +323,34 @@ TEST_F(FieldClientBasisTest, DesignStreamRoundTrip) {
   EXPECT_TRUE(client->ListBases().ok());
 }
 
-TEST_F(FieldClientBasisTest, DeadlinesApplyToCallsAndStreams) {
-  FieldClientOptions expired;
-  expired.timeout = std::chrono::milliseconds(0);
-  auto client = server_->Client(expired);
-  ASSERT_NE(client, nullptr);
-  EXPECT_EQ(client->ListMeshes().status().code(), absl::StatusCode::kDeadlineExceeded);
-  EXPECT_EQ(client->Health().status().code(), absl::StatusCode::kDeadlineExceeded);
+TEST(FieldClientTest, DeadlinesApplyToUnaryCallsAndHealth) {
+  // A listener that never answers: every call waits until its deadline. (Against a live server
+  // an expired deadline races with a fast answer on an already connected channel.)
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_in addr{};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof(addr);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&addr), sizeof(addr)), 0);
+  ASSERT_EQ(::listen(fd, 8), 0);
+  ASSERT_EQ(::getsockname(fd, reinterpret_cast<sockaddr*>(&addr), &len), 0);
+  FieldClientOptions options;
+  options.address = absl::StrFormat("127.0.0.1:%d", ntohs(addr.sin_port));
+  options.timeout = std::chrono::milliseconds(200);
+  auto client = FieldClient::Create(options);
+  ASSERT_TRUE(client.ok());
+  const auto start = std::chrono::steady_clock::now();
+  EXPECT_EQ((*client)->ListMeshes().status().code(), absl::StatusCode::kDeadlineExceeded);
+  EXPECT_EQ((*client)->Health().status().code(), absl::StatusCode::kDeadlineExceeded);
+  EXPECT_EQ((*client)->BuildBasis(VectorBasis("m-0123456789abcdef", 10)).status().code(),
+            absl::StatusCode::kDeadlineExceeded);
+  EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5));
+  ::close(fd);
+}
+
+TEST_F(FieldClientBasisTest, DesignSessionDeadlineCoversTheWholeStream) {
   const v1::BasisInfo& basis = basis_;
-  // A session's deadline covers the whole stream: an edit after it has passed fails.
   FieldClientOptions short_session;
   short_session.timeout = std::chrono::milliseconds(1000);
   auto timed = server_->Client(short_session);
