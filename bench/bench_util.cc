@@ -1,77 +1,15 @@
 #include "bench/bench_util.h"
 
-#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <string>
 
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 
 namespace fieldspace::bench {
-
-absl::StatusOr<Args> Args::Parse(int argc, char** argv, const std::vector<std::string>& switches) {
-  Args args;
-  for (int i = 0; i < argc; ++i) {
-    std::string a = argv[i];
-    if (a.rfind("--", 0) != 0 || a.size() == 2) {
-      args.positional_.push_back(a);
-      continue;
-    }
-    std::string name = a.substr(2);
-    if (size_t eq = name.find('='); eq != std::string::npos) {
-      args.flags_[name.substr(0, eq)] = name.substr(eq + 1);
-      continue;
-    }
-    if (std::find(switches.begin(), switches.end(), name) != switches.end()) {
-      args.flags_[name] = "";
-      continue;
-    }
-    if (i + 1 >= argc)
-      return absl::InvalidArgumentError(absl::StrCat("--", name, " needs a value"));
-    args.flags_[name] = argv[++i];
-  }
-  return args;
-}
-
-std::optional<std::string> Args::Get(const std::string& flag) const {
-  auto it = flags_.find(flag);
-  if (it == flags_.end()) return std::nullopt;
-  return it->second;
-}
-
-absl::StatusOr<int64_t> Args::GetInt(const std::string& flag, int64_t default_value) const {
-  auto v = Get(flag);
-  if (!v) return default_value;
-  int64_t out;
-  if (!absl::SimpleAtoi(*v, &out)) {
-    return absl::InvalidArgumentError(absl::StrCat("--", flag, ": not an integer: '", *v, "'"));
-  }
-  return out;
-}
-
-absl::StatusOr<double> Args::GetDouble(const std::string& flag, double default_value) const {
-  auto v = Get(flag);
-  if (!v) return default_value;
-  double out;
-  if (!absl::SimpleAtod(*v, &out) || !std::isfinite(out)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--", flag, ": not a finite number: '", *v, "'"));
-  }
-  return out;
-}
-
-absl::Status Args::CheckKnown(const std::vector<std::string>& known) const {
-  for (const auto& [name, value] : flags_) {
-    if (std::find(known.begin(), known.end(), name) == known.end()) {
-      return absl::InvalidArgumentError(absl::StrCat("unknown flag --", name));
-    }
-  }
-  return absl::OkStatus();
-}
 
 void JsonWriter::Key(const std::string& key) {
   if (!first_.empty()) {

@@ -3,35 +3,17 @@
 
 #include <chrono>
 #include <cstdint>
-#include <map>
-#include <optional>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "core/common/command_line.h"
 
 namespace fieldspace::bench {
 
-// Command-line arguments of one subcommand: positional arguments and `--flag value` /
-// `--flag=value` / bare `--switch` options.
-class Args {
- public:
-  // `switches` lists the flags that take no value.
-  static absl::StatusOr<Args> Parse(int argc, char** argv,
-                                    const std::vector<std::string>& switches);
-
-  const std::vector<std::string>& positional() const { return positional_; }
-  bool Has(const std::string& flag) const { return flags_.count(flag) > 0; }
-  std::optional<std::string> Get(const std::string& flag) const;
-  absl::StatusOr<int64_t> GetInt(const std::string& flag, int64_t default_value) const;
-  absl::StatusOr<double> GetDouble(const std::string& flag, double default_value) const;
-  // InvalidArgument naming the first flag not in `known`.
-  absl::Status CheckKnown(const std::vector<std::string>& known) const;
-
- private:
-  std::vector<std::string> positional_;
-  std::map<std::string, std::string> flags_;
-};
+// Command-line arguments of one subcommand: the parser shared with fieldspaced and fieldspace
+// (`Args::Parse(argc, argv, switches)`, then `CheckKnown`).
+using Args = ::fieldspace::CommandLine;
 
 // Minimal JSON writer for flat objects with nested objects and number arrays.
 class JsonWriter {

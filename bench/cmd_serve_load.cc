@@ -26,11 +26,9 @@
 #include "absl/strings/str_cat.h"
 #include "bench/bench_util.h"
 #include "bench/commands.h"
+#include "client/field_client.h"
 #include "core/mesh/mesh_io.h"
-#include "fieldspace/v1/fieldspace.grpc.pb.h"
-#include "grpcpp/grpcpp.h"
 #include "server/field_server.h"
-#include "server/status_util.h"
 
 namespace fieldspace::bench {
 namespace {
@@ -63,10 +61,10 @@ void WritePercentiles(JsonWriter& j, const std::string& key, const Percentiles& 
   j.EndObject();
 }
 
-absl::Status FromGrpc(const grpc::Status& s, const std::string& what) {
-  if (s.ok()) return absl::OkStatus();
-  absl::Status st = server::FromGrpcStatus(s);
-  return absl::Status(st.code(), absl::StrCat(what, ": ", st.message()));
+// `status` with "<what>: " before its message.
+absl::Status Prefixed(const absl::Status& status, const std::string& what) {
+  if (status.ok()) return status;
+  return absl::Status(status.code(), absl::StrCat(what, ": ", status.message()));
 }
 
 struct SessionResult {
@@ -77,26 +75,24 @@ struct SessionResult {
   int refactorizations = 0;
 };
 
-SessionResult RunSession(v1::FieldSpace::Stub* stub, const std::string& basis_id, int32_t num_faces,
-                         int32_t values_per_face, int edits, int watch, uint32_t seed,
-                         double rate) {
+SessionResult RunSession(const client::FieldClient& field_client, const std::string& basis_id,
+                         int32_t num_faces, int32_t values_per_face, int edits, int watch,
+                         uint32_t seed, double rate) {
   SessionResult out;
   std::mt19937 rng(seed);
   std::uniform_int_distribution<int32_t> face(0, num_faces - 1);
   std::normal_distribution<double> value(0.0, 1.0);
-  grpc::ClientContext context;
-  auto stream = stub->Design(&context);
-  v1::DesignRequest open;
-  open.mutable_open()->set_basis_id(basis_id);
-  open.mutable_open()->mutable_weights()->set_mu_s(1.0);
-  open.mutable_open()->mutable_weights()->set_mu_b(0.0);
-  open.mutable_open()->mutable_weights()->set_mu_c(1.0);
-  for (int i = 0; i < watch; ++i) open.mutable_open()->add_watch_faces(face(rng));
-  open.mutable_open()->set_watch_encoding(v1::FIELD_ENCODING_AMBIENT);
-  v1::DesignUpdate update;
+  std::unique_ptr<client::DesignStream> stream = field_client.Design();
+  v1::OpenDesign open;
+  open.set_basis_id(basis_id);
+  open.mutable_weights()->set_mu_s(1.0);
+  open.mutable_weights()->set_mu_b(0.0);
+  open.mutable_weights()->set_mu_c(1.0);
+  for (int i = 0; i < watch; ++i) open.add_watch_faces(face(rng));
+  open.set_watch_encoding(v1::FIELD_ENCODING_AMBIENT);
   auto t0 = std::chrono::steady_clock::now();
-  if (!stream->Write(open) || !stream->Read(&update)) {
-    out.status = FromGrpc(stream->Finish(), "Design open");
+  if (absl::StatusOr<v1::DesignUpdate> opened = stream->Open(open); !opened.ok()) {
+    out.status = Prefixed(opened.status(), "Design open");
     return out;
   }
   out.open_ms =
@@ -137,14 +133,14 @@ SessionResult RunSession(v1::FieldSpace::Stub* stub, const std::string& basis_id
       live.erase(live.begin() + static_cast<std::ptrdiff_t>(k));
     }
     t0 = std::chrono::steady_clock::now();
-    if (!stream->Write(r) || !stream->Read(&update)) break;
+    absl::StatusOr<v1::DesignUpdate> update = stream->Edit(r);
+    if (!update.ok()) break;  // Close gives the session's status
     out.round_trip_ms.push_back(
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-    out.server_ms.push_back(update.timings().total_ms());
-    out.refactorizations += update.timings().refactorized() ? 1 : 0;
+    out.server_ms.push_back(update->timings().total_ms());
+    out.refactorizations += update->timings().refactorized() ? 1 : 0;
   }
-  stream->WritesDone();
-  out.status = FromGrpc(stream->Finish(), "Design");
+  out.status = Prefixed(stream->Close(), "Design");
   return out;
 }
 
@@ -217,61 +213,37 @@ int RunServeLoad(int argc, char** argv) {
     local.reset();
     if (!store.empty()) std::filesystem::remove_all(store);
   };
-  grpc::ChannelArguments channel_args;
-  channel_args.SetMaxReceiveMessageSize(-1);
-  channel_args.SetMaxSendMessageSize(-1);
-  auto channel =
-      grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), channel_args);
-  auto stub = v1::FieldSpace::NewStub(channel);
+  client::FieldClientOptions client_options;
+  client_options.address = address;
+  client_options.upload_chunk_bytes = 4 << 20;
+  absl::StatusOr<std::unique_ptr<client::FieldClient>> field_client =
+      client::FieldClient::Create(client_options);
+  if (!field_client.ok()) {
+    cleanup();
+    return ReportError(field_client.status());
+  }
 
   // Upload as raw arrays, in 4 MiB chunks.
   Stopwatch upload_watch;
-  std::string raw(reinterpret_cast<const char*>(mesh->arrays.vertices.data()),
-                  sizeof(double) * mesh->arrays.vertices.size());
-  raw.append(reinterpret_cast<const char*>(mesh->arrays.faces.data()),
-             sizeof(int32_t) * mesh->arrays.faces.size());
-  v1::MeshInfo info;
-  {
-    grpc::ClientContext context;
-    auto writer = stub->UploadMesh(&context, &info);
-    for (size_t offset = 0; offset == 0 || offset < raw.size(); offset += 4 << 20) {
-      v1::UploadMeshRequest r;
-      if (offset == 0) {
-        r.mutable_header()->set_name(std::filesystem::path(args->positional()[0]).filename());
-        r.mutable_header()->set_format(v1::MESH_FORMAT_RAW);
-        r.mutable_header()->set_num_vertices(mesh->arrays.vertices.rows());
-        r.mutable_header()->set_num_faces(mesh->arrays.faces.rows());
-        r.mutable_header()->set_total_bytes(raw.size());
-      }
-      r.set_offset(offset);
-      r.set_data(raw.substr(offset, 4 << 20));
-      if (!writer->Write(r)) break;
-    }
-    writer->WritesDone();
-    if (auto st = FromGrpc(writer->Finish(), "UploadMesh"); !st.ok()) {
-      cleanup();
-      return ReportError(st);
-    }
+  absl::StatusOr<v1::MeshInfo> info =
+      (*field_client)
+          ->UploadMeshArrays(mesh->arrays,
+                             std::filesystem::path(args->positional()[0]).filename().string());
+  if (!info.ok()) {
+    cleanup();
+    return ReportError(Prefixed(info.status(), "UploadMesh"));
   }
   const double upload_seconds = upload_watch.Seconds();
 
   Stopwatch build_watch;
   v1::BuildBasisRequest build;
-  build.set_mesh_id(info.id());
+  build.set_mesh_id(info->id());
   *build.mutable_field() = type;
   build.set_dimension(static_cast<int32_t>(*dim));
-  v1::BasisInfo basis;
-  {
-    grpc::ClientContext context;
-    auto reader = stub->BuildBasis(&context, build);
-    v1::BuildBasisProgress p;
-    while (reader->Read(&p)) {
-      if (p.has_basis()) basis = p.basis();
-    }
-    if (auto st = FromGrpc(reader->Finish(), "BuildBasis"); !st.ok()) {
-      cleanup();
-      return ReportError(st);
-    }
+  absl::StatusOr<v1::BasisInfo> basis = (*field_client)->BuildBasis(build);
+  if (!basis.ok()) {
+    cleanup();
+    return ReportError(Prefixed(basis.status(), "BuildBasis"));
   }
   const double build_seconds = build_watch.Seconds();
 
@@ -281,7 +253,7 @@ int RunServeLoad(int argc, char** argv) {
   std::vector<std::thread> workers;
   for (int64_t s = 0; s < *sessions; ++s) {
     workers.emplace_back([&, s] {
-      results[s] = RunSession(stub.get(), basis.id(), info.num_faces(), values_per_face,
+      results[s] = RunSession(**field_client, basis->id(), info->num_faces(), values_per_face,
                               static_cast<int>(*edits), static_cast<int>(*watch),
                               static_cast<uint32_t>(1000 + s), *rate);
     });
@@ -305,9 +277,9 @@ int RunServeLoad(int argc, char** argv) {
   j.BeginObject();
   j.String("command", "serve-load");
   j.String("mesh", args->positional()[0]);
-  j.Int("faces", info.num_faces());
+  j.Int("faces", info->num_faces());
   j.String("field", field);
-  j.Int("dimension", basis.columns());
+  j.Int("dimension", basis->columns());
   j.String("server", local != nullptr ? "in-process" : address);
   j.Double("upload_seconds", upload_seconds);
   j.Double("build_seconds", build_seconds);

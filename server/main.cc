@@ -19,10 +19,11 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "absl/strings/ascii.h"
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "core/common/command_line.h"
 #include "server/demo.h"
 #include "server/field_server.h"
 
@@ -66,60 +67,55 @@ int main(int argc, char** argv) {
   double drain_seconds = 10;
   std::string token_file;
 
-  std::map<std::string, std::string*> string_flags = {{"--listen", &options.listen},
-                                                      {"--store", &options.store_dir},
-                                                      {"--data-root", &options.data_root},
-                                                      {"--auth-token-file", &token_file}};
-  std::map<std::string, int64_t*> int64_flags = {{"--memory-budget-mb", &options.memory_budget_mb},
-                                                 {"--max-message-mb", &options.max_message_mb},
-                                                 {"--max-upload-mb", &options.max_upload_mb}};
+  std::map<std::string, std::string*> string_flags = {{"listen", &options.listen},
+                                                      {"store", &options.store_dir},
+                                                      {"data-root", &options.data_root},
+                                                      {"auth-token-file", &token_file}};
+  std::map<std::string, int64_t*> int64_flags = {{"memory-budget-mb", &options.memory_budget_mb},
+                                                 {"max-message-mb", &options.max_message_mb},
+                                                 {"max-upload-mb", &options.max_upload_mb}};
   std::map<std::string, int32_t*> int32_flags = {
-      {"--threads", &options.threads},
-      {"--max-dimension", &options.max_dimension},
-      {"--design-verify-every", &options.design_verify_interval},
-      {"--debug-save-pause-ms", &options.debug_save_pause_ms}};
-  for (int i = 1; i < argc; ++i) {
-    std::string arg = argv[i];
-    std::string value;
-    bool has_value = false;
-    if (size_t eq = arg.find('='); arg.rfind("--", 0) == 0 && eq != std::string::npos) {
-      value = arg.substr(eq + 1);
-      arg = arg.substr(0, eq);
-      has_value = true;
-    }
-    auto take_value = [&]() -> bool {
-      if (has_value) return true;
-      if (i + 1 >= argc) return false;
-      value = argv[++i];
-      return true;
-    };
-    if (arg == "--help" || arg == "-h") {
-      std::cout << kUsage;
-      return 0;
-    } else if (arg == "--demo") {
-      demo = true;
-    } else if (arg == "--insecure") {
-      options.insecure = true;
-    } else if (auto s = string_flags.find(arg); s != string_flags.end()) {
-      if (!take_value()) return Fail(arg + " needs a value");
-      *s->second = value;
-    } else if (auto l = int64_flags.find(arg); l != int64_flags.end()) {
-      if (!take_value() || !absl::SimpleAtoi(value, l->second)) {
-        return Fail(arg + " needs an integer");
-      }
-    } else if (auto n = int32_flags.find(arg); n != int32_flags.end()) {
-      if (!take_value() || !absl::SimpleAtoi(value, n->second)) {
-        return Fail(arg + " needs an integer");
-      }
-    } else if (arg == "--drain-seconds") {
-      if (!take_value() || !absl::SimpleAtod(value, &drain_seconds) || drain_seconds < 0) {
-        return Fail("--drain-seconds needs a non-negative number");
-      }
-    } else {
-      std::cerr << kUsage;
-      return Fail("unknown argument '" + arg + "'");
-    }
+      {"threads", &options.threads},
+      {"max-dimension", &options.max_dimension},
+      {"design-verify-every", &options.design_verify_interval},
+      {"debug-save-pause-ms", &options.debug_save_pause_ms}};
+  fieldspace::FlagSpec spec;
+  spec.switches = {"help", "demo", "insecure"};
+  spec.value_flags = {"drain-seconds"};
+  for (const auto& flag : string_flags) spec.value_flags.push_back(flag.first);
+  for (const auto& flag : int64_flags) spec.value_flags.push_back(flag.first);
+  for (const auto& flag : int32_flags) spec.value_flags.push_back(flag.first);
+  absl::StatusOr<fieldspace::CommandLine> args =
+      fieldspace::CommandLine::Parse(std::vector<std::string>(argv + 1, argv + argc), spec);
+  if (!args.ok()) {
+    std::cerr << kUsage;
+    return Fail(std::string(args.status().message()));
   }
+  const std::vector<std::string>& positional = args->positional();
+  if (args->Has("help") || (!positional.empty() && positional[0] == "-h")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  if (!positional.empty()) {
+    std::cerr << kUsage;
+    return Fail("unknown argument '" + positional[0] + "'");
+  }
+  demo = args->Has("demo");
+  options.insecure = args->Has("insecure");
+  for (const auto& [name, target] : string_flags) *target = args->Get(name).value_or(*target);
+  for (const auto& [name, target] : int64_flags) {
+    absl::StatusOr<int64_t> value = args->GetInt(name, *target);
+    if (!value.ok()) return Fail(std::string(value.status().message()));
+    *target = *value;
+  }
+  for (const auto& [name, target] : int32_flags) {
+    absl::StatusOr<int32_t> value = args->GetInt32(name, *target);
+    if (!value.ok()) return Fail(std::string(value.status().message()));
+    *target = *value;
+  }
+  absl::StatusOr<double> drain = args->GetDouble("drain-seconds", drain_seconds);
+  if (!drain.ok() || *drain < 0) return Fail("--drain-seconds needs a non-negative number");
+  drain_seconds = *drain;
   if (options.store_dir.empty()) {
     std::cerr << kUsage;
     return Fail("--store DIR is required");

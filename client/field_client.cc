@@ -1,0 +1,317 @@
+#include "client/field_client.h"
+
+#include <bit>
+#include <filesystem>
+#include <fstream>
+#include <utility>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
+#include "grpc/health/v1/health.grpc.pb.h"
+
+namespace fieldspace::client {
+namespace {
+
+namespace v1 = ::fieldspace::v1;
+
+// The one place where a grpc::Status becomes an absl::Status: the codes share their numbering.
+absl::Status FromGrpc(const grpc::Status& status) {
+  if (status.ok()) return absl::OkStatus();
+  return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
+}
+
+// Reads a server stream to its end; `on_message` sees every message.
+template <typename Message, typename OnMessage>
+absl::Status ReadAll(grpc::ClientReader<Message>& reader, OnMessage on_message) {
+  Message message;
+  while (reader.Read(&message)) on_message(message);
+  return FromGrpc(reader.Finish());
+}
+
+constexpr std::chrono::seconds kHealthTimeout(10);
+
+}  // namespace
+
+v1::UploadMeshHeader MeshFileHeader(const std::string& path, const std::string& name) {
+  const std::filesystem::path p(path);
+  v1::UploadMeshHeader header;
+  header.set_name(name.empty() ? p.filename().string() : name);
+  const std::string ext = absl::AsciiStrToLower(p.extension().string());
+  header.set_format(ext == ".obj"   ? v1::MESH_FORMAT_OBJ
+                    : ext == ".off" ? v1::MESH_FORMAT_OFF
+                    : ext == ".ply" ? v1::MESH_FORMAT_PLY
+                                    : v1::MESH_FORMAT_UNSPECIFIED);
+  std::error_code ec;
+  const uintmax_t size = std::filesystem::file_size(p, ec);
+  if (!ec) header.set_total_bytes(size);
+  return header;
+}
+
+absl::StatusOr<std::unique_ptr<FieldClient>> FieldClient::Create(FieldClientOptions options) {
+  if (options.address.empty()) {
+    return absl::InvalidArgumentError("FieldClient needs a server address (HOST:PORT)");
+  }
+  if (options.upload_chunk_bytes == 0) {
+    return absl::InvalidArgumentError("FieldClient upload_chunk_bytes must be positive");
+  }
+  return std::unique_ptr<FieldClient>(new FieldClient(std::move(options)));
+}
+
+FieldClient::FieldClient(FieldClientOptions options) : options_(std::move(options)) {
+  grpc::ChannelArguments channel_args;
+  channel_args.SetMaxReceiveMessageSize(-1);  // the server enforces its own limit
+  channel_args.SetMaxSendMessageSize(-1);
+  channel_ =
+      grpc::CreateCustomChannel(options_.address, grpc::InsecureChannelCredentials(), channel_args);
+  stub_ = v1::FieldSpace::NewStub(channel_);
+}
+
+std::unique_ptr<grpc::ClientContext> FieldClient::NewContext() const {
+  auto context = std::make_unique<grpc::ClientContext>();
+  if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
+  if (options_.timeout) context->set_deadline(std::chrono::system_clock::now() + *options_.timeout);
+  return context;
+}
+
+template <typename Request, typename Response>
+absl::StatusOr<Response> FieldClient::Unary(
+    grpc::Status (v1::FieldSpace::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
+    const Request& request) const {
+  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  Response response;
+  if (absl::Status status = FromGrpc((stub_.get()->*method)(context.get(), request, &response));
+      !status.ok()) {
+    return status;
+  }
+  return response;
+}
+
+absl::StatusOr<grpc::health::v1::HealthCheckResponse> FieldClient::Health(
+    const std::string& service) const {
+  auto stub = grpc::health::v1::Health::NewStub(channel_);
+  grpc::health::v1::HealthCheckRequest request;
+  request.set_service(service);
+  grpc::health::v1::HealthCheckResponse response;
+  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  if (!options_.timeout) context->set_deadline(std::chrono::system_clock::now() + kHealthTimeout);
+  if (absl::Status status = FromGrpc(stub->Check(context.get(), request, &response));
+      !status.ok()) {
+    return status;
+  }
+  return response;
+}
+
+absl::StatusOr<v1::MeshInfo> FieldClient::Upload(
+    const v1::UploadMeshHeader& header,
+    const std::function<bool(std::string* chunk)>& next_chunk) const {
+  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  v1::MeshInfo info;
+  auto writer = stub_->UploadMesh(context.get(), &info);
+  v1::UploadMeshRequest request;
+  *request.mutable_header() = header;
+  uint64_t offset = 0;
+  bool more = true;
+  for (bool first = true; more; first = false) {
+    std::string data;
+    more = next_chunk(&data);
+    if (data.empty() && !first) break;
+    request.set_offset(offset);
+    offset += data.size();
+    request.set_data(std::move(data));
+    if (!writer->Write(request)) break;  // the server ended the call: Finish tells why
+    request.clear_header();
+  }
+  writer->WritesDone();
+  if (absl::Status status = FromGrpc(writer->Finish()); !status.ok()) return status;
+  return info;
+}
+
+absl::StatusOr<v1::MeshInfo> FieldClient::UploadMesh(const v1::UploadMeshHeader& header,
+                                                     std::istream& in) const {
+  const size_t chunk_bytes = options_.upload_chunk_bytes;
+  return Upload(header, [&in, chunk_bytes](std::string* chunk) {
+    chunk->resize(chunk_bytes);
+    in.read(chunk->data(), static_cast<std::streamsize>(chunk_bytes));
+    chunk->resize(static_cast<size_t>(std::max<std::streamsize>(in.gcount(), 0)));
+    return chunk->size() == chunk_bytes;
+  });
+}
+
+absl::StatusOr<v1::MeshInfo> FieldClient::UploadMesh(const v1::UploadMeshHeader& header,
+                                                     absl::string_view bytes) const {
+  const size_t chunk_bytes = options_.upload_chunk_bytes;
+  size_t offset = 0;
+  return Upload(header, [bytes, chunk_bytes, &offset](std::string* chunk) {
+    const absl::string_view part = bytes.substr(offset, chunk_bytes);
+    chunk->assign(part.data(), part.size());
+    offset += part.size();
+    return offset < bytes.size();
+  });
+}
+
+absl::StatusOr<v1::MeshInfo> FieldClient::UploadMeshArrays(const MeshArrays& arrays,
+                                                           const std::string& name) const {
+  static_assert(std::endian::native == std::endian::little, "raw uploads are little-endian");
+  // Row-major #V x 3 and #F x 3: the arrays' storage is the wire layout.
+  std::string raw(reinterpret_cast<const char*>(arrays.vertices.data()),
+                  sizeof(double) * arrays.vertices.size());
+  raw.append(reinterpret_cast<const char*>(arrays.faces.data()),
+             sizeof(int32_t) * arrays.faces.size());
+  v1::UploadMeshHeader header;
+  header.set_name(name);
+  header.set_format(v1::MESH_FORMAT_RAW);
+  header.set_num_vertices(arrays.vertices.rows());
+  header.set_num_faces(arrays.faces.rows());
+  header.set_total_bytes(raw.size());
+  return UploadMesh(header, raw);
+}
+
+absl::StatusOr<v1::MeshInfo> FieldClient::UploadMeshFile(const std::string& path,
+                                                         const std::string& name) const {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError("cannot open " + path);
+  return UploadMesh(MeshFileHeader(path, name), in);
+}
+
+absl::StatusOr<v1::MeshInfo> FieldClient::LoadMesh(const v1::LoadMeshRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::LoadMesh, request);
+}
+
+absl::StatusOr<v1::MeshInfo> FieldClient::GetMesh(const v1::GetMeshRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::GetMesh, request);
+}
+
+absl::StatusOr<v1::ListMeshesResponse> FieldClient::ListMeshes(
+    const v1::ListMeshesRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::ListMeshes, request);
+}
+
+absl::StatusOr<v1::DeleteMeshResponse> FieldClient::DeleteMesh(
+    const v1::DeleteMeshRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::DeleteMesh, request);
+}
+
+absl::StatusOr<MeshGeometry> FieldClient::GetMeshGeometry(
+    const v1::GetMeshGeometryRequest& request) const {
+  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  auto reader = stub_->GetMeshGeometry(context.get(), request);
+  MeshGeometry geometry;
+  absl::Status status = ReadAll(*reader, [&geometry](const v1::MeshGeometryChunk& chunk) {
+    geometry.vertices.insert(geometry.vertices.end(), chunk.vertices().begin(),
+                             chunk.vertices().end());
+    geometry.faces.insert(geometry.faces.end(), chunk.faces().begin(), chunk.faces().end());
+  });
+  if (!status.ok()) return status;
+  return geometry;
+}
+
+absl::StatusOr<v1::BasisInfo> FieldClient::BuildBasis(
+    const v1::BuildBasisRequest& request, const BuildProgressCallback& on_progress) const {
+  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  auto reader = stub_->BuildBasis(context.get(), request);
+  std::optional<v1::BasisInfo> basis;
+  absl::Status status = ReadAll(*reader, [&](const v1::BuildBasisProgress& progress) {
+    if (on_progress) on_progress(progress);
+    if (progress.has_basis()) basis = progress.basis();
+  });
+  if (!status.ok()) return status;
+  if (!basis) return absl::InternalError("the build stream ended without a basis");
+  return *std::move(basis);
+}
+
+absl::StatusOr<v1::CancelBuildResponse> FieldClient::CancelBuild(
+    const v1::CancelBuildRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::CancelBuild, request);
+}
+
+absl::StatusOr<v1::BasisInfo> FieldClient::GetBasis(const v1::GetBasisRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::GetBasis, request);
+}
+
+absl::StatusOr<v1::ListBasesResponse> FieldClient::ListBases(
+    const v1::ListBasesRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::ListBases, request);
+}
+
+absl::StatusOr<v1::DeleteBasisResponse> FieldClient::DeleteBasis(
+    const v1::DeleteBasisRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::DeleteBasis, request);
+}
+
+absl::StatusOr<v1::ProjectResponse> FieldClient::Project(const v1::ProjectRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::Project, request);
+}
+
+absl::StatusOr<v1::SolveResponse> FieldClient::Solve(const v1::SolveRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::Solve, request);
+}
+
+absl::StatusOr<std::vector<v1::FieldChunk>> FieldClient::Lift(
+    const v1::LiftRequest& request) const {
+  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  auto reader = stub_->Lift(context.get(), request);
+  std::vector<v1::FieldChunk> chunks;
+  absl::Status status =
+      ReadAll(*reader, [&chunks](const v1::FieldChunk& chunk) { chunks.push_back(chunk); });
+  if (!status.ok()) return status;
+  return chunks;
+}
+
+absl::StatusOr<v1::EigenfieldsResponse> FieldClient::Eigenfields(
+    const v1::EigenfieldsRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::Eigenfields, request);
+}
+
+std::unique_ptr<DesignStream> FieldClient::Design() const {
+  return std::unique_ptr<DesignStream>(new DesignStream(NewContext(), stub_.get()));
+}
+
+DesignStream::DesignStream(std::unique_ptr<grpc::ClientContext> context, v1::FieldSpace::Stub* stub)
+    : context_(std::move(context)), stream_(stub->Design(context_.get())) {}
+
+DesignStream::~DesignStream() {
+  if (final_status_) return;
+  context_->TryCancel();
+  stream_->Finish();
+}
+
+absl::StatusOr<v1::DesignUpdate> DesignStream::Open(const v1::OpenDesign& open, uint64_t seq) {
+  v1::DesignRequest request;
+  request.set_seq(seq);
+  *request.mutable_open() = open;
+  return Edit(request);
+}
+
+absl::StatusOr<v1::DesignUpdate> DesignStream::Edit(const v1::DesignRequest& request) {
+  if (absl::Status status = SendEdit(request); !status.ok()) return status;
+  return ReadUpdate();
+}
+
+absl::Status DesignStream::SendEdit(const v1::DesignRequest& request) {
+  if (final_status_) return absl::FailedPreconditionError("the design stream is closed");
+  if (!stream_->Write(request)) return Broken();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<v1::DesignUpdate> DesignStream::ReadUpdate() {
+  if (final_status_) return absl::FailedPreconditionError("the design stream is closed");
+  v1::DesignUpdate update;
+  if (!stream_->Read(&update)) return Broken();
+  return update;
+}
+
+absl::Status DesignStream::Close() {
+  if (!final_status_) {
+    stream_->WritesDone();
+    final_status_ = FromGrpc(stream_->Finish());
+  }
+  return *final_status_;
+}
+
+absl::Status DesignStream::Broken() {
+  absl::Status status = Close();
+  if (status.ok()) return absl::UnavailableError("the server ended the design session");
+  return status;
+}
+
+}  // namespace fieldspace::client

@@ -1,0 +1,176 @@
+#ifndef FIELDSPACE_CLIENT_FIELD_CLIENT_H_
+#define FIELDSPACE_CLIENT_FIELD_CLIENT_H_
+
+// A small synchronous C++ client of fieldspace.v1.FieldSpace (and grpc.health.v1), the one piece
+// of client/ and bench/ that touches gRPC stubs. Requests and responses are the wire protos;
+// every grpc::Status becomes an absl::Status with the same code and message. A FieldClient is
+// thread-safe (one channel, shared by all calls); a DesignStream belongs to one thread.
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <istream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
+#include "core/mesh/triangle_mesh.h"
+#include "fieldspace/v1/fieldspace.grpc.pb.h"
+#include "grpc/health/v1/health.pb.h"
+#include "grpcpp/grpcpp.h"
+
+namespace fieldspace::client {
+
+struct FieldClientOptions {
+  std::string address;  // HOST:PORT of fieldspaced
+  // Sent as `authorization: Bearer <token>` on every call when not empty.
+  std::string token;
+  // Deadline of every call (for a stream: of the whole stream, e.g. a build or a design
+  // session); none when unset.
+  std::optional<std::chrono::milliseconds> timeout;
+  // Upload chunk size (the server's message limit is 64 MiB by default).
+  size_t upload_chunk_bytes = size_t{1} << 20;
+};
+
+// A mesh's canonical arrays (GetMeshGeometry): #V x 3 coordinates and #F x 3 zero-based vertex
+// indices, both row-major.
+struct MeshGeometry {
+  std::vector<double> vertices;
+  std::vector<int32_t> faces;
+};
+
+// The header of an upload of the file `path`: `name` (default: the file name), the format from
+// the extension (.obj, .off, .ply; otherwise left to the server) and the size when known.
+fieldspace::v1::UploadMeshHeader MeshFileHeader(const std::string& path,
+                                                const std::string& name = "");
+
+class DesignStream;
+
+class FieldClient {
+ public:
+  // InvalidArgument for an empty address. Connecting is lazy: an unreachable server shows as
+  // UNAVAILABLE on the first call.
+  static absl::StatusOr<std::unique_ptr<FieldClient>> Create(FieldClientOptions options);
+
+  // grpc.health.v1 Check of `service` ("": the whole server). Without options.timeout it waits
+  // at most 10 s, so that a probe never hangs.
+  absl::StatusOr<grpc::health::v1::HealthCheckResponse> Health(
+      const std::string& service = "") const;
+
+  // UploadMesh from `in`, in chunks of options.upload_chunk_bytes (the header goes with the
+  // first chunk; an empty input still sends it).
+  absl::StatusOr<fieldspace::v1::MeshInfo> UploadMesh(
+      const fieldspace::v1::UploadMeshHeader& header, std::istream& in) const;
+  // The same from bytes in memory (e.g. MESH_FORMAT_RAW arrays).
+  absl::StatusOr<fieldspace::v1::MeshInfo> UploadMesh(
+      const fieldspace::v1::UploadMeshHeader& header, absl::string_view bytes) const;
+  // A triangle soup as MESH_FORMAT_RAW: the little-endian float64 vertex and int32 face arrays.
+  absl::StatusOr<fieldspace::v1::MeshInfo> UploadMeshArrays(const MeshArrays& arrays,
+                                                            const std::string& name) const;
+  // Opens `path` (NotFound "cannot open PATH") and uploads it with MeshFileHeader(path, name).
+  absl::StatusOr<fieldspace::v1::MeshInfo> UploadMeshFile(const std::string& path,
+                                                          const std::string& name = "") const;
+  absl::StatusOr<fieldspace::v1::MeshInfo> LoadMesh(
+      const fieldspace::v1::LoadMeshRequest& request) const;
+  absl::StatusOr<fieldspace::v1::MeshInfo> GetMesh(
+      const fieldspace::v1::GetMeshRequest& request) const;
+  absl::StatusOr<fieldspace::v1::ListMeshesResponse> ListMeshes(
+      const fieldspace::v1::ListMeshesRequest& request = {}) const;
+  absl::StatusOr<fieldspace::v1::DeleteMeshResponse> DeleteMesh(
+      const fieldspace::v1::DeleteMeshRequest& request) const;
+  // All chunks of the mesh's arrays, concatenated.
+  absl::StatusOr<MeshGeometry> GetMeshGeometry(
+      const fieldspace::v1::GetMeshGeometryRequest& request) const;
+
+  // Runs (or joins) the build and returns the final BasisInfo; `on_progress`, when given, sees
+  // every progress message (the last one carries the basis). Internal if the stream ends
+  // without a basis.
+  using BuildProgressCallback = std::function<void(const fieldspace::v1::BuildBasisProgress&)>;
+  absl::StatusOr<fieldspace::v1::BasisInfo> BuildBasis(
+      const fieldspace::v1::BuildBasisRequest& request,
+      const BuildProgressCallback& on_progress = nullptr) const;
+  absl::StatusOr<fieldspace::v1::CancelBuildResponse> CancelBuild(
+      const fieldspace::v1::CancelBuildRequest& request) const;
+  absl::StatusOr<fieldspace::v1::BasisInfo> GetBasis(
+      const fieldspace::v1::GetBasisRequest& request) const;
+  absl::StatusOr<fieldspace::v1::ListBasesResponse> ListBases(
+      const fieldspace::v1::ListBasesRequest& request = {}) const;
+  absl::StatusOr<fieldspace::v1::DeleteBasisResponse> DeleteBasis(
+      const fieldspace::v1::DeleteBasisRequest& request) const;
+
+  absl::StatusOr<fieldspace::v1::ProjectResponse> Project(
+      const fieldspace::v1::ProjectRequest& request) const;
+  absl::StatusOr<fieldspace::v1::SolveResponse> Solve(
+      const fieldspace::v1::SolveRequest& request) const;
+  // All chunks of the lift, in the order the server sent them (all-faces lifts: by start_face).
+  absl::StatusOr<std::vector<fieldspace::v1::FieldChunk>> Lift(
+      const fieldspace::v1::LiftRequest& request) const;
+  absl::StatusOr<fieldspace::v1::EigenfieldsResponse> Eigenfields(
+      const fieldspace::v1::EigenfieldsRequest& request) const;
+
+  // Starts a Design call; send `open` first (DesignStream::Open).
+  std::unique_ptr<DesignStream> Design() const;
+
+ private:
+  explicit FieldClient(FieldClientOptions options);
+  // A context with the token and the deadline of the options.
+  std::unique_ptr<grpc::ClientContext> NewContext() const;
+  // Unary calls of FieldSpace, one implementation for all.
+  template <typename Request, typename Response>
+  absl::StatusOr<Response> Unary(grpc::Status (fieldspace::v1::FieldSpace::Stub::*method)(
+                                     grpc::ClientContext*, const Request&, Response*),
+                                 const Request& request) const;
+  // UploadMesh of the chunks from `next_chunk`, which sets the next one and returns whether more
+  // may follow; an empty chunk after the first ends the upload.
+  absl::StatusOr<fieldspace::v1::MeshInfo> Upload(
+      const fieldspace::v1::UploadMeshHeader& header,
+      const std::function<bool(std::string* chunk)>& next_chunk) const;
+
+  FieldClientOptions options_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<fieldspace::v1::FieldSpace::Stub> stub_;
+};
+
+// One interactive session (the bidirectional Design stream): Open, then one Edit per change
+// (or SendEdit / ReadUpdate to pipeline), then Close. When the stream breaks, the failing call
+// returns the call's final status and the stream is closed. Destroying an unclosed stream
+// cancels the call.
+class DesignStream {
+ public:
+  ~DesignStream();
+  DesignStream(const DesignStream&) = delete;
+  DesignStream& operator=(const DesignStream&) = delete;
+
+  // Sends {seq, open} and returns its update.
+  absl::StatusOr<fieldspace::v1::DesignUpdate> Open(const fieldspace::v1::OpenDesign& open,
+                                                    uint64_t seq = 0);
+  // Sends one request and returns its update (SendEdit + ReadUpdate).
+  absl::StatusOr<fieldspace::v1::DesignUpdate> Edit(const fieldspace::v1::DesignRequest& request);
+  absl::Status SendEdit(const fieldspace::v1::DesignRequest& request);
+  absl::StatusOr<fieldspace::v1::DesignUpdate> ReadUpdate();
+  // Half-closes the stream and returns the call's final status (OK after a clean session); read
+  // the updates of all sent edits first. The same status on every call; calls after it are
+  // FailedPrecondition.
+  absl::Status Close();
+
+ private:
+  friend class FieldClient;
+  DesignStream(std::unique_ptr<grpc::ClientContext> context,
+               fieldspace::v1::FieldSpace::Stub* stub);
+  // Ends a broken stream and returns why (Unavailable when the server ended it with OK).
+  absl::Status Broken();
+
+  std::unique_ptr<grpc::ClientContext> context_;
+  std::unique_ptr<
+      grpc::ClientReaderWriter<fieldspace::v1::DesignRequest, fieldspace::v1::DesignUpdate>>
+      stream_;
+  std::optional<absl::Status> final_status_;
+};
+
+}  // namespace fieldspace::client
+
+#endif  // FIELDSPACE_CLIENT_FIELD_CLIENT_H_
