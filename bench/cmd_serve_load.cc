@@ -8,7 +8,11 @@
 // --rate HZ paces each session like a user dragging a constraint: one edit every 1/HZ seconds
 // (start times staggered), the round trip measured from the send; 0 (default) sends each edit as
 // soon as the previous answer arrives (closed loop, a saturation test). RSS is sampled before and
-// after the sessions ("rss_mb") to show that memory stays bounded.
+// after the sessions ("rss_mb") to show that memory stays bounded. Then --lifts L (default 5) Lift
+// calls of all faces (DOF encoding, random coefficients) report the daemon's server-side lift time
+// (FieldChunk.server_ms) and the client's round trip; an in-process server also reports the same
+// lift through the basis's LiftPlan called directly ("liftplan_ms"), the bench path it is
+// compared with.
 
 #include <unistd.h>
 
@@ -28,7 +32,9 @@
 #include "bench/commands.h"
 #include "client/field_client.h"
 #include "core/mesh/mesh_io.h"
+#include "core/subspace/projection.h"
 #include "server/field_server.h"
+#include "server/registry.h"
 
 namespace fieldspace::bench {
 namespace {
@@ -149,15 +155,16 @@ SessionResult RunSession(const client::FieldClient& field_client, const std::str
 int RunServeLoad(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {});
   if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown(
-          {"dim", "field", "n", "sessions", "edits", "watch", "threads", "server", "rate"});
+  if (auto st = args->CheckKnown({"dim", "field", "n", "sessions", "edits", "watch", "threads",
+                                  "server", "rate", "lifts"});
       !st.ok()) {
     return ReportError(st);
   }
   if (args->positional().size() != 1) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] "
-        "[--sessions S] [--edits E] [--watch W] [--threads T] [--rate HZ] [--server HOST:PORT]"));
+        "[--sessions S] [--edits E] [--watch W] [--threads T] [--rate HZ] [--lifts L] "
+        "[--server HOST:PORT]"));
   }
   auto dim = args->GetInt("dim", 0);
   auto sessions = args->GetInt("sessions", 4);
@@ -165,7 +172,8 @@ int RunServeLoad(int argc, char** argv) {
   auto watch = args->GetInt("watch", 16);
   auto threads = args->GetInt("threads", 0);
   auto n = args->GetInt("n", 4);
-  for (const auto* v : {&dim, &sessions, &edits, &watch, &threads, &n}) {
+  auto lifts = args->GetInt("lifts", 5);
+  for (const auto* v : {&dim, &sessions, &edits, &watch, &threads, &n, &lifts}) {
     if (!v->ok()) return ReportError(v->status());
   }
   auto rate = args->GetDouble("rate", 0.0);
@@ -173,9 +181,9 @@ int RunServeLoad(int argc, char** argv) {
   if (!(*rate >= 0.0 && *rate <= 1e4)) {
     return ReportError(absl::InvalidArgumentError("--rate must be in [0, 10000] edits/s"));
   }
-  if (*dim < 1 || *sessions < 1 || *edits < 1 || *watch < 0) {
-    return ReportError(
-        absl::InvalidArgumentError("need --dim >= 1, --sessions >= 1, --edits >= 1"));
+  if (*dim < 1 || *sessions < 1 || *edits < 1 || *watch < 0 || *lifts < 0) {
+    return ReportError(absl::InvalidArgumentError(
+        "need --dim >= 1, --sessions >= 1, --edits >= 1, --watch >= 0, --lifts >= 0"));
   }
   const std::string field = args->Get("field").value_or("vector");
   v1::FieldType type;
@@ -273,6 +281,46 @@ int RunServeLoad(int argc, char** argv) {
     open_ms.push_back(r.open_ms);
     refactorizations += r.refactorizations;
   }
+  // All-faces lifts through the daemon (and, in process, through the LiftPlan directly).
+  std::vector<double> lift_server_ms, lift_round_trip_ms, liftplan_ms;
+  {
+    std::mt19937 rng(7);
+    std::normal_distribution<double> value(0.0, 1.0);
+    v1::LiftRequest lift;
+    lift.set_basis_id(basis->id());
+    lift.set_encoding(v1::FIELD_ENCODING_DOF);
+    for (int32_t i = 0; i < basis->columns(); ++i) lift.add_coefficients(value(rng));
+    for (int64_t l = 0; l < *lifts; ++l) {
+      Stopwatch watch;
+      absl::StatusOr<std::vector<v1::FieldChunk>> chunks = (*field_client)->Lift(lift);
+      if (!chunks.ok() || chunks->empty()) {
+        cleanup();
+        return ReportError(
+            Prefixed(chunks.ok() ? absl::InternalError("no chunks") : chunks.status(), "Lift"));
+      }
+      lift_round_trip_ms.push_back(watch.Seconds() * 1e3);
+      lift_server_ms.push_back(chunks->back().server_ms());
+    }
+    if (local != nullptr && *lifts > 0) {
+      auto served = local->registry()->GetBasis(basis->id());
+      if (!served.ok()) {
+        cleanup();
+        return ReportError(served.status());
+      }
+      const Eigen::Map<const Eigen::VectorXd> x(lift.coefficients().data(),
+                                                lift.coefficients().size());
+      std::vector<double> out((*served)->system->dofs());
+      for (int64_t l = 0; l < *lifts; ++l) {
+        Stopwatch watch;
+        if (absl::Status st = LiftInto(*(*served)->system, x, absl::MakeSpan(out)); !st.ok()) {
+          cleanup();
+          return ReportError(st);
+        }
+        liftplan_ms.push_back(watch.Seconds() * 1e3);
+      }
+    }
+  }
+
   JsonWriter j;
   j.BeginObject();
   j.String("command", "serve-load");
@@ -292,6 +340,11 @@ int RunServeLoad(int argc, char** argv) {
   WritePercentiles(j, "open_ms", Summarize(open_ms));
   WritePercentiles(j, "server_edit_ms", Summarize(server_ms));
   WritePercentiles(j, "round_trip_ms", Summarize(round_trip_ms));
+  j.BeginObject("lift_all_faces").Int("lifts", *lifts);
+  WritePercentiles(j, "server_ms", Summarize(lift_server_ms));
+  WritePercentiles(j, "round_trip_ms", Summarize(lift_round_trip_ms));
+  if (!liftplan_ms.empty()) WritePercentiles(j, "liftplan_ms", Summarize(liftplan_ms));
+  j.EndObject();
   j.BeginObject("rss_mb").Double("before", rss_before_mb).Double("after", rss_after_mb).EndObject();
   j.Double("peak_rss_mb", PeakRssMb());
   j.EndObject();

@@ -27,7 +27,7 @@ constexpr Command kCommands[] = {
      "[--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N]"},
     {"serve-load", fieldspace::bench::RunServeLoad,
      "serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] [--sessions S] [--edits E] "
-     "[--watch W] [--threads T] [--server HOST:PORT]"},
+     "[--watch W] [--threads T] [--rate HZ] [--lifts L] [--server HOST:PORT]"},
     {"approx", fieldspace::bench::RunApprox,
      "approx MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] --tests K --seed N "
      "[--basis local|eigen] [--min-constraints A] [--max-constraints B]"},

@@ -49,71 +49,6 @@ MeshRecord RecordFor(const TriangleMesh& mesh) {
 
 // --- BuildJob ----------------------------------------------------------------------------------
 
-BuildJob::Progress BuildJob::progress() const {
-  std::lock_guard<std::mutex> lock(mu_);
-  return progress_;
-}
-
-uint64_t BuildJob::Subscribe(std::function<void()> listener) {
-  bool finished;
-  uint64_t token;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    token = next_token_++;
-    finished = progress_.finished;
-    if (!finished) listeners_.emplace(token, listener);
-  }
-  if (finished) listener();
-  return token;
-}
-
-void BuildJob::Unsubscribe(uint64_t token) {
-  std::lock_guard<std::mutex> lock(mu_);
-  listeners_.erase(token);
-}
-
-void BuildJob::SetStage(BuildStage stage, double fraction) {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (progress_.finished) return;
-    const bool stage_changed = stage != progress_.stage;
-    progress_.stage = stage;
-    progress_.fraction = std::clamp(fraction, 0.0, 1.0);
-    // Core reports progress often; watchers need a few updates per second at most.
-    const auto now = std::chrono::steady_clock::now();
-    if (!stage_changed && now - last_notify_ < std::chrono::milliseconds(50)) return;
-    last_notify_ = now;
-  }
-  Notify();
-}
-
-void BuildJob::Finish(absl::Status status, const BasisRecord& record) {
-  std::map<uint64_t, std::function<void()>> listeners;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    progress_.finished = true;
-    progress_.status = std::move(status);
-    progress_.record = record;
-    if (progress_.status.ok()) {
-      progress_.stage = BuildStage::kDone;
-      progress_.fraction = 1.0;
-    }
-    listeners.swap(listeners_);
-  }
-  for (auto& [token, listener] : listeners) listener();
-}
-
-void BuildJob::Notify() {
-  std::vector<std::function<void()>> listeners;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    for (const auto& [token, listener] : listeners_) listeners.push_back(listener);
-  }
-  for (auto& listener : listeners) listener();
-}
-
-// --- Registry ----------------------------------------------------------------------------------
-
 absl::StatusOr<std::unique_ptr<Registry>> Registry::Create(Store* store, ComputePool* pool,
                                                            const RegistryOptions& options) {
   if (store == nullptr || pool == nullptr) {
@@ -276,58 +211,74 @@ absl::StatusOr<std::vector<std::string>> Registry::DeleteMesh(const std::string&
   return basis_ids;
 }
 
-absl::StatusOr<std::shared_ptr<const TriangleMesh>> Registry::GetMesh(const std::string& id) {
+template <typename E>
+absl::StatusOr<std::shared_ptr<const typename E::ValueType>> Registry::GetOrLoad(
+    std::map<std::string, E>& entries, const std::string& id,
+    const std::function<absl::Status()>& missing,
+    const std::function<absl::StatusOr<std::shared_ptr<const typename E::ValueType>>()>& load,
+    const std::function<int64_t(const typename E::ValueType&)>& bytes) {
   std::shared_ptr<std::mutex> load_mu;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    auto it = meshes_.find(id);
-    if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+    auto it = entries.find(id);
+    if (it == entries.end()) return missing();
     if (!it->second.damaged.ok()) return it->second.damaged;
     it->second.last_used = ++clock_;
     if (it->second.loaded != nullptr) {
       // Held before evicting, so that this entry counts as in use. Memory over budget (artifacts
       // that were busy when the last load happened) is trimmed on every hit, not only on loads.
-      std::shared_ptr<const TriangleMesh> handle = it->second.loaded;
+      std::shared_ptr<const typename E::ValueType> handle = it->second.loaded;
       EvictLocked();
       return handle;
     }
     load_mu = it->second.load_mu;
   }
-  // One loader per mesh; others wait here and then find it loaded.
+  // One loader per artifact; others wait here and then find it loaded.
   std::lock_guard<std::mutex> load_lock(*load_mu);
   {
     std::lock_guard<std::mutex> lock(mu_);
-    auto it = meshes_.find(id);
-    if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+    auto it = entries.find(id);
+    if (it == entries.end()) return missing();
     if (it->second.loaded != nullptr) return it->second.loaded;
   }
-  absl::StatusOr<MeshArrays> arrays = store_->LoadMesh(id);
-  absl::StatusOr<TriangleMesh> mesh =
-      arrays.ok() ? TriangleMesh::Create(*std::move(arrays)) : arrays.status();
-  if (mesh.ok() && MeshIdFor(*mesh) != id) {
-    mesh = absl::DataLossError(absl::StrCat("stored mesh ", id, " does not match its id"));
-  } else if (!mesh.ok() && arrays.ok()) {
-    // Checksums passed but validation failed: the file was written by something else.
-    mesh = absl::DataLossError(
-        absl::StrCat("stored mesh ", id, " is invalid: ", mesh.status().message()));
-  }
+  absl::StatusOr<std::shared_ptr<const typename E::ValueType>> loaded = load();
   std::lock_guard<std::mutex> lock(mu_);
-  auto it = meshes_.find(id);
-  if (!mesh.ok()) {
-    if (it != meshes_.end() && mesh.status().code() == absl::StatusCode::kDataLoss) {
-      it->second.damaged = mesh.status();
+  auto it = entries.find(id);
+  if (!loaded.ok()) {
+    if (it != entries.end() && loaded.status().code() == absl::StatusCode::kDataLoss) {
+      it->second.damaged = loaded.status();
     }
-    return mesh.status();
+    return loaded.status();
   }
-  auto shared = std::make_shared<const TriangleMesh>(*std::move(mesh));
-  if (it != meshes_.end()) {
-    it->second.loaded = shared;
-    it->second.bytes = shared->MemoryBytes();
+  if (it != entries.end()) {
+    it->second.loaded = *loaded;
+    it->second.bytes = bytes(**loaded);
     it->second.last_used = ++clock_;
     memory_in_use_ += it->second.bytes;
     EvictLocked();
   }
-  return shared;
+  return loaded;
+}
+
+absl::StatusOr<std::shared_ptr<const TriangleMesh>> Registry::GetMesh(const std::string& id) {
+  return GetOrLoad<MeshEntry>(
+      meshes_, id, [&] { return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'")); },
+      [&]() -> absl::StatusOr<std::shared_ptr<const TriangleMesh>> {
+        absl::StatusOr<MeshArrays> arrays = store_->LoadMesh(id);
+        absl::StatusOr<TriangleMesh> mesh =
+            arrays.ok() ? TriangleMesh::Create(*std::move(arrays)) : arrays.status();
+        if (mesh.ok() && MeshIdFor(*mesh) != id) {
+          return absl::DataLossError(absl::StrCat("stored mesh ", id, " does not match its id"));
+        }
+        if (!mesh.ok() && arrays.ok()) {
+          // Checksums passed but validation failed: the file was written by something else.
+          return absl::DataLossError(
+              absl::StrCat("stored mesh ", id, " is invalid: ", mesh.status().message()));
+        }
+        if (!mesh.ok()) return mesh.status();
+        return std::make_shared<const TriangleMesh>(*std::move(mesh));
+      },
+      [](const TriangleMesh& mesh) { return mesh.MemoryBytes(); });
 }
 
 std::string Registry::BasisIdFor(const BasisKey& key) {
@@ -574,49 +525,15 @@ absl::Status Registry::DeleteBasis(const std::string& id) {
 }
 
 absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std::string& id) {
-  std::shared_ptr<std::mutex> load_mu;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = bases_.find(id);
-    if (it == bases_.end()) {
-      if (builds_.count(id) > 0) {
-        return absl::FailedPreconditionError(absl::StrCat("basis ", id, " is still being built"));
-      }
-      return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
-    }
-    if (!it->second.damaged.ok()) return it->second.damaged;
-    it->second.last_used = ++clock_;
-    if (it->second.loaded != nullptr) {
-      std::shared_ptr<const ServedBasis> handle = it->second.loaded;  // see GetMesh
-      EvictLocked();
-      return handle;
-    }
-    load_mu = it->second.load_mu;
-  }
-  std::lock_guard<std::mutex> load_lock(*load_mu);
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = bases_.find(id);
-    if (it == bases_.end()) return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
-    if (it->second.loaded != nullptr) return it->second.loaded;
-  }
-  absl::StatusOr<std::shared_ptr<const ServedBasis>> loaded = LoadBasis(id);
-  std::lock_guard<std::mutex> lock(mu_);
-  auto it = bases_.find(id);
-  if (!loaded.ok()) {
-    if (it != bases_.end() && loaded.status().code() == absl::StatusCode::kDataLoss) {
-      it->second.damaged = loaded.status();
-    }
-    return loaded.status();
-  }
-  if (it != bases_.end()) {
-    it->second.loaded = *loaded;
-    it->second.bytes = (*loaded)->memory_bytes;
-    it->second.last_used = ++clock_;
-    memory_in_use_ += it->second.bytes;
-    EvictLocked();
-  }
-  return loaded;
+  return GetOrLoad<BasisEntry>(
+      bases_, id,
+      [&] {
+        if (builds_.count(id) > 0) {
+          return absl::FailedPreconditionError(absl::StrCat("basis ", id, " is still being built"));
+        }
+        return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+      },
+      [&] { return LoadBasis(id); }, [](const ServedBasis& basis) { return basis.memory_bytes; });
 }
 
 absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std::string& id) {

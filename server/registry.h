@@ -135,22 +135,30 @@ class Registry {
   int64_t memory_in_use() const;
 
  private:
-  struct MeshEntry {
-    MeshRecord record;
+  // A stored artifact (mesh or basis) and its in-memory copy, if loaded.
+  template <typename Record, typename Value>
+  struct Entry {
+    using ValueType = Value;
+    Record record;
     absl::Status damaged;  // DataLoss: the file exists but is unusable
-    std::shared_ptr<const TriangleMesh> loaded;
+    std::shared_ptr<const Value> loaded;
     std::shared_ptr<std::mutex> load_mu = std::make_shared<std::mutex>();
     int64_t bytes = 0;
     uint64_t last_used = 0;
   };
-  struct BasisEntry {
-    BasisRecord record;
-    absl::Status damaged;
-    std::shared_ptr<const ServedBasis> loaded;
-    std::shared_ptr<std::mutex> load_mu = std::make_shared<std::mutex>();
-    int64_t bytes = 0;
-    uint64_t last_used = 0;
-  };
+  using MeshEntry = Entry<MeshRecord, TriangleMesh>;
+  using BasisEntry = Entry<BasisRecord, ServedBasis>;
+
+  // The loaded artifact `id` of `entries`, loading it with `load` (outside mu_, one loader per
+  // artifact; others wait and then find it) and counting `bytes` of it against the budget.
+  // `missing` gives the status for an unknown id (called with mu_ held). A DataLoss from `load`
+  // marks the entry damaged.
+  template <typename E>
+  absl::StatusOr<std::shared_ptr<const typename E::ValueType>> GetOrLoad(
+      std::map<std::string, E>& entries, const std::string& id,
+      const std::function<absl::Status()>& missing,
+      const std::function<absl::StatusOr<std::shared_ptr<const typename E::ValueType>>()>& load,
+      const std::function<int64_t(const typename E::ValueType&)>& bytes);
 
   Registry(Store* store, ComputePool* pool, const RegistryOptions& options)
       : store_(store), pool_(pool), options_(options) {}

@@ -68,4 +68,22 @@ EdgeTransport ComputeEdgeTransport(const TriangleMesh& mesh) {
   return t;
 }
 
+void TransportPower(const EdgeTransport::Edge& edge, int32_t n, double* cos_out, double* sin_out) {
+  double zr = edge.cos_delta, zi = edge.sin_delta;
+  double pr = 1.0, pi = 0.0;
+  for (int32_t m = n; m > 0; m >>= 1) {
+    if (m & 1) {
+      const double r = pr * zr - pi * zi;
+      pi = pr * zi + pi * zr;
+      pr = r;
+    }
+    const double r = zr * zr - zi * zi;
+    zi = 2.0 * zr * zi;
+    zr = r;
+  }
+  const double inv = 1.0 / std::sqrt(pr * pr + pi * pi);
+  *cos_out = pr * inv;
+  *sin_out = pi * inv;
+}
+
 }  // namespace fieldspace

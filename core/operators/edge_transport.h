@@ -29,6 +29,12 @@ struct EdgeTransport {
 // O(#E), parallel.
 EdgeTransport ComputeEdgeTransport(const TriangleMesh& mesh);
 
+// e^{i n delta} of an edge's transport e^{i delta} by repeated squaring (exact rotations, no
+// trigonometry), renormalized against rounding drift: the rotation that maps n-field
+// representation vectors of face f1 to face f0. The n-field Laplacian and the singularity
+// indices use this one function, so they agree to the last bit.
+void TransportPower(const EdgeTransport::Edge& edge, int32_t n, double* cos_out, double* sin_out);
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_OPERATORS_EDGE_TRANSPORT_H_

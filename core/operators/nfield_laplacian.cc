@@ -16,24 +16,8 @@ absl::StatusOr<Eigen::SparseMatrix<double>> BuildNFieldStiffness(const TriangleM
   }
   const EdgeTransport transport = ComputeEdgeTransport(mesh);
   auto rotation = [&](int32_t e, double* T) {
-    // e^{i n (theta_0 - theta_1)} by repeated squaring (exact rotations, no trigonometry),
-    // renormalized against rounding drift.
-    double zr = transport.edges[e].cos_delta;
-    double zi = transport.edges[e].sin_delta;
-    double pr = 1.0, pi = 0.0;
-    for (int32_t m = n; m > 0; m >>= 1) {
-      if (m & 1) {
-        const double r = pr * zr - pi * zi;
-        pi = pr * zi + pi * zr;
-        pr = r;
-      }
-      const double r = zr * zr - zi * zi;
-      zi = 2.0 * zr * zi;
-      zr = r;
-    }
-    const double inv = 1.0 / std::sqrt(pr * pr + pi * pi);
-    pr *= inv;
-    pi *= inv;
+    double pr, pi;
+    TransportPower(transport.edges[e], n, &pr, &pi);
     // R(n (theta_0 - theta_1)) maps representation vectors of face f1 to face f0.
     T[0] = pr;
     T[1] = -pi;

@@ -20,26 +20,6 @@ constexpr double kTwoPi = 2.0 * std::numbers::pi;
 // error: the terms are exact rotations up to rounding, so the sum is off by ~1e-15 per edge.
 constexpr double kIntegerTolerance = 1e-6;
 
-// e^{i n delta} from e^{i delta} by repeated squaring, exactly as BuildNFieldStiffness does, so
-// the index uses the Laplacian's transport to the last bit.
-void RotationPower(double c, double s, int32_t n, double* pr_out, double* pi_out) {
-  double zr = c, zi = s;
-  double pr = 1.0, pi = 0.0;
-  for (int32_t m = n; m > 0; m >>= 1) {
-    if (m & 1) {
-      const double r = pr * zr - pi * zi;
-      pi = pr * zi + pi * zr;
-      pr = r;
-    }
-    const double r = zr * zr - zi * zi;
-    zi = 2.0 * zr * zi;
-    zr = r;
-  }
-  const double inv = 1.0 / std::sqrt(pr * pr + pi * pi);
-  *pr_out = pr * inv;
-  *pi_out = pi * inv;
-}
-
 absl::Status Validate(const TriangleMesh& mesh, const Eigen::Ref<const Eigen::VectorXd>& dofs,
                       const SingularityOptions& options) {
   if (options.n < 1 || options.n > 64) {
@@ -98,25 +78,25 @@ absl::StatusOr<VertexIndices> ComputeVertexIndices(const TriangleMesh& mesh,
   const EdgeTransport transport = ComputeEdgeTransport(mesh);
   std::vector<double> omega(ne, 0.0);
   std::vector<int32_t> tail(ne, -1);  // p; -1 for boundary edges and edges at zero faces
-  tbb::parallel_for(
-      tbb::blocked_range<int32_t>(0, ne, 4096), [&](const tbb::blocked_range<int32_t>& r) {
-        for (int32_t e = r.begin(); e != r.end(); ++e) {
-          const int32_t f0 = EF(e, 0), f1 = EF(e, 1);
-          if (f1 == kNoFace || zero_face[f0] || zero_face[f1]) continue;
-          double cr, ci;
-          RotationPower(transport.edges[e].cos_delta, transport.edges[e].sin_delta, n, &cr, &ci);
-          // t = R(n delta) u_f1 in f0's frame; omega = arg(u_f0 conj(t)).
-          const double a0 = dofs[2 * f0], b0 = dofs[2 * f0 + 1];
-          const double a1 = dofs[2 * f1], b1 = dofs[2 * f1 + 1];
-          const double tr = cr * a1 - ci * b1, ti = ci * a1 + cr * b1;
-          double w = std::atan2(b0 * tr - a0 * ti, a0 * tr + b0 * ti);
-          if (w == -std::numbers::pi) w = std::numbers::pi;  // atan2(-0, x < 0)
-          omega[e] = w;
-          int k = 0;
-          while (FE(f0, k) != e) ++k;
-          tail[e] = F(f0, (k + 1) % 3);
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range<int32_t>(0, ne, 4096),
+                    [&](const tbb::blocked_range<int32_t>& r) {
+                      for (int32_t e = r.begin(); e != r.end(); ++e) {
+                        const int32_t f0 = EF(e, 0), f1 = EF(e, 1);
+                        if (f1 == kNoFace || zero_face[f0] || zero_face[f1]) continue;
+                        double cr, ci;
+                        TransportPower(transport.edges[e], n, &cr, &ci);
+                        // t = R(n delta) u_f1 in f0's frame; omega = arg(u_f0 conj(t)).
+                        const double a0 = dofs[2 * f0], b0 = dofs[2 * f0 + 1];
+                        const double a1 = dofs[2 * f1], b1 = dofs[2 * f1 + 1];
+                        const double tr = cr * a1 - ci * b1, ti = ci * a1 + cr * b1;
+                        double w = std::atan2(b0 * tr - a0 * ti, a0 * tr + b0 * ti);
+                        if (w == -std::numbers::pi) w = std::numbers::pi;  // atan2(-0, x < 0)
+                        omega[e] = w;
+                        int k = 0;
+                        while (FE(f0, k) != e) ++k;
+                        tail[e] = F(f0, (k + 1) % 3);
+                      }
+                    });
 
   // Corner angles, atan2(|a x b|, a . b) (accurate for any angle).
   std::vector<double> corner_angle(3 * int64_t{nf});
