@@ -164,6 +164,7 @@ TEST_F(DesignEditorTest, ErrorsHaveExactCodesAndLeaveTheSessionAsItWas) {
   EXPECT_FALSE(editor.is_open());
   ASSERT_TRUE(editor.Apply(Open(1, 0, 1), &u).ok());
   EXPECT_EQ(editor.Apply(Open(1, 0, 1), &u).code(), absl::StatusCode::kFailedPrecondition);
+  u.Clear();
   ASSERT_TRUE(editor.Apply(Add(1, 10, 1, 0, true), &u).ok());
   const std::vector<double> before(u.coefficients().begin(), u.coefficients().end());
   // Each of these fails and changes nothing.

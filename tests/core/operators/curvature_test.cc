@@ -11,9 +11,11 @@
 #include <vector>
 
 #include "Eigen/Geometry"
+#include "core/mesh/shapes.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {

@@ -18,7 +18,8 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tbb/global_control.h"
-#include "tests/core/operators/operator_test_util.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace {
 namespace {
