@@ -132,8 +132,8 @@ TEST_F(RealBasisTest, DesignSessionWithBiharmonicEnergyMatchesFreshSolves) {
     c.face = static_cast<int32_t>(rng() % mesh_->num_faces());
     const double a = 0.001 * static_cast<double>(rng() % 6283);
     c.value = Eigen::Vector2d(std::cos(a), std::sin(a));
-    const ConstraintKind kind = id % 3 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft;
-    const absl::Status st = (*session)->AddConstraint(id, kind, c);
+    c.kind = id % 3 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft;
+    const absl::Status st = (*session)->AddConstraint(id, c);
     if (!st.ok()) {
       EXPECT_EQ(st.code(), absl::StatusCode::kFailedPrecondition);
       continue;
