@@ -30,6 +30,7 @@ class DesignEditorTest : public ::testing::Test {
     key.mesh_id = "m-test";
     key.field = FieldType::Vector();
     key.dimension = 60;
+    key.fields_per_region = 2;
     BuildContext context;
     context.threads = 2;
     auto built = BuildBasisForKey(*shared_mesh, key, Eigen::VectorXd(), context);
@@ -42,6 +43,8 @@ class DesignEditorTest : public ::testing::Test {
     basis_ = new std::shared_ptr<const ServedBasis>(*served);
   }
   static void TearDownTestSuite() { delete basis_; }
+  // A failed suite set-up must fail every test, not skip it.
+  void SetUp() override { ASSERT_NE(basis_, nullptr) << "the test basis could not be built"; }
 
   static DesignEditor NewEditor() {
     return DesignEditor(
