@@ -7,6 +7,7 @@
 #include <cmath>
 #include <fstream>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -50,6 +51,13 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
         [--encoding ambient|dof]      the model problem with soft/hard constraints
   lift BASIS_ID COEFFS_FILE (--out FIELD_FILE | --faces F1,F2,...) [--encoding ambient|dof]
   eigen BASIS_ID --count K [--coefficients]
+  curvature MESH_ID --out FIELD_FILE [--encoding ambient|dof] [--estimator jet|normal-differences]
+        [--principal FILE]            the per-face shape operator (1/length) into FIELD_FILE;
+                                      --principal: per face k1 k2 d1x d1y d1z d2x d2y d2z
+  smoothest BASIS_ID [--out FIELD_FILE] [--encoding ambient|dof]
+                                      the smoothest unit field (lowest eigenfield) of the basis
+  singularities BASIS_ID COEFFS_FILE [--zero-tolerance T]
+                                      vertex indices (in turns) of the lifted field
   design BASIS_ID --script EDITS.jsonl [--mu-s X] [--mu-b X] [--mu-c X] [--watch F1,F2,...]
         [--no-coefficients]           stream edits; one JSON line per update
 
@@ -239,6 +247,9 @@ class Cli {
   int Lift(const CommandLine& a);
   int Eigen(const CommandLine& a);
   int Design(const CommandLine& a);
+  int Curvature(const CommandLine& a);
+  int Smoothest(const CommandLine& a);
+  int Singularities(const CommandLine& a);
 
   // Lifts all faces of `basis_id` and writes FIELD_FILE (text, or PLY with the mesh).
   int LiftToFile(const std::string& basis_id, const std::vector<double>& coefficients,
@@ -311,6 +322,9 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"design",
          {Flags({"script", "mu-s", "mu-b", "mu-c", "watch"}, {"no-coefficients"}), 1,
           &Cli::Design}},
+        {"curvature", {Flags({"out", "encoding", "estimator", "principal"}), 1, &Cli::Curvature}},
+        {"smoothest", {Flags({"out", "encoding"}), 1, &Cli::Smoothest}},
+        {"singularities", {Flags({"zero-tolerance"}), 2, &Cli::Singularities}},
     };
     auto it = commands.find(command);
     if (it == commands.end()) throw UsageError("unknown command '" + command + "'");
@@ -672,6 +686,140 @@ int Cli::Eigen(const CommandLine& a) {
     }
     j.EndArray();
   }
+  j.EndObject();
+  Emit(j);
+  return 0;
+}
+
+int Cli::Curvature(const CommandLine& a) {
+  if (!a.Has("out")) throw UsageError("curvature needs --out FIELD_FILE");
+  v1::CurvatureRequest request;
+  request.set_mesh_id(a.positional()[0]);
+  const v1::FieldEncoding encoding = ParseEncoding(a);
+  request.set_encoding(encoding);
+  const std::string estimator = GetString(a, "estimator", "jet");
+  if (estimator == "jet") {
+    request.set_estimator(v1::CURVATURE_ESTIMATOR_JET);
+  } else if (estimator == "normal-differences") {
+    request.set_estimator(v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES);
+  } else {
+    throw UsageError("--estimator must be jet or normal-differences");
+  }
+  request.set_principal(a.Has("principal"));
+  absl::StatusOr<std::vector<v1::CurvatureChunk>> chunks = client_->Curvature(request);
+  if (!chunks.ok()) return Fail(chunks.status(), "Curvature");
+  FieldFile field;
+  field.encoding = encoding;
+  field.values_per_face = encoding == v1::FIELD_ENCODING_AMBIENT ? 6 : 3;
+  std::vector<double> principal;
+  double k_min = std::numeric_limits<double>::infinity();
+  double k_max = -std::numeric_limits<double>::infinity();
+  double server_ms = 0;
+  for (const v1::CurvatureChunk& chunk : *chunks) {
+    if (chunk.start_face() != field.num_faces()) {
+      return Fail(absl::DataLossError("Curvature chunks arrived out of order"));
+    }
+    field.values.insert(field.values.end(), chunk.tensor().values().begin(),
+                        chunk.tensor().values().end());
+    for (int i = 0; i < chunk.k1_size(); ++i) {
+      k_min = std::min<double>(k_min, chunk.k2(i));
+      k_max = std::max<double>(k_max, chunk.k1(i));
+      principal.insert(principal.end(), {chunk.k1(i), chunk.k2(i)});
+      for (int c = 0; c < 3; ++c) principal.push_back(chunk.d1(3 * i + c));
+      for (int c = 0; c < 3; ++c) principal.push_back(chunk.d2(3 * i + c));
+    }
+    server_ms = chunk.server_ms();
+  }
+  const std::string out = GetString(a, "out");
+  if (absl::Status st = WriteFieldText(out, field, "tensor"); !st.ok()) return Fail(st);
+  if (a.Has("principal")) {
+    FieldFile p;
+    p.encoding = v1::FIELD_ENCODING_DOF;
+    p.values_per_face = 8;
+    p.values = std::move(principal);
+    if (absl::Status st = WriteFieldText(GetString(a, "principal"), p, "principal curvatures");
+        !st.ok()) {
+      return Fail(st);
+    }
+  }
+  JsonWriter j;
+  j.BeginObject();
+  j.Key("mesh_id").String(request.mesh_id());
+  j.Key("faces").Int(field.num_faces());
+  j.Key("estimator").String(estimator);
+  j.Key("encoding").String(encoding == v1::FIELD_ENCODING_AMBIENT ? "ambient" : "dof");
+  j.Key("out").String(out);
+  if (a.Has("principal")) {
+    j.Key("principal").String(GetString(a, "principal"));
+    j.Key("k_min").Number(k_min);
+    j.Key("k_max").Number(k_max);
+  }
+  j.Key("server_ms").Number(server_ms);
+  j.EndObject();
+  Emit(j);
+  return 0;
+}
+
+int Cli::Smoothest(const CommandLine& a) {
+  v1::EigenfieldsRequest request;
+  request.set_basis_id(a.positional()[0]);
+  request.set_count(1);
+  absl::StatusOr<v1::EigenfieldsResponse> response = client_->Eigenfields(request);
+  if (!response.ok()) return Fail(response.status(), "Eigenfields");
+  const std::vector<double> coefficients(response->coefficients().begin(),
+                                         response->coefficients().end());
+  if (a.Has("out")) {
+    if (int rc =
+            LiftToFile(request.basis_id(), coefficients, ParseEncoding(a), GetString(a, "out"));
+        rc != 0) {
+      return rc;
+    }
+  }
+  JsonWriter j;
+  j.BeginObject();
+  j.Key("basis_id").String(request.basis_id());
+  // The field is M-normalized (unit L2 norm); its Dirichlet energy x^T (U^T S U) x is the lowest
+  // reduced eigenvalue.
+  j.Key("energy").Number(response->eigenvalues(0));
+  j.Key("seconds").Number(response->seconds());
+  if (a.Has("out")) j.Key("out").String(GetString(a, "out"));
+  j.Key("coefficients");
+  WriteNumbers(j, coefficients);
+  j.EndObject();
+  Emit(j);
+  return 0;
+}
+
+int Cli::Singularities(const CommandLine& a) {
+  absl::StatusOr<std::string> text = ReadFile(a.positional()[1]);
+  if (!text.ok()) return Fail(text.status());
+  absl::StatusOr<std::vector<double>> coefficients = ParseCoefficients(*text);
+  if (!coefficients.ok()) {
+    return Fail(absl::InvalidArgumentError(
+        absl::StrCat(a.positional()[1], ": ", coefficients.status().message())));
+  }
+  v1::SingularitiesRequest request;
+  request.set_basis_id(a.positional()[0]);
+  request.mutable_coefficients()->Add(coefficients->begin(), coefficients->end());
+  request.set_zero_tolerance(ParseDouble(a, "zero-tolerance", 0.0));
+  absl::StatusOr<v1::SingularitiesResponse> response = client_->Singularities(request);
+  if (!response.ok()) return Fail(response.status(), "Singularities");
+  JsonWriter j;
+  j.BeginObject();
+  j.Key("basis_id").String(request.basis_id());
+  j.Key("n").Int(response->n());
+  j.Key("singularities").BeginArray();
+  for (const v1::Singularity& s : response->singularities()) {
+    j.BeginObject().Key("vertex").Int(s.vertex()).Key("index").Number(s.turns());
+    j.Key("position");
+    WriteNumbers(j, s.position());
+    j.EndObject();
+  }
+  j.EndArray();
+  j.Key("index_sum").Number(response->index_sum());
+  j.Key("euler_characteristic").Int(response->euler_characteristic());
+  j.Key("boundary_vertices").Int(response->boundary_size());
+  j.Key("undefined_vertices").Int(response->undefined_vertices_size());
   j.EndObject();
   Emit(j);
   return 0;

@@ -246,15 +246,33 @@ absl::StatusOr<v1::SolveResponse> FieldClient::Solve(const v1::SolveRequest& req
   return Unary(&v1::FieldSpace::Stub::Solve, request);
 }
 
-absl::StatusOr<std::vector<v1::FieldChunk>> FieldClient::Lift(
-    const v1::LiftRequest& request) const {
+template <typename Request, typename Chunk>
+absl::StatusOr<std::vector<Chunk>> FieldClient::Collect(
+    std::unique_ptr<grpc::ClientReader<Chunk>> (v1::FieldSpace::Stub::*method)(grpc::ClientContext*,
+                                                                               const Request&),
+    const Request& request) const {
   std::unique_ptr<grpc::ClientContext> context = NewContext();
-  auto reader = stub_->Lift(context.get(), request);
-  std::vector<v1::FieldChunk> chunks;
+  auto reader = (stub_.get()->*method)(context.get(), request);
+  std::vector<Chunk> chunks;
   absl::Status status =
-      ReadAll(*reader, [&chunks](const v1::FieldChunk& chunk) { chunks.push_back(chunk); });
+      ReadAll(*reader, [&chunks](const Chunk& chunk) { chunks.push_back(chunk); });
   if (!status.ok()) return status;
   return chunks;
+}
+
+absl::StatusOr<std::vector<v1::FieldChunk>> FieldClient::Lift(
+    const v1::LiftRequest& request) const {
+  return Collect(&v1::FieldSpace::Stub::Lift, request);
+}
+
+absl::StatusOr<std::vector<v1::CurvatureChunk>> FieldClient::Curvature(
+    const v1::CurvatureRequest& request) const {
+  return Collect(&v1::FieldSpace::Stub::Curvature, request);
+}
+
+absl::StatusOr<v1::SingularitiesResponse> FieldClient::Singularities(
+    const v1::SingularitiesRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::Singularities, request);
 }
 
 absl::StatusOr<v1::EigenfieldsResponse> FieldClient::Eigenfields(

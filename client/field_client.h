@@ -112,6 +112,12 @@ class FieldClient {
   absl::StatusOr<fieldspace::v1::EigenfieldsResponse> Eigenfields(
       const fieldspace::v1::EigenfieldsRequest& request) const;
 
+  // All chunks of the mesh's shape operator, in order.
+  absl::StatusOr<std::vector<fieldspace::v1::CurvatureChunk>> Curvature(
+      const fieldspace::v1::CurvatureRequest& request) const;
+  absl::StatusOr<fieldspace::v1::SingularitiesResponse> Singularities(
+      const fieldspace::v1::SingularitiesRequest& request) const;
+
   // Starts a Design call; send `open` first (DesignStream::Open).
   std::unique_ptr<DesignStream> Design() const;
 
@@ -124,6 +130,12 @@ class FieldClient {
   absl::StatusOr<Response> Unary(grpc::Status (fieldspace::v1::FieldSpace::Stub::*method)(
                                      grpc::ClientContext*, const Request&, Response*),
                                  const Request& request) const;
+  // All messages of a server-streaming call of FieldSpace, in order.
+  template <typename Request, typename Chunk>
+  absl::StatusOr<std::vector<Chunk>> Collect(
+      std::unique_ptr<grpc::ClientReader<Chunk>> (fieldspace::v1::FieldSpace::Stub::*method)(
+          grpc::ClientContext*, const Request&),
+      const Request& request) const;
   // UploadMesh of the chunks from `next_chunk`, which sets the next one and returns whether more
   // may follow; an empty chunk after the first ends the upload.
   absl::StatusOr<fieldspace::v1::MeshInfo> Upload(

@@ -1,10 +1,11 @@
-// GetMeshGeometry and Lift (server streaming): chunks produced on the compute pool.
+// GetMeshGeometry, Lift and Curvature (server streaming): chunks produced on the compute pool.
 
 #include <algorithm>
 #include <numeric>
 #include <vector>
 
 #include "core/common/status_macros.h"
+#include "core/operators/curvature.h"
 #include "server/proto_convert.h"
 #include "server/reactors.h"
 #include "server/rpc_util.h"
@@ -121,7 +122,98 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
   double server_ms_ = 0;
 };
 
+// Curvature: the shape operator (and principal curvatures) computed once on the pool in
+// Prepare, then sent in chunks of faces.
+class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
+ public:
+  CurvatureWriter(FieldService* service, grpc::CallbackServerContext* context,
+                  const v1::CurvatureRequest& request)
+      : ChunkWriter(service, context), request_(request) {
+    Begin();
+  }
+
+ private:
+  absl::Status Prepare(const std::atomic<bool>*) override {
+    const auto start = Clock::now();
+    ASSIGN_OR_RETURN(encoding_, EncodingFromProto(request_.encoding()));
+    if (request_.chunk_faces() < 0) {
+      return absl::InvalidArgumentError("chunk_faces must not be negative");
+    }
+    chunk_ = request_.chunk_faces() == 0 ? kDefaultChunkFaces
+                                         : std::min(request_.chunk_faces(), kMaxChunkFaces);
+    ShapeOperatorOptions options;
+    switch (request_.estimator()) {
+      case v1::CURVATURE_ESTIMATOR_JET:
+        options.estimator = CurvatureEstimator::kJetFit;
+        break;
+      case v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES:
+        options.estimator = CurvatureEstimator::kNormalDifferences;
+        break;
+      default:
+        return absl::InvalidArgumentError(
+            absl::StrCat("unknown curvature estimator ", static_cast<int>(request_.estimator())));
+    }
+    ASSIGN_OR_RETURN(mesh_, service()->registry()->GetMesh(request_.mesh_id()));
+    ASSIGN_OR_RETURN(dofs_, ComputeShapeOperator(*mesh_, options));
+    if (request_.principal()) {
+      ASSIGN_OR_RETURN(principal_, ComputePrincipalCurvatures(*mesh_, dofs_));
+    }
+    server_ms_ = MsSince(start);
+    return absl::OkStatus();
+  }
+
+  absl::StatusOr<bool> Next(v1::CurvatureChunk* out) override {
+    const int32_t total = mesh_->num_faces();
+    if (next_ >= total) return false;
+    const auto start = Clock::now();
+    const int32_t count = std::min(chunk_, total - next_);
+    faces_.resize(count);
+    std::iota(faces_.begin(), faces_.end(), next_);
+    out->set_start_face(next_);
+    out->set_total_faces(total);
+    const FieldType type = FieldType::Tensor();
+    const int32_t vpf = ValuesPerFace(type, encoding_);
+    v1::FieldValues* tensor = out->mutable_tensor();
+    tensor->set_encoding(EncodingToProto(encoding_));
+    tensor->mutable_values()->Resize(count * vpf, 0.0f);
+    RETURN_IF_ERROR(
+        DofsToValues(*mesh_, type, encoding_, faces_,
+                     absl::MakeConstSpan(dofs_.data() + int64_t{3} * next_, int64_t{3} * count),
+                     absl::MakeSpan(tensor->mutable_values()->mutable_data(), count * vpf)));
+    if (request_.principal()) {
+      for (int32_t f = next_; f < next_ + count; ++f) {
+        out->add_k1(static_cast<float>(principal_.k1[f]));
+        out->add_k2(static_cast<float>(principal_.k2[f]));
+        for (int c = 0; c < 3; ++c) {
+          out->add_d1(static_cast<float>(principal_.d1(f, c)));
+          out->add_d2(static_cast<float>(principal_.d2(f, c)));
+        }
+      }
+    }
+    next_ += count;
+    server_ms_ += MsSince(start);
+    out->set_server_ms(server_ms_);
+    return true;
+  }
+
+  const v1::CurvatureRequest request_;
+  std::shared_ptr<const TriangleMesh> mesh_;
+  Eigen::VectorXd dofs_;
+  PrincipalCurvatures principal_;
+  FieldEncoding encoding_ = FieldEncoding::kDof;
+  std::vector<int32_t> faces_;
+  int32_t chunk_ = kDefaultChunkFaces;
+  int32_t next_ = 0;
+  double server_ms_ = 0;
+};
+
 }  // namespace
+
+grpc::ServerWriteReactor<v1::CurvatureChunk>* NewCurvatureWriter(
+    FieldService* service, grpc::CallbackServerContext* context,
+    const v1::CurvatureRequest& request) {
+  return new CurvatureWriter(service, context, request);
+}
 
 grpc::ServerWriteReactor<v1::MeshGeometryChunk>* NewGeometryWriter(
     FieldService* service, grpc::CallbackServerContext* context,

@@ -14,6 +14,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/mesh/mesh_io.h"
+#include "core/operators/singularities.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/projection.h"
 #include "core/subspace/spectrum.h"
@@ -303,6 +304,71 @@ grpc::ServerUnaryReactor* FieldService::Eigenfields(grpc::CallbackServerContext*
 grpc::ServerBidiReactor<v1::DesignRequest, v1::DesignUpdate>* FieldService::Design(
     grpc::CallbackServerContext* context) {
   return NewDesignReactor(this, context);
+}
+
+// --- applications ------------------------------------------------------------------------------
+
+grpc::ServerWriteReactor<v1::CurvatureChunk>* FieldService::Curvature(
+    grpc::CallbackServerContext* context, const v1::CurvatureRequest* request) {
+  return NewCurvatureWriter(this, context, *request);
+}
+
+grpc::ServerUnaryReactor* FieldService::Singularities(grpc::CallbackServerContext* context,
+                                                      const v1::SingularitiesRequest* request,
+                                                      v1::SingularitiesResponse* response) {
+  return RunUnary(
+      this, context, Where::kPool,
+      [this, request, response](const std::atomic<bool>*) -> absl::Status {
+        ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
+                         registry_->GetBasis(request->basis_id()));
+        const TriangleMesh& mesh = *basis->mesh;
+        const FieldType& type = basis->basis->type;
+        if (type.kind == FieldKind::kTensor) {
+          return absl::InvalidArgumentError(
+              "singularities are defined for vector and n-field bases, not tensor bases");
+        }
+        const bool has_field = !request->field().values().empty();
+        if (has_field == !request->coefficients().empty()) {
+          return absl::InvalidArgumentError(
+              "give the field either as coefficients or as values on all faces (field)");
+        }
+        Eigen::VectorXd dofs;
+        if (has_field) {
+          ASSIGN_OR_RETURN(dofs, FieldFromProto(request->field(), *basis));
+        } else {
+          ASSIGN_OR_RETURN(Eigen::VectorXd x,
+                           CoefficientsFromProto(request->coefficients(), *basis));
+          ASSIGN_OR_RETURN(dofs, fieldspace::Lift(*basis->system, x));
+        }
+        SingularityOptions options;
+        options.n = type.kind == FieldKind::kNField ? type.n : 1;
+        options.zero_tolerance = request->zero_tolerance();
+        ASSIGN_OR_RETURN(fieldspace::Singularities found,
+                         ComputeSingularities(mesh, dofs, options));
+        const auto position = [&mesh](int32_t v, v1::Singularity* s) {
+          for (int c = 0; c < 3; ++c) s->add_position(mesh.vertices()(v, c));
+        };
+        response->set_n(found.n);
+        for (const fieldspace::Singularity& s : found.singularities) {
+          v1::Singularity* out = response->add_singularities();
+          out->set_vertex(s.vertex);
+          out->set_index(s.index);
+          out->set_turns(s.turns);
+          position(s.vertex, out);
+        }
+        for (const BoundaryIndex& b : found.boundary) {
+          v1::Singularity* out = response->add_boundary();
+          out->set_vertex(b.vertex);
+          out->set_turns(b.turns);
+          position(b.vertex, out);
+        }
+        response->mutable_undefined_vertices()->Add(found.undefined_vertices.begin(),
+                                                    found.undefined_vertices.end());
+        response->set_index_sum(static_cast<double>(found.index_sum) / found.n);
+        response->set_euler_characteristic(mesh.num_vertices() - mesh.num_edges() +
+                                           mesh.num_faces());
+        return absl::OkStatus();
+      });
 }
 
 }  // namespace fieldspace::server

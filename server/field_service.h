@@ -116,6 +116,13 @@ class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
   grpc::ServerBidiReactor<fieldspace::v1::DesignRequest, fieldspace::v1::DesignUpdate>* Design(
       grpc::CallbackServerContext* context) override;
 
+  grpc::ServerWriteReactor<fieldspace::v1::CurvatureChunk>* Curvature(
+      grpc::CallbackServerContext* context,
+      const fieldspace::v1::CurvatureRequest* request) override;
+  grpc::ServerUnaryReactor* Singularities(grpc::CallbackServerContext* context,
+                                          const fieldspace::v1::SingularitiesRequest* request,
+                                          fieldspace::v1::SingularitiesResponse* response) override;
+
  private:
   Registry* const registry_;
   ComputePool* const pool_;

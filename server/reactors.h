@@ -24,6 +24,11 @@ grpc::ServerWriteReactor<fieldspace::v1::FieldChunk>* NewLiftWriter(
     FieldService* service, grpc::CallbackServerContext* context,
     const fieldspace::v1::LiftRequest& request);
 
+// Curvature: the mesh's shape operator, computed on the pool, sent in chunks.
+grpc::ServerWriteReactor<fieldspace::v1::CurvatureChunk>* NewCurvatureWriter(
+    FieldService* service, grpc::CallbackServerContext* context,
+    const fieldspace::v1::CurvatureRequest& request);
+
 // BuildBasis: watches a (possibly shared) build job; the job outlives the stream.
 grpc::ServerWriteReactor<fieldspace::v1::BuildBasisProgress>* NewBuildWatcher(
     FieldService* service, grpc::CallbackServerContext* context,

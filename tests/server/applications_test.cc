@@ -1,0 +1,232 @@
+// The paper's applications on the wire (Curvature, Singularities, the smoothest field through
+// Eigenfields), through the C++ client library against an in-process FieldServer, with answers a
+// wrong implementation would get wrong: the sphere's shape operator (1/r) (I - n n^T), the Euler
+// characteristic as the sum of indices (Poincare-Hopf), exact status codes.
+
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "client/field_client.h"
+#include "core/mesh/shapes.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "server/field_server.h"
+#include "tests/testing/matchers.h"
+
+namespace fieldspace::server {
+namespace {
+
+namespace fs = std::filesystem;
+namespace v1 = ::fieldspace::v1;
+using ::fieldspace::testing::IsOk;
+using ::fieldspace::testing::StatusIs;
+
+class ApplicationsTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    root_ = new fs::path(fs::temp_directory_path() / absl::StrCat("fs_apps_", ::getpid()));
+    fs::remove_all(*root_);
+    FieldServerOptions options;
+    options.listen = "127.0.0.1:0";
+    options.store_dir = (*root_ / "store").string();
+    options.threads = 2;
+    auto started = FieldServer::Start(options);
+    ASSERT_TRUE(started.ok()) << started.status();
+    server_ = started->release();
+    client::FieldClientOptions client_options;
+    client_options.address = server_->address();
+    auto client = client::FieldClient::Create(client_options);
+    ASSERT_TRUE(client.ok()) << client.status();
+    client_ = client->release();
+  }
+  static void TearDownTestSuite() {
+    delete client_;
+    if (server_ != nullptr) server_->Shutdown(std::chrono::seconds(5));
+    delete server_;
+    fs::remove_all(*root_);
+    delete root_;
+  }
+  void SetUp() override { ASSERT_NE(client_, nullptr) << "the server did not start"; }
+
+  static std::string Upload(absl::StatusOr<MeshArrays> arrays, const std::string& name) {
+    EXPECT_TRUE(arrays.ok()) << arrays.status();
+    auto info = client_->UploadMeshArrays(*arrays, name);
+    EXPECT_TRUE(info.ok()) << info.status();
+    return info.ok() ? info->id() : "";
+  }
+  static std::string Build(const std::string& mesh_id, v1::FieldKind kind, int n, int d) {
+    v1::BuildBasisRequest request;
+    request.set_mesh_id(mesh_id);
+    request.mutable_field()->set_kind(kind);
+    request.mutable_field()->set_n(n);
+    request.set_dimension(d);
+    auto basis = client_->BuildBasis(request);
+    EXPECT_TRUE(basis.ok()) << basis.status();
+    return basis.ok() ? basis->id() : "";
+  }
+  // The lowest reduced eigenfield: the smoothest unit field of the basis.
+  static std::vector<double> Smoothest(const std::string& basis_id) {
+    v1::EigenfieldsRequest request;
+    request.set_basis_id(basis_id);
+    request.set_count(1);
+    auto response = client_->Eigenfields(request);
+    EXPECT_TRUE(response.ok()) << response.status();
+    if (!response.ok()) return {};
+    return {response->coefficients().begin(), response->coefficients().end()};
+  }
+
+  static fs::path* root_;
+  static FieldServer* server_;
+  static client::FieldClient* client_;
+};
+
+fs::path* ApplicationsTest::root_ = nullptr;
+FieldServer* ApplicationsTest::server_ = nullptr;
+client::FieldClient* ApplicationsTest::client_ = nullptr;
+
+TEST_F(ApplicationsTest, CurvatureOfASphereIsOneOverRTimesTheTangentProjector) {
+  const double r = 2.0;
+  const std::string mesh_id = Upload(MakeIcosphere(4, r), "sphere_r2");  // 5120 faces
+  v1::CurvatureRequest request;
+  request.set_mesh_id(mesh_id);
+  request.set_encoding(v1::FIELD_ENCODING_AMBIENT);
+  request.set_principal(true);
+  request.set_chunk_faces(1000);  // several chunks
+  auto chunks = client_->Curvature(request);
+  ASSERT_THAT(chunks.status(), IsOk());
+  ASSERT_EQ(chunks->size(), 6u);
+  auto mesh = MakeIcosphere(4, r);
+  ASSERT_TRUE(mesh.ok());
+  int32_t next = 0;
+  double worst_tensor = 0, worst_k = 0;
+  for (const v1::CurvatureChunk& chunk : *chunks) {
+    EXPECT_EQ(chunk.start_face(), next);
+    EXPECT_EQ(chunk.total_faces(), 5120);
+    const int count = chunk.tensor().values_size() / 6;
+    ASSERT_EQ(chunk.k1_size(), count);
+    ASSERT_EQ(chunk.d1_size(), 3 * count);
+    for (int i = 0; i < count; ++i) {
+      const int f = next + i;
+      // The face's outward normal from its barycenter (the icosphere is centered at 0).
+      Eigen::Vector3d n = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 3; ++k) n += mesh->vertices.row(mesh->faces(f, k)).transpose();
+      n.normalize();
+      const Eigen::Matrix3d expected = (Eigen::Matrix3d::Identity() - n * n.transpose()) / r;
+      const float* v = chunk.tensor().values().data() + 6 * i;
+      const double got[6] = {v[0], v[1], v[2], v[3], v[4], v[5]};
+      const double want[6] = {expected(0, 0), expected(1, 1), expected(2, 2),
+                              expected(0, 1), expected(1, 2), expected(2, 0)};
+      for (int c = 0; c < 6; ++c) worst_tensor = std::max(worst_tensor, std::abs(got[c] - want[c]));
+      worst_k = std::max({worst_k, std::abs(chunk.k1(i) * r - 1), std::abs(chunk.k2(i) * r - 1)});
+      // Principal directions are tangent (orthogonal to n) and orthonormal.
+      const Eigen::Vector3d d1(chunk.d1(3 * i), chunk.d1(3 * i + 1), chunk.d1(3 * i + 2));
+      const Eigen::Vector3d d2(chunk.d2(3 * i), chunk.d2(3 * i + 1), chunk.d2(3 * i + 2));
+      EXPECT_NEAR(d1.norm(), 1.0, 1e-5);
+      EXPECT_LT(std::abs(d1.dot(d2)), 1e-5);
+    }
+    next += count;
+    EXPECT_GT(chunk.server_ms(), 0.0);
+  }
+  EXPECT_EQ(next, 5120);
+  EXPECT_LT(worst_tensor, 0.02 / r);  // the estimator converges: ~1% at this resolution
+  EXPECT_LT(worst_k, 0.02);
+  // DOF encoding: 3 values per face, and unknown meshes and bad requests have exact codes.
+  request.set_encoding(v1::FIELD_ENCODING_DOF);
+  request.set_principal(false);
+  auto dofs = client_->Curvature(request);
+  ASSERT_THAT(dofs.status(), IsOk());
+  EXPECT_EQ((*dofs)[0].tensor().values_size(), 3 * 1000);
+  EXPECT_EQ((*dofs)[0].k1_size(), 0);
+  request.set_mesh_id("m-0000000000000000");
+  EXPECT_THAT(client_->Curvature(request).status(), StatusIs(absl::StatusCode::kNotFound));
+  request.set_mesh_id(mesh_id);
+  request.set_chunk_faces(-1);
+  EXPECT_THAT(client_->Curvature(request).status(), StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
+TEST_F(ApplicationsTest, SingularityIndicesSumToTheEulerCharacteristic) {
+  struct Case {
+    std::string name;
+    absl::StatusOr<MeshArrays> arrays;
+    v1::FieldKind kind;
+    int n;
+    int chi;
+  };
+  const Case cases[] = {
+      {"sphere_vector", MakeIcosphere(3, 1.0), v1::FIELD_KIND_VECTOR, 1, 2},
+      {"sphere_cross", MakeIcosphere(3, 1.0), v1::FIELD_KIND_NFIELD, 4, 2},
+      {"torus_line", MakeTorus(1.0, 0.4, 48, 24), v1::FIELD_KIND_NFIELD, 2, 0},
+      {"genus2_vector", MakeGenusSurface(2, 24), v1::FIELD_KIND_VECTOR, 1, -2},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const std::string mesh_id = Upload(c.arrays, c.name);
+    const std::string basis_id = Build(mesh_id, c.kind, c.n, 60);
+    const std::vector<double> x = Smoothest(basis_id);
+    v1::SingularitiesRequest request;
+    request.set_basis_id(basis_id);
+    request.mutable_coefficients()->Add(x.begin(), x.end());
+    auto response = client_->Singularities(request);
+    ASSERT_THAT(response.status(), IsOk());
+    EXPECT_EQ(response->n(), c.n);
+    EXPECT_EQ(response->euler_characteristic(), c.chi);
+    EXPECT_EQ(response->index_sum(), c.chi);
+    int64_t sum = 0;
+    for (const v1::Singularity& s : response->singularities()) {
+      EXPECT_NE(s.index(), 0);
+      EXPECT_DOUBLE_EQ(s.turns(), static_cast<double>(s.index()) / c.n);
+      EXPECT_EQ(s.position_size(), 3);
+      sum += s.index();
+    }
+    EXPECT_EQ(sum, int64_t{c.chi} * c.n);
+    // The same field given as values on all faces (lifted, DOF encoding) gives the same answer.
+    v1::LiftRequest lift;
+    lift.set_basis_id(basis_id);
+    lift.mutable_coefficients()->Add(x.begin(), x.end());
+    lift.set_encoding(v1::FIELD_ENCODING_DOF);
+    auto chunks = client_->Lift(lift);
+    ASSERT_THAT(chunks.status(), IsOk());
+    v1::SingularitiesRequest by_field;
+    by_field.set_basis_id(basis_id);
+    by_field.mutable_field()->set_encoding(v1::FIELD_ENCODING_DOF);
+    for (const v1::FieldChunk& chunk : *chunks) {
+      by_field.mutable_field()->mutable_values()->Add(chunk.field().values().begin(),
+                                                      chunk.field().values().end());
+    }
+    auto again = client_->Singularities(by_field);
+    ASSERT_THAT(again.status(), IsOk());
+    EXPECT_EQ(again->index_sum(), c.chi);
+  }
+}
+
+TEST_F(ApplicationsTest, SingularitiesErrorsHaveExactCodes) {
+  const std::string mesh_id = Upload(MakeIcosphere(2, 1.0), "small_sphere");
+  const std::string vector_id = Build(mesh_id, v1::FIELD_KIND_VECTOR, 0, 20);
+  const std::string tensor_id = Build(mesh_id, v1::FIELD_KIND_TENSOR, 0, 21);
+  v1::SingularitiesRequest request;
+  request.set_basis_id(tensor_id);
+  request.mutable_coefficients()->Resize(21, 0.5);
+  EXPECT_THAT(client_->Singularities(request).status(),
+              StatusIs(absl::StatusCode::kInvalidArgument));  // tensor basis
+  request.set_basis_id(vector_id);
+  request.clear_coefficients();
+  EXPECT_THAT(client_->Singularities(request).status(),
+              StatusIs(absl::StatusCode::kInvalidArgument));  // no field at all
+  request.mutable_coefficients()->Resize(19, 0.5);
+  EXPECT_THAT(client_->Singularities(request).status(),
+              StatusIs(absl::StatusCode::kInvalidArgument));  // d - 1 coefficients
+  request.clear_coefficients();
+  request.mutable_coefficients()->Resize(20, std::nan(""));
+  EXPECT_THAT(client_->Singularities(request).status(),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  request.set_basis_id("b-0000000000000000");
+  EXPECT_THAT(client_->Singularities(request).status(), StatusIs(absl::StatusCode::kNotFound));
+}
+
+}  // namespace
+}  // namespace fieldspace::server
