@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/mesh/mesh_io.h"
@@ -42,11 +43,19 @@ absl::Status FieldService::Admit(grpc::CallbackServerContext* context) const {
     return absl::UnauthenticatedError("missing 'authorization: Bearer <token>' metadata");
   }
   const std::string_view value(it->second.data(), it->second.size());
-  const std::string expected = "Bearer " + options_.auth_token;
+  // The scheme is case-insensitive (RFC 7235, section 2.1); the token is not.
+  constexpr std::string_view kScheme = "bearer ";
+  if (value.size() < kScheme.size() ||
+      !absl::EqualsIgnoreCase(absl::string_view(value.data(), kScheme.size()),
+                              absl::string_view(kScheme.data(), kScheme.size()))) {
+    return absl::UnauthenticatedError("expected 'authorization: Bearer <token>'");
+  }
+  const std::string_view token = value.substr(kScheme.size());
+  const std::string& expected = options_.auth_token;
   // Constant-time comparison: the time taken must not reveal how much of the token matched.
-  unsigned char diff = value.size() == expected.size() ? 0 : 1;
+  unsigned char diff = token.size() == expected.size() ? 0 : 1;
   for (size_t i = 0; i < expected.size(); ++i) {
-    diff |= static_cast<unsigned char>(expected[i] ^ (i < value.size() ? value[i] : 0));
+    diff |= static_cast<unsigned char>(expected[i] ^ (i < token.size() ? token[i] : 0));
   }
   if (diff != 0) return absl::UnauthenticatedError("invalid token");
   return absl::OkStatus();

@@ -1,5 +1,6 @@
 // UploadMesh (client streaming).
 
+#include <algorithm>
 #include <atomic>
 #include <cstring>
 #include <string>
@@ -31,8 +32,10 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadMeshRequest
       End();
       return;
     }
-    if (absl::Status st = Accept(); !st.ok()) {
-      FinishWith(this, (st));
+    // Guarded: a header whose announced size cannot be reserved (bad_alloc, length_error) used
+    // to throw out of this callback, which left the call unfinished and blocked shutdown.
+    if (absl::Status st = Guarded([this] { return Accept(); }); !st.ok()) {
+      FinishWith(this, st);
       return;
     }
     StartRead(&request_);
@@ -82,7 +85,9 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadMeshRequest
         return absl::ResourceExhaustedError(absl::StrCat(
             "upload of ", header_.total_bytes(), " bytes exceeds the limit of ", limit, " bytes"));
       }
-      if (header_.total_bytes() > 0) data_.reserve(header_.total_bytes());
+      // Reserve up front only what is cheap to hold; larger uploads grow as chunks arrive.
+      constexpr uint64_t kMaxReserve = uint64_t{256} << 20;
+      if (header_.total_bytes() > 0) data_.reserve(std::min(header_.total_bytes(), kMaxReserve));
     } else if (request_.has_header()) {
       return absl::InvalidArgumentError("only the first UploadMeshRequest may carry a header");
     }
