@@ -56,6 +56,11 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
                                       --principal: per face k1 k2 d1x d1y d1z d2x d2y d2z
   smoothest BASIS_ID [--out FIELD_FILE] [--encoding ambient|dof]
                                       the smoothest unit field (lowest eigenfield) of the basis
+  smooth BASIS_ID FIELD_FILE [--mu-s X] [--mu-b X] [--mu-c X] [--face-weights FILE] [--raw-weights]
+        [--out FIELD_FILE] [--encoding ambient|dof]
+                                      the field closest to FIELD_FILE (M-weighted) with harmonic
+                                      and biharmonic fairness; scale-free weights unless
+                                      --raw-weights (defaults 0.001, 0, 1)
   singularities BASIS_ID COEFFS_FILE [--zero-tolerance T]
                                       vertex indices (in turns) of the lifted field
   design BASIS_ID --script EDITS.jsonl [--mu-s X] [--mu-b X] [--mu-c X] [--watch F1,F2,...]
@@ -250,6 +255,7 @@ class Cli {
   int Curvature(const CommandLine& a);
   int Smoothest(const CommandLine& a);
   int Singularities(const CommandLine& a);
+  int Smooth(const CommandLine& a);
 
   // Lifts all faces of `basis_id` and writes FIELD_FILE (text, or PLY with the mesh).
   int LiftToFile(const std::string& basis_id, const std::vector<double>& coefficients,
@@ -325,6 +331,9 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"curvature", {Flags({"out", "encoding", "estimator", "principal"}), 1, &Cli::Curvature}},
         {"smoothest", {Flags({"out", "encoding"}), 1, &Cli::Smoothest}},
         {"singularities", {Flags({"zero-tolerance"}), 2, &Cli::Singularities}},
+        {"smooth",
+         {Flags({"mu-s", "mu-b", "mu-c", "face-weights", "out", "encoding"}, {"raw-weights"}), 2,
+          &Cli::Smooth}},
     };
     auto it = commands.find(command);
     if (it == commands.end()) throw UsageError("unknown command '" + command + "'");
@@ -820,6 +829,59 @@ int Cli::Singularities(const CommandLine& a) {
   j.Key("euler_characteristic").Int(response->euler_characteristic());
   j.Key("boundary_vertices").Int(response->boundary_size());
   j.Key("undefined_vertices").Int(response->undefined_vertices_size());
+  j.EndObject();
+  Emit(j);
+  return 0;
+}
+
+int Cli::Smooth(const CommandLine& a) {
+  absl::StatusOr<FieldFile> field = ReadFieldFile(a.positional()[1]);
+  if (!field.ok()) return Fail(field.status());
+  v1::SmoothRequest request;
+  request.set_basis_id(a.positional()[0]);
+  request.mutable_field()->set_encoding(field->encoding);
+  request.mutable_field()->mutable_values()->Add(field->values.begin(), field->values.end());
+  request.mutable_weights()->set_mu_s(ParseDouble(a, "mu-s", 0.001));
+  request.mutable_weights()->set_mu_b(ParseDouble(a, "mu-b", 0.0));
+  request.mutable_weights()->set_mu_c(ParseDouble(a, "mu-c", 1.0));
+  request.set_scale_free(!a.Has("raw-weights"));
+  if (a.Has("face-weights")) {
+    const std::string path = GetString(a, "face-weights");
+    absl::StatusOr<std::string> text = ReadFile(path);
+    if (!text.ok()) return Fail(text.status());
+    absl::StatusOr<std::vector<double>> weights = ParseCoefficients(*text);
+    if (!weights.ok()) {
+      return Fail(
+          absl::InvalidArgumentError(absl::StrCat(path, ": ", weights.status().message())));
+    }
+    request.mutable_face_weights()->Add(weights->begin(), weights->end());
+  }
+  absl::StatusOr<v1::SmoothResponse> response = client_->Smooth(request);
+  if (!response.ok()) return Fail(response.status(), "Smooth");
+  const std::vector<double> coefficients(response->coefficients().begin(),
+                                         response->coefficients().end());
+  if (a.Has("out")) {
+    if (int rc = LiftToFile(request.basis_id(), coefficients, ParseEncoding(a),
+                            GetString(a, "out"));
+        rc != 0) {
+      return rc;
+    }
+  }
+  const v1::SmoothTimings& t = response->timings();
+  JsonWriter j;
+  j.BeginObject();
+  j.Key("basis_id").String(request.basis_id());
+  j.Key("scale_free").Bool(request.scale_free());
+  j.Key("timings").BeginObject();
+  j.Key("rhs_ms").Number(t.rhs_ms());
+  j.Key("weighted_mass_ms").Number(t.weighted_mass_ms());
+  j.Key("factorize_ms").Number(t.factorize_ms());
+  j.Key("solve_ms").Number(t.solve_ms());
+  j.Key("total_ms").Number(t.total_ms());
+  j.EndObject();
+  if (a.Has("out")) j.Key("out").String(GetString(a, "out"));
+  j.Key("coefficients");
+  WriteNumbers(j, coefficients);
   j.EndObject();
   Emit(j);
   return 0;

@@ -275,6 +275,10 @@ absl::StatusOr<v1::SingularitiesResponse> FieldClient::Singularities(
   return Unary(&v1::FieldSpace::Stub::Singularities, request);
 }
 
+absl::StatusOr<v1::SmoothResponse> FieldClient::Smooth(const v1::SmoothRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::Smooth, request);
+}
+
 absl::StatusOr<v1::EigenfieldsResponse> FieldClient::Eigenfields(
     const v1::EigenfieldsRequest& request) const {
   return Unary(&v1::FieldSpace::Stub::Eigenfields, request);

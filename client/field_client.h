@@ -117,6 +117,8 @@ class FieldClient {
       const fieldspace::v1::CurvatureRequest& request) const;
   absl::StatusOr<fieldspace::v1::SingularitiesResponse> Singularities(
       const fieldspace::v1::SingularitiesRequest& request) const;
+  absl::StatusOr<fieldspace::v1::SmoothResponse> Smooth(
+      const fieldspace::v1::SmoothRequest& request) const;
 
   // Starts a Design call; send `open` first (DesignStream::Open).
   std::unique_ptr<DesignStream> Design() const;

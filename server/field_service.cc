@@ -18,6 +18,7 @@
 #include "core/operators/singularities.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/projection.h"
+#include "core/subspace/smoothing.h"
 #include "core/subspace/spectrum.h"
 #include "server/data_root.h"
 #include "server/proto_convert.h"
@@ -376,6 +377,57 @@ grpc::ServerUnaryReactor* FieldService::Singularities(grpc::CallbackServerContex
         response->set_index_sum(static_cast<double>(found.index_sum) / found.n);
         response->set_euler_characteristic(mesh.num_vertices() - mesh.num_edges() +
                                            mesh.num_faces());
+        return absl::OkStatus();
+      });
+}
+
+grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* context,
+                                               const v1::SmoothRequest* request,
+                                               v1::SmoothResponse* response) {
+  return RunUnary(
+      this, context, Where::kPool,
+      [this, request, response](const std::atomic<bool>* cancel) -> absl::Status {
+        const auto start = Clock::now();
+        ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
+                         registry_->GetBasis(request->basis_id()));
+        ASSIGN_OR_RETURN(Eigen::VectorXd X0, FieldFromProto(request->field(), *basis));
+        const EnergyWeights weights = WeightsFromProto(request->weights());
+        RETURN_IF_ERROR(ValidateWeights(weights));
+        ASSIGN_OR_RETURN(FieldEncoding encoding, EncodingFromProto(request->field_encoding()));
+        if (request->return_field()) {
+          const int64_t bytes =
+              int64_t{4} * ValuesPerFace(basis->basis->type, encoding) * basis->mesh->num_faces();
+          if (bytes > options_.max_message_bytes - (int64_t{1} << 20)) {
+            return absl::ResourceExhaustedError(absl::StrCat(
+                "the smoothed field (", bytes, " bytes) exceeds the message size limit; use Lift"));
+          }
+        }
+        SmoothingOptions options;
+        options.scale_free = request->scale_free();
+        options.cancel = cancel;
+        ASSIGN_OR_RETURN(SmoothingResult result,
+                         SmoothReduced(*basis->system, X0, weights, request->face_weights(),
+                                       options));
+        response->mutable_coefficients()->Add(
+            result.coefficients.data(), result.coefficients.data() + result.coefficients.size());
+        double lift_ms = 0;
+        if (request->return_field()) {
+          const auto lift_start = Clock::now();
+          std::vector<int32_t> faces(basis->mesh->num_faces());
+          std::iota(faces.begin(), faces.end(), 0);
+          response->mutable_field()->set_encoding(EncodingToProto(encoding));
+          RETURN_IF_ERROR(LiftToValues(*basis, result.coefficients, faces, encoding,
+                                       response->mutable_field()->mutable_values()));
+          lift_ms = MsSince(lift_start);
+        }
+        v1::SmoothTimings* t = response->mutable_timings();
+        t->set_rhs_ms(result.timings.rhs_ms);
+        t->set_weighted_mass_ms(result.timings.weighted_mass_ms);
+        t->set_factorize_ms(result.timings.factorize_ms);
+        t->set_solve_ms(result.timings.solve_ms);
+        t->set_lift_ms(lift_ms);
+        t->set_total_ms(MsSince(start));
+        response->set_backward_error(result.backward_error);
         return absl::OkStatus();
       });
 }

@@ -122,6 +122,9 @@ class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
   grpc::ServerUnaryReactor* Singularities(grpc::CallbackServerContext* context,
                                           const fieldspace::v1::SingularitiesRequest* request,
                                           fieldspace::v1::SingularitiesResponse* response) override;
+  grpc::ServerUnaryReactor* Smooth(grpc::CallbackServerContext* context,
+                                   const fieldspace::v1::SmoothRequest* request,
+                                   fieldspace::v1::SmoothResponse* response) override;
 
  private:
   Registry* const registry_;

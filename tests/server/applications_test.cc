@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <memory>
+#include <random>
 #include <string>
 
 #include "absl/strings/str_cat.h"
@@ -202,6 +203,66 @@ TEST_F(ApplicationsTest, SingularityIndicesSumToTheEulerCharacteristic) {
     ASSERT_THAT(again.status(), IsOk());
     EXPECT_EQ(again->index_sum(), c.chi);
   }
+}
+
+// Smoothing on the wire: scale-free weights mean the same on a mesh scaled by 10 (the smoothed
+// field's DOFs agree), raw weights do not; with a vanishing fairness weight a field in span(U) is
+// returned unchanged.
+TEST_F(ApplicationsTest, SmoothWeightsAreScaleFree) {
+  const std::string small = Build(Upload(MakeIcosphere(3, 1.0), "unit_sphere"),
+                                  v1::FIELD_KIND_VECTOR, 0, 80);
+  const std::string large = Build(Upload(MakeIcosphere(3, 10.0), "sphere_r10"),
+                                  v1::FIELD_KIND_VECTOR, 0, 80);
+  // A rough input: DOF noise on every face (the same DOFs on both meshes: frames are equal).
+  std::mt19937 rng(3);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  v1::FieldValues input;
+  input.set_encoding(v1::FIELD_ENCODING_DOF);
+  for (int i = 0; i < 2 * 1280; ++i) input.add_values(static_cast<float>(normal(rng)));
+  const auto smooth = [&](const std::string& basis_id, bool scale_free) {
+    v1::SmoothRequest request;
+    request.set_basis_id(basis_id);
+    *request.mutable_field() = input;
+    request.mutable_weights()->set_mu_s(0.01);
+    request.mutable_weights()->set_mu_b(0.0001);
+    request.mutable_weights()->set_mu_c(1.0);
+    request.set_scale_free(scale_free);
+    request.set_return_field(true);
+    request.set_field_encoding(v1::FIELD_ENCODING_DOF);
+    auto response = client_->Smooth(request);
+    EXPECT_THAT(response.status(), IsOk());
+    return response.ok() ? std::vector<float>(response->field().values().begin(),
+                                              response->field().values().end())
+                         : std::vector<float>();
+  };
+  const auto relative = [](const std::vector<float>& a, const std::vector<float>& b) {
+    double num = 0, den = 0;
+    for (size_t i = 0; i < a.size(); ++i) {
+      num += (a[i] - b[i]) * (a[i] - b[i]);
+      den += a[i] * a[i];
+    }
+    return std::sqrt(num / den);
+  };
+  const std::vector<float> a = smooth(small, true), b = smooth(large, true);
+  ASSERT_EQ(a.size(), 2u * 1280);
+  ASSERT_EQ(b.size(), a.size());
+  EXPECT_LT(relative(a, b), 1e-4);
+  const std::vector<float> c = smooth(small, false), e = smooth(large, false);
+  EXPECT_GT(relative(c, e), 0.05);
+  // Errors: tensor values for a vector basis, negative face weights, invalid weights.
+  v1::SmoothRequest bad;
+  bad.set_basis_id(small);
+  *bad.mutable_field() = input;
+  bad.mutable_weights()->set_mu_s(1);
+  bad.mutable_weights()->set_mu_c(1);
+  bad.mutable_face_weights()->Resize(1280, -1.0);
+  EXPECT_THAT(client_->Smooth(bad).status(), StatusIs(absl::StatusCode::kInvalidArgument));
+  bad.clear_face_weights();
+  bad.mutable_weights()->set_mu_s(0);
+  EXPECT_THAT(client_->Smooth(bad).status(), StatusIs(absl::StatusCode::kInvalidArgument));
+  bad.mutable_weights()->set_mu_s(1);
+  bad.mutable_field()->mutable_values()->RemoveLast();
+  EXPECT_THAT(client_->Smooth(bad).status(), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST_F(ApplicationsTest, SingularitiesErrorsHaveExactCodes) {
