@@ -281,6 +281,15 @@ TEST(SmoothingTest, Errors) {
   cancelled.cancel = &cancel;
   EXPECT_THAT(SmoothReduced(**sys, field, w, {}, cancelled),
               StatusIs(absl::StatusCode::kCancelled));
+  // A flag set after the smoother was created cancels its solves.
+  CancelFlag later{false};
+  SmoothingOptions cancel_later;
+  cancel_later.cancel = &later;
+  auto smoother = ReducedSmoother::Create(*sys, field, {}, cancel_later);
+  ASSERT_TRUE(smoother.ok()) << smoother.status();
+  ASSERT_TRUE(smoother->Solve(w).ok());
+  later = true;
+  EXPECT_THAT(smoother->Solve(w), StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(SmoothingTest, ZeroDataWeightNeedsADefiniteEnergy) {
