@@ -31,6 +31,9 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
 // holds rows a <= c: only the upper triangle is accumulated).
 struct ProductWorkspace {
   std::vector<double> s, b, m;  // band accumulators, width x d each
+  // Pattern mode (ProductPass::pattern): the mass product on the pattern's positions instead.
+  std::vector<double> pattern_values;
+  bool outside_pattern = false;
   // Sparse accumulator for one row of S U.
   std::vector<double> spa;
   std::vector<char> mark;
@@ -60,13 +63,27 @@ struct ProductPass {
   int64_t accumulator_budget_bytes = 0;
   const CancelFlag* cancel = nullptr;
   const std::function<void(double fraction)>* progress = nullptr;  // may be null
+  // Mass product only (S null): accumulate onto the upper-triangle positions of this known
+  // symmetric pattern (column-major, sorted rows) instead of dense band accumulators, so that
+  // memory and the final scan are O(nnz(pattern)) per thread instead of O(d^2).
+  const Eigen::SparseMatrix<double>* pattern = nullptr;
 };
 
-// The upper-triangle entries (row <= col) with a nonzero value in any product, ordered by column
-// and then row. One parallel pass over the rows of U per band of output columns: the work is
-// O(nnz(U) * row nnz) (plus the rows of S for the S products), the memory that of the band
-// accumulators. Returns false when cancelled.
-bool ComputeProducts(const ProductPass& pass, std::vector<Entry>* entries) {
+struct ProductOutput {
+  // Without a pattern: the upper-triangle entries (row <= col) with a nonzero value in any
+  // product, ordered by column and then row.
+  std::vector<Entry> entries;
+  // With a pattern: U^T diag(row_mass) U at the pattern's upper-triangle positions (0 below the
+  // diagonal), and whether a nonzero fell outside the pattern (then pattern_values is incomplete).
+  std::vector<double> pattern_values;
+  bool outside_pattern = false;
+};
+
+// One parallel pass over the rows of U per band of output columns (one band in pattern mode):
+// the work is O(nnz(U) * row nnz) (plus the rows of S for the S products), the memory that of
+// the band accumulators (pattern mode: of the pattern's values, per thread). Returns false when
+// cancelled.
+bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
   const BasisMatrix& U = *pass.U;
   const Eigen::SparseMatrix<double>* S = pass.S;
   const bool with_s = S != nullptr;
@@ -74,12 +91,16 @@ bool ComputeProducts(const ProductPass& pass, std::vector<Entry>* entries) {
   const int64_t k = U.rows();
   const int64_t d = U.cols();
   const int products = with_s ? 3 : 1;
+  const Eigen::SparseMatrix<double>* pattern = with_s ? nullptr : pass.pattern;
+  const int64_t pattern_nnz = pattern != nullptr ? pattern->nonZeros() : 0;
   std::atomic<bool> cancelled{false};
   std::atomic<int64_t> work_done{0};
   // Output columns per band: d x d accumulators for all threads when they fit the budget.
   const int64_t threads = std::max(1, tbb::this_task_arena::max_concurrency());
   const int64_t band_width =
-      std::clamp<int64_t>(pass.accumulator_budget_bytes / (products * 8 * d * threads), 1, d);
+      pattern != nullptr
+          ? d
+          : std::clamp<int64_t>(pass.accumulator_budget_bytes / (products * 8 * d * threads), 1, d);
   // Groups: rows ordered by their dominant column (counting sort), split into chunks of at
   // most kMaxGroupRows. Rows without entries (faces no basis field covers) still have S U
   // entries through their neighbors; they form their own groups.
@@ -134,7 +155,9 @@ bool ComputeProducts(const ProductPass& pass, std::vector<Entry>* entries) {
         tbb::blocked_range<int64_t>(0, num_groups, 1),
         [&](const tbb::blocked_range<int64_t>& range) {
           ProductWorkspace& w = workspaces.local();
-          if (w.m.size() != static_cast<size_t>(width * d)) {
+          if (pattern != nullptr) {
+            if (w.pattern_values.empty()) w.pattern_values.assign(pattern_nnz, 0.0);
+          } else if (w.m.size() != static_cast<size_t>(width * d)) {
             if (with_s) {
               w.s.assign(width * d, 0.0);
               w.b.assign(width * d, 0.0);
@@ -252,6 +275,30 @@ bool ComputeProducts(const ProductPass& pass, std::vector<Entry>* entries) {
                 for (int64_t p = 0; p <= q; ++p) col_m[uc[p]] += uv[p] * mv;
               }
             }
+            if (pattern != nullptr) {
+              // Add the local sums at the pattern's positions: column c's rows are sorted, and
+              // so are the local rows (ascending global order), so one merge per column.
+              const int* outer = pattern->outerIndexPtr();
+              const int* inner = pattern->innerIndexPtr();
+              for (int64_t lcol = 0; lcol < L; ++lcol) {
+                const int64_t c = w.local_cols[lcol];
+                const double* lm = w.lm.data() + lcol * L;
+                int64_t q = outer[c];
+                const int64_t end = outer[c + 1];
+                for (int64_t lrow = 0; lrow <= lcol; ++lrow) {
+                  if (lm[lrow] == 0.0) continue;
+                  const int32_t a = w.local_cols[lrow];
+                  while (q < end && inner[q] < a) ++q;
+                  if (q < end && inner[q] == a) {
+                    w.pattern_values[q] += lm[lrow];
+                  } else {
+                    w.outside_pattern = true;
+                  }
+                }
+              }
+              for (int32_t c : w.local_cols) w.local_of[c] = -1;
+              continue;
+            }
             // Add the local sums to the band accumulators.
             for (int64_t lcol = 0; lcol < L; ++lcol) {
               const int64_t c = w.local_cols[lcol];
@@ -274,6 +321,20 @@ bool ComputeProducts(const ProductPass& pass, std::vector<Entry>* entries) {
             for (int32_t c : w.local_cols) w.local_of[c] = -1;
           }
         });
+    if (pattern != nullptr) {
+      out->pattern_values.assign(pattern_nnz, 0.0);
+      for (ProductWorkspace& w : workspaces) {
+        if (w.pattern_values.empty()) continue;
+        out->outside_pattern = out->outside_pattern || w.outside_pattern;
+        tbb::parallel_for(tbb::blocked_range<int64_t>(0, pattern_nnz, 1 << 16),
+                          [&](const tbb::blocked_range<int64_t>& r) {
+                            for (int64_t t = r.begin(); t < r.end(); ++t) {
+                              out->pattern_values[t] += w.pattern_values[t];
+                            }
+                          });
+      }
+      continue;
+    }
     // Reduce the thread-local accumulators and keep the entries of this band.
     ProductWorkspace* total = nullptr;
     for (ProductWorkspace& w : workspaces) {
@@ -301,7 +362,7 @@ bool ComputeProducts(const ProductPass& pass, std::vector<Entry>* entries) {
         const double bv = with_s ? total->b[base + a] : 0.0;
         const double mv = total->m[base + a];
         if (sv != 0.0 || bv != 0.0 || mv != 0.0) {
-          entries->push_back({static_cast<int32_t>(a), static_cast<int32_t>(c), sv, bv, mv});
+          out->entries.push_back({static_cast<int32_t>(a), static_cast<int32_t>(c), sv, bv, mv});
         }
       }
     }
@@ -361,7 +422,6 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   const Eigen::SparseMatrix<double>& S = op.stiffness;
   const Eigen::VectorXd& mass = op.mass;
 
-  std::vector<Entry> entries;
   ProductPass pass;
   pass.U = &U;
   pass.S = &S;
@@ -369,7 +429,9 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   pass.accumulator_budget_bytes = options.accumulator_budget_bytes;
   pass.cancel = options.cancel;
   pass.progress = &options.progress;
-  if (!ComputeProducts(pass, &entries)) return absl::CancelledError("ReducedSystem: cancelled");
+  ProductOutput products;
+  if (!ComputeProducts(pass, &products)) return absl::CancelledError("ReducedSystem: cancelled");
+  std::vector<Entry> entries = std::move(products.entries);
 
   // All diagonal entries are stored (the factorization needs them), even an all-zero column's.
   {
@@ -467,47 +529,32 @@ absl::StatusOr<Eigen::SparseMatrix<double>> WeightedMassMatrix(
     }
   }
   const Eigen::VectorXd row_mass = system.mass().cwiseProduct(dof_weights);
-  std::vector<Entry> entries;
+  Eigen::SparseMatrix<double> C = system.mass_matrix();
   ProductPass pass;
   pass.U = &U;
   pass.row_mass = row_mass.data();
   pass.accumulator_budget_bytes = options.accumulator_budget_bytes;
   pass.cancel = options.cancel;
-  if (!ComputeProducts(pass, &entries)) {
+  pass.pattern = &C;
+  ProductOutput products;
+  if (!ComputeProducts(pass, &products)) {
     return absl::CancelledError("WeightedMassMatrix: cancelled");
   }
-  // Values on the shared pattern: the upper triangle by merging each column's entries (sorted by
-  // row) with the pattern's rows, then the lower triangle from it column by column (a transpose
-  // with one cursor per column).
-  Eigen::SparseMatrix<double> C = system.mass_matrix();
-  const int* outer = C.outerIndexPtr();
-  const int* inner = C.innerIndexPtr();
-  double* values = C.valuePtr();
-  std::fill(values, values + C.nonZeros(), 0.0);
-  bool outside = false;
-  {
-    size_t e = 0;
-    for (int64_t c = 0; c < d && !outside; ++c) {
-      int64_t q = outer[c];
-      for (; e < entries.size() && entries[e].col == c; ++e) {
-        while (q < outer[c + 1] && inner[q] < entries[e].row) ++q;
-        if (q == outer[c + 1] || inner[q] != entries[e].row) {
-          outside = true;
-          break;
-        }
-        values[q] = entries[e].m;
+  if (products.outside_pattern) {
+    // A nonzero where U^T S U, U^T B U and U^T M U all vanish (exact cancellation): compute the
+    // entries instead and return the union of both patterns (the caller analyzes it separately).
+    pass.pattern = nullptr;
+    if (!ComputeProducts(pass, &products)) {
+      return absl::CancelledError("WeightedMassMatrix: cancelled");
+    }
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(static_cast<size_t>(C.nonZeros()) + 2 * products.entries.size());
+    for (int64_t c = 0; c < d; ++c) {
+      for (Eigen::SparseMatrix<double>::InnerIterator it(C, c); it; ++it) {
+        triplets.emplace_back(it.row(), c, 0.0);
       }
     }
-  }
-  if (outside) {
-    // An entry where U^T S U, U^T B U and U^T M U all vanish (exact cancellation): return the
-    // union of the two patterns instead (the caller analyzes it separately).
-    std::vector<Eigen::Triplet<double>> triplets;
-    triplets.reserve(static_cast<size_t>(C.nonZeros()) + 2 * entries.size());
-    for (int64_t c = 0; c < d; ++c) {
-      for (int64_t q = outer[c]; q < outer[c + 1]; ++q) triplets.emplace_back(inner[q], c, 0.0);
-    }
-    for (const Entry& en : entries) {
+    for (const Entry& en : products.entries) {
       triplets.emplace_back(en.row, en.col, en.m);
       if (en.row != en.col) triplets.emplace_back(en.col, en.row, en.m);
     }
@@ -516,6 +563,12 @@ absl::StatusOr<Eigen::SparseMatrix<double>> WeightedMassMatrix(
     union_matrix.makeCompressed();
     return union_matrix;
   }
+  // The upper triangle came from the pass; mirror it below the diagonal column by column (a
+  // transpose with one cursor per column).
+  const int* outer = C.outerIndexPtr();
+  const int* inner = C.innerIndexPtr();
+  double* values = C.valuePtr();
+  std::copy(products.pattern_values.begin(), products.pattern_values.end(), values);
   std::vector<int64_t> cursor(outer, outer + d);
   for (int64_t c = 0; c < d; ++c) {
     for (int64_t q = outer[c]; q < outer[c + 1]; ++q) {

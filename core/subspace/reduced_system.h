@@ -103,7 +103,8 @@ class ReducedSystem {
 };
 
 struct WeightedMassOptions {
-  // As ReducedSystemOptions::accumulator_budget_bytes (one d x d accumulator per thread).
+  // As ReducedSystemOptions::accumulator_budget_bytes; used only in the degenerate case below
+  // (the regular pass keeps one array of the pattern's values per thread).
   int64_t accumulator_budget_bytes = int64_t{768} << 20;
   // Checked for every group of rows of U: Cancelled once true. Not owned; may be null.
   const CancelFlag* cancel = nullptr;
@@ -112,8 +113,9 @@ struct WeightedMassOptions {
 // U^T W M U (d x d, symmetric PSD, both triangles stored) for per-DOF weights W = diag(w)
 // (`dof_weights`: k values, finite, >= 0): the mass matrix of a data term weighted per face or
 // per DOF. Computed by the same parallel product pass over U as ReducedSystem::Build (only the
-// mass product): O(nnz(U) * nonzeros per row of U) work, per-thread accumulators within
-// options.accumulator_budget_bytes. The result has the pattern of system.mass_matrix() (so that
+// mass product, accumulated straight onto the shared pattern): O(nnz(U) * nonzeros per row of U)
+// work, O(nnz of the pattern) memory per thread. The result has the pattern of
+// system.mass_matrix() (so that
 // SupernodalSymbolic::SamePattern holds and weighted sums with the other reduced matrices are
 // formed value by value), except in the degenerate case that it has a nonzero where all three
 // precomputed matrices vanish exactly (cancellation): then it is returned on the union of both
