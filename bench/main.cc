@@ -39,6 +39,9 @@ constexpr Command kCommands[] = {
      "[--max-constraints C] [--no-full] [--full-biharmonic]"},
     {"curvature", fieldspace::bench::RunCurvature,
      "curvature MESH [--estimator jet|normal-differences]"},
+    {"smooth", fieldspace::bench::RunSmooth,
+     "smooth MESH --field tensor|vector|nfield [--n N] --dim D [--sigma S] [--seed N] "
+     "[--coarse-dim C] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] [--scale-free]"},
 };
 
 void PrintUsage() {

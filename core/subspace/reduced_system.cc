@@ -31,6 +31,9 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
 // holds rows a <= c: only the upper triangle is accumulated).
 struct ProductWorkspace {
   std::vector<double> s, b, m;  // band accumulators, width x d each
+  // Pattern mode (ProductPass::pattern): the mass product on the pattern's positions instead.
+  std::vector<double> pattern_values;
+  bool outside_pattern = false;
   // Sparse accumulator for one row of S U.
   std::vector<double> spa;
   std::vector<char> mark;
@@ -50,6 +53,322 @@ struct Entry {
   int32_t row, col;
   double s, b, m;
 };
+
+// What one product pass computes: U^T diag(row_mass) U always; with `S`, also U^T S U and
+// (S U)^T diag(row_mass)^-1 (S U) (then row_mass must be positive).
+struct ProductPass {
+  const BasisMatrix* U = nullptr;
+  const Eigen::SparseMatrix<double>* S = nullptr;  // symmetric k x k, or null: mass product only
+  const double* row_mass = nullptr;                // k values, >= 0 (> 0 with S)
+  int64_t accumulator_budget_bytes = 0;
+  const CancelFlag* cancel = nullptr;
+  const std::function<void(double fraction)>* progress = nullptr;  // may be null
+  // Mass product only (S null): accumulate onto the upper-triangle positions of this known
+  // symmetric pattern (column-major, sorted rows) instead of dense band accumulators, so that
+  // memory and the final scan are O(nnz(pattern)) per thread instead of O(d^2).
+  const Eigen::SparseMatrix<double>* pattern = nullptr;
+};
+
+struct ProductOutput {
+  // Without a pattern: the upper-triangle entries (row <= col) with a nonzero value in any
+  // product, ordered by column and then row.
+  std::vector<Entry> entries;
+  // With a pattern: U^T diag(row_mass) U at the pattern's upper-triangle positions (0 below the
+  // diagonal), and whether a nonzero fell outside the pattern (then pattern_values is incomplete).
+  std::vector<double> pattern_values;
+  bool outside_pattern = false;
+};
+
+// One parallel pass over the rows of U per band of output columns (one band in pattern mode):
+// the work is O(nnz(U) * row nnz) (plus the rows of S for the S products), the memory that of
+// the band accumulators (pattern mode: of the pattern's values, per thread). Returns false when
+// cancelled.
+bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
+  const BasisMatrix& U = *pass.U;
+  const Eigen::SparseMatrix<double>* S = pass.S;
+  const bool with_s = S != nullptr;
+  const double* row_mass = pass.row_mass;
+  const int64_t k = U.rows();
+  const int64_t d = U.cols();
+  const int products = with_s ? 3 : 1;
+  const Eigen::SparseMatrix<double>* pattern = with_s ? nullptr : pass.pattern;
+  const int64_t pattern_nnz = pattern != nullptr ? pattern->nonZeros() : 0;
+  std::atomic<bool> cancelled{false};
+  std::atomic<int64_t> work_done{0};
+  // Output columns per band: d x d accumulators for all threads when they fit the budget.
+  const int64_t threads = std::max(1, tbb::this_task_arena::max_concurrency());
+  const int64_t band_width =
+      pattern != nullptr
+          ? d
+          : std::clamp<int64_t>(pass.accumulator_budget_bytes / (products * 8 * d * threads), 1, d);
+  // Groups: rows ordered by their dominant column (counting sort), split into chunks of at
+  // most kMaxGroupRows. Rows without entries (faces no basis field covers) still have S U
+  // entries through their neighbors; they form their own groups.
+  constexpr int64_t kMaxGroupRows = 4096;
+  std::vector<int32_t> key(k);
+  tbb::parallel_for(tbb::blocked_range<int64_t>(0, k, 8192),
+                    [&](const tbb::blocked_range<int64_t>& r) {
+                      for (int64_t i = r.begin(); i < r.end(); ++i) {
+                        const BasisRow u = GetBasisRow(U, i);
+                        int32_t best = static_cast<int32_t>(d);  // "no entry" bucket
+                        float best_abs = -1;
+                        for (int64_t q = 0; q < u.size; ++q) {
+                          if (std::abs(u.vals[q]) > best_abs) {
+                            best_abs = std::abs(u.vals[q]);
+                            best = u.cols[q];
+                          }
+                        }
+                        key[i] = best;
+                      }
+                    });
+  std::vector<int64_t> bucket(d + 2, 0);
+  for (int64_t i = 0; i < k; ++i) ++bucket[key[i] + 1];
+  for (int64_t c = 0; c <= d; ++c) bucket[c + 1] += bucket[c];
+  std::vector<int32_t> order(k);
+  {
+    std::vector<int64_t> fill(bucket.begin(), bucket.end() - 1);
+    for (int64_t i = 0; i < k; ++i) order[fill[key[i]]++] = static_cast<int32_t>(i);
+  }
+  std::vector<int64_t> group_begin;
+  // Without S, rows without entries contribute nothing: skip their bucket.
+  const int64_t last_bucket = with_s ? d : d - 1;
+  for (int64_t c = 0; c <= last_bucket; ++c) {
+    for (int64_t g = bucket[c]; g < bucket[c + 1]; g += kMaxGroupRows) group_begin.push_back(g);
+  }
+  group_begin.push_back(bucket[last_bucket + 1]);
+  std::vector<int32_t>().swap(key);
+  const int64_t num_groups = static_cast<int64_t>(group_begin.size()) - 1;
+  const int64_t num_bands = (d + band_width - 1) / band_width;
+  const int64_t total_work = std::max<int64_t>(1, num_groups * num_bands);
+  const int64_t report_every = std::max<int64_t>(1, total_work / 100);
+
+  tbb::enumerable_thread_specific<ProductWorkspace> workspaces;
+  for (int64_t band_begin = 0; band_begin < d && !cancelled.load(); band_begin += band_width) {
+    const int64_t band_end = std::min(d, band_begin + band_width);
+    const int64_t width = band_end - band_begin;
+    for (ProductWorkspace& w : workspaces) {
+      std::fill(w.s.begin(), w.s.end(), 0.0);
+      std::fill(w.b.begin(), w.b.end(), 0.0);
+      std::fill(w.m.begin(), w.m.end(), 0.0);
+    }
+    tbb::parallel_for(
+        tbb::blocked_range<int64_t>(0, num_groups, 1),
+        [&](const tbb::blocked_range<int64_t>& range) {
+          ProductWorkspace& w = workspaces.local();
+          if (pattern != nullptr) {
+            if (w.pattern_values.empty()) w.pattern_values.assign(pattern_nnz, 0.0);
+          } else if (w.m.size() != static_cast<size_t>(width * d)) {
+            if (with_s) {
+              w.s.assign(width * d, 0.0);
+              w.b.assign(width * d, 0.0);
+            }
+            w.m.assign(width * d, 0.0);
+          }
+          if (w.local_of.empty()) {
+            if (with_s) {
+              w.spa.assign(d, 0.0);
+              w.mark.assign(d, 0);
+            }
+            w.local_of.assign(d, -1);
+          }
+          for (int64_t g = range.begin(); g < range.end(); ++g) {
+            if (cancelled.load(std::memory_order_relaxed)) return;
+            if (IsCancelled(pass.cancel)) {
+              cancelled.store(true);
+              return;
+            }
+            if (const int64_t done = work_done.fetch_add(1) + 1;
+                pass.progress != nullptr && *pass.progress && done % report_every == 0) {
+              (*pass.progress)(static_cast<double>(done) / static_cast<double>(total_work));
+            }
+            // Pass 1: the group's rows of U and S U, and the columns they touch.
+            w.u_begin.assign(1, 0);
+            w.su_begin.assign(1, 0);
+            w.u_cols.clear();
+            w.u_vals.clear();
+            w.su_cols.clear();
+            w.su_vals.clear();
+            w.row_mass.clear();
+            w.local_cols.clear();
+            const auto touch = [&](int32_t c) {
+              if (w.local_of[c] < 0) {
+                w.local_of[c] = 0;
+                w.local_cols.push_back(c);
+              }
+            };
+            for (int64_t t = group_begin[g]; t < group_begin[g + 1]; ++t) {
+              const int64_t i = order[t];
+              const BasisRow u = GetBasisRow(U, i);
+              for (int64_t q = 0; q < u.size; ++q) {
+                w.u_cols.push_back(u.cols[q]);
+                w.u_vals.push_back(static_cast<double>(u.vals[q]));
+                touch(u.cols[q]);
+              }
+              w.u_begin.push_back(static_cast<int64_t>(w.u_cols.size()));
+              w.row_mass.push_back(row_mass[i]);
+              if (!with_s) continue;
+              // Row i of S U (S symmetric: row i = column i).
+              w.su_row.clear();
+              for (Eigen::SparseMatrix<double>::InnerIterator it(*S, i); it; ++it) {
+                const BasisRow uj = GetBasisRow(U, it.row());
+                const double sij = it.value();
+                for (int64_t q = 0; q < uj.size; ++q) {
+                  const int32_t c = uj.cols[q];
+                  if (!w.mark[c]) {
+                    w.mark[c] = 1;
+                    w.spa[c] = 0.0;
+                    w.su_row.emplace_back(c, 0.0);
+                  }
+                  w.spa[c] += sij * static_cast<double>(uj.vals[q]);
+                }
+              }
+              for (auto& [c, v] : w.su_row) {
+                v = w.spa[c];
+                w.mark[c] = 0;
+              }
+              std::sort(w.su_row.begin(), w.su_row.end());
+              for (const auto& [c, v] : w.su_row) {
+                w.su_cols.push_back(c);
+                w.su_vals.push_back(v);
+                touch(c);
+              }
+              w.su_begin.push_back(static_cast<int64_t>(w.su_cols.size()));
+            }
+            // Local numbering in ascending global order, so that a <= b iff la <= lb.
+            std::sort(w.local_cols.begin(), w.local_cols.end());
+            const int64_t L = static_cast<int64_t>(w.local_cols.size());
+            for (int64_t l = 0; l < L; ++l) w.local_of[w.local_cols[l]] = static_cast<int32_t>(l);
+            for (int32_t& c : w.u_cols) c = w.local_of[c];
+            for (int32_t& c : w.su_cols) c = w.local_of[c];
+            if (with_s) {
+              w.ls.assign(L * L, 0.0);
+              w.lb.assign(L * L, 0.0);
+            }
+            w.lm.assign(L * L, 0.0);
+            // Pass 2: U^T S U: sum_i U_ia (S U)_ib; U^T B U: (S U)_ia (S U)_ib / m_i;
+            // U^T M U: U_ia U_ib m_i (a <= b).
+            const int64_t rows = static_cast<int64_t>(w.row_mass.size());
+            for (int64_t t = 0; t < rows; ++t) {
+              const int32_t* uc = w.u_cols.data() + w.u_begin[t];
+              const double* uv = w.u_vals.data() + w.u_begin[t];
+              const int64_t nu = w.u_begin[t + 1] - w.u_begin[t];
+              const double mi = w.row_mass[t];
+              if (with_s) {
+                const int32_t* sc = w.su_cols.data() + w.su_begin[t];
+                const double* sv = w.su_vals.data() + w.su_begin[t];
+                const int64_t ns = w.su_begin[t + 1] - w.su_begin[t];
+                const double inv_mi = 1.0 / mi;
+                for (int64_t q = 0; q < ns; ++q) {
+                  const int64_t cb = sc[q];
+                  double* col_s = w.ls.data() + cb * L;
+                  double* col_b = w.lb.data() + cb * L;
+                  const double svq = sv[q];
+                  for (int64_t p = 0; p < nu && uc[p] <= cb; ++p) col_s[uc[p]] += uv[p] * svq;
+                  const double bv = svq * inv_mi;
+                  for (int64_t p = 0; p <= q; ++p) col_b[sc[p]] += sv[p] * bv;
+                }
+              }
+              if (mi == 0.0) continue;
+              for (int64_t q = 0; q < nu; ++q) {
+                double* col_m = w.lm.data() + static_cast<int64_t>(uc[q]) * L;
+                const double mv = uv[q] * mi;
+                for (int64_t p = 0; p <= q; ++p) col_m[uc[p]] += uv[p] * mv;
+              }
+            }
+            if (pattern != nullptr) {
+              // Add the local sums at the pattern's positions: column c's rows are sorted, and
+              // so are the local rows (ascending global order), so one merge per column.
+              const int* outer = pattern->outerIndexPtr();
+              const int* inner = pattern->innerIndexPtr();
+              for (int64_t lcol = 0; lcol < L; ++lcol) {
+                const int64_t c = w.local_cols[lcol];
+                const double* lm = w.lm.data() + lcol * L;
+                int64_t q = outer[c];
+                const int64_t end = outer[c + 1];
+                for (int64_t lrow = 0; lrow <= lcol; ++lrow) {
+                  if (lm[lrow] == 0.0) continue;
+                  const int32_t a = w.local_cols[lrow];
+                  while (q < end && inner[q] < a) ++q;
+                  if (q < end && inner[q] == a) {
+                    w.pattern_values[q] += lm[lrow];
+                  } else {
+                    w.outside_pattern = true;
+                  }
+                }
+              }
+              for (int32_t c : w.local_cols) w.local_of[c] = -1;
+              continue;
+            }
+            // Add the local sums to the band accumulators.
+            for (int64_t lcol = 0; lcol < L; ++lcol) {
+              const int64_t c = w.local_cols[lcol];
+              if (c < band_begin || c >= band_end) continue;
+              const int64_t base = (c - band_begin) * d;
+              const double* lm = w.lm.data() + lcol * L;
+              if (with_s) {
+                const double* ls = w.ls.data() + lcol * L;
+                const double* lbv = w.lb.data() + lcol * L;
+                for (int64_t lrow = 0; lrow <= lcol; ++lrow) {
+                  const int64_t a = w.local_cols[lrow];
+                  w.s[base + a] += ls[lrow];
+                  w.b[base + a] += lbv[lrow];
+                }
+              }
+              for (int64_t lrow = 0; lrow <= lcol; ++lrow) {
+                w.m[base + w.local_cols[lrow]] += lm[lrow];
+              }
+            }
+            for (int32_t c : w.local_cols) w.local_of[c] = -1;
+          }
+        });
+    if (pattern != nullptr) {
+      out->pattern_values.assign(pattern_nnz, 0.0);
+      for (ProductWorkspace& w : workspaces) {
+        if (w.pattern_values.empty()) continue;
+        out->outside_pattern = out->outside_pattern || w.outside_pattern;
+        tbb::parallel_for(tbb::blocked_range<int64_t>(0, pattern_nnz, 1 << 16),
+                          [&](const tbb::blocked_range<int64_t>& r) {
+                            for (int64_t t = r.begin(); t < r.end(); ++t) {
+                              out->pattern_values[t] += w.pattern_values[t];
+                            }
+                          });
+      }
+      continue;
+    }
+    // Reduce the thread-local accumulators and keep the entries of this band.
+    ProductWorkspace* total = nullptr;
+    for (ProductWorkspace& w : workspaces) {
+      if (w.m.size() != static_cast<size_t>(width * d)) continue;
+      if (total == nullptr) {
+        total = &w;
+        continue;
+      }
+      tbb::parallel_for(tbb::blocked_range<int64_t>(0, width * d, 1 << 16),
+                        [&](const tbb::blocked_range<int64_t>& r) {
+                          for (int64_t t = r.begin(); t < r.end(); ++t) {
+                            if (with_s) {
+                              total->s[t] += w.s[t];
+                              total->b[t] += w.b[t];
+                            }
+                            total->m[t] += w.m[t];
+                          }
+                        });
+    }
+    if (total == nullptr) continue;
+    for (int64_t c = band_begin; c < band_end; ++c) {
+      const int64_t base = (c - band_begin) * d;
+      for (int64_t a = 0; a <= c; ++a) {
+        const double sv = with_s ? total->s[base + a] : 0.0;
+        const double bv = with_s ? total->b[base + a] : 0.0;
+        const double mv = total->m[base + a];
+        if (sv != 0.0 || bv != 0.0 || mv != 0.0) {
+          out->entries.push_back({static_cast<int32_t>(a), static_cast<int32_t>(c), sv, bv, mv});
+        }
+      }
+    }
+  }
+  return !cancelled.load();
+}
 
 }  // namespace
 
@@ -103,229 +422,16 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   const Eigen::SparseMatrix<double>& S = op.stiffness;
   const Eigen::VectorXd& mass = op.mass;
 
-  std::vector<Entry> entries;
-  std::atomic<bool> cancelled{false};
-  std::atomic<int64_t> work_done{0};
-  // Output columns per band: d x d accumulators for all threads when they fit the budget.
-  const auto band_width_for = [&](int64_t dim) {
-    const int64_t threads = std::max(1, tbb::this_task_arena::max_concurrency());
-    const int64_t bytes_per_column = 3 * 8 * dim * threads;
-    return std::clamp<int64_t>(options.accumulator_budget_bytes / bytes_per_column, 1, dim);
-  };
-  auto compute_products = [&]() {
-    // Groups: rows ordered by their dominant column (counting sort), split into chunks of at
-    // most kMaxGroupRows. Rows without entries (faces no basis field covers) still have S U
-    // entries through their neighbors; they form their own groups.
-    constexpr int64_t kMaxGroupRows = 4096;
-    std::vector<int32_t> key(k);
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, k, 8192),
-                      [&](const tbb::blocked_range<int64_t>& r) {
-                        for (int64_t i = r.begin(); i < r.end(); ++i) {
-                          const BasisRow u = GetBasisRow(U, i);
-                          int32_t best = static_cast<int32_t>(d);  // "no entry" bucket
-                          float best_abs = -1;
-                          for (int64_t q = 0; q < u.size; ++q) {
-                            if (std::abs(u.vals[q]) > best_abs) {
-                              best_abs = std::abs(u.vals[q]);
-                              best = u.cols[q];
-                            }
-                          }
-                          key[i] = best;
-                        }
-                      });
-    std::vector<int64_t> bucket(d + 2, 0);
-    for (int64_t i = 0; i < k; ++i) ++bucket[key[i] + 1];
-    for (int64_t c = 0; c <= d; ++c) bucket[c + 1] += bucket[c];
-    std::vector<int32_t> order(k);
-    {
-      std::vector<int64_t> fill(bucket.begin(), bucket.end() - 1);
-      for (int64_t i = 0; i < k; ++i) order[fill[key[i]]++] = static_cast<int32_t>(i);
-    }
-    std::vector<int64_t> group_begin;
-    for (int64_t c = 0; c <= d; ++c) {
-      for (int64_t g = bucket[c]; g < bucket[c + 1]; g += kMaxGroupRows) group_begin.push_back(g);
-    }
-    group_begin.push_back(k);
-    std::vector<int32_t>().swap(key);
-    const int64_t num_groups = static_cast<int64_t>(group_begin.size()) - 1;
-    const int64_t num_bands = (d + band_width_for(d) - 1) / band_width_for(d);
-    const int64_t total_work = std::max<int64_t>(1, num_groups * num_bands);
-    const int64_t report_every = std::max<int64_t>(1, total_work / 100);
-
-    const int64_t band_width = band_width_for(d);
-    tbb::enumerable_thread_specific<ProductWorkspace> workspaces;
-    for (int64_t band_begin = 0; band_begin < d && !cancelled.load(); band_begin += band_width) {
-      const int64_t band_end = std::min(d, band_begin + band_width);
-      const int64_t width = band_end - band_begin;
-      for (ProductWorkspace& w : workspaces) {
-        std::fill(w.s.begin(), w.s.end(), 0.0);
-        std::fill(w.b.begin(), w.b.end(), 0.0);
-        std::fill(w.m.begin(), w.m.end(), 0.0);
-      }
-      tbb::parallel_for(
-          tbb::blocked_range<int64_t>(0, num_groups, 1),
-          [&](const tbb::blocked_range<int64_t>& range) {
-            ProductWorkspace& w = workspaces.local();
-            if (w.s.size() != static_cast<size_t>(width * d)) {
-              w.s.assign(width * d, 0.0);
-              w.b.assign(width * d, 0.0);
-              w.m.assign(width * d, 0.0);
-            }
-            if (w.spa.empty()) {
-              w.spa.assign(d, 0.0);
-              w.mark.assign(d, 0);
-              w.local_of.assign(d, -1);
-            }
-            for (int64_t g = range.begin(); g < range.end(); ++g) {
-              if (cancelled.load(std::memory_order_relaxed)) return;
-              if (IsCancelled(options.cancel)) {
-                cancelled.store(true);
-                return;
-              }
-              if (const int64_t done = work_done.fetch_add(1) + 1;
-                  options.progress && done % report_every == 0) {
-                options.progress(static_cast<double>(done) / static_cast<double>(total_work));
-              }
-              // Pass 1: the group's rows of U and S U, and the columns they touch.
-              w.u_begin.assign(1, 0);
-              w.su_begin.assign(1, 0);
-              w.u_cols.clear();
-              w.u_vals.clear();
-              w.su_cols.clear();
-              w.su_vals.clear();
-              w.row_mass.clear();
-              w.local_cols.clear();
-              const auto touch = [&](int32_t c) {
-                if (w.local_of[c] < 0) {
-                  w.local_of[c] = 0;
-                  w.local_cols.push_back(c);
-                }
-              };
-              for (int64_t t = group_begin[g]; t < group_begin[g + 1]; ++t) {
-                const int64_t i = order[t];
-                const BasisRow u = GetBasisRow(U, i);
-                for (int64_t q = 0; q < u.size; ++q) {
-                  w.u_cols.push_back(u.cols[q]);
-                  w.u_vals.push_back(static_cast<double>(u.vals[q]));
-                  touch(u.cols[q]);
-                }
-                w.u_begin.push_back(static_cast<int64_t>(w.u_cols.size()));
-                // Row i of S U (S symmetric: row i = column i).
-                w.su_row.clear();
-                for (Eigen::SparseMatrix<double>::InnerIterator it(S, i); it; ++it) {
-                  const BasisRow uj = GetBasisRow(U, it.row());
-                  const double sij = it.value();
-                  for (int64_t q = 0; q < uj.size; ++q) {
-                    const int32_t c = uj.cols[q];
-                    if (!w.mark[c]) {
-                      w.mark[c] = 1;
-                      w.spa[c] = 0.0;
-                      w.su_row.emplace_back(c, 0.0);
-                    }
-                    w.spa[c] += sij * static_cast<double>(uj.vals[q]);
-                  }
-                }
-                for (auto& [c, v] : w.su_row) {
-                  v = w.spa[c];
-                  w.mark[c] = 0;
-                }
-                std::sort(w.su_row.begin(), w.su_row.end());
-                for (const auto& [c, v] : w.su_row) {
-                  w.su_cols.push_back(c);
-                  w.su_vals.push_back(v);
-                  touch(c);
-                }
-                w.su_begin.push_back(static_cast<int64_t>(w.su_cols.size()));
-                w.row_mass.push_back(mass[i]);
-              }
-              // Local numbering in ascending global order, so that a <= b iff la <=
-              // lb.
-              std::sort(w.local_cols.begin(), w.local_cols.end());
-              const int64_t L = static_cast<int64_t>(w.local_cols.size());
-              for (int64_t l = 0; l < L; ++l) w.local_of[w.local_cols[l]] = static_cast<int32_t>(l);
-              for (int32_t& c : w.u_cols) c = w.local_of[c];
-              for (int32_t& c : w.su_cols) c = w.local_of[c];
-              w.ls.assign(L * L, 0.0);
-              w.lb.assign(L * L, 0.0);
-              w.lm.assign(L * L, 0.0);
-              // Pass 2: U^T S U: sum_i U_ia (S U)_ib; U^T B U: (S U)_ia (S U)_ib /
-              // m_i; U^T M U: U_ia U_ib m_i (a <= b).
-              const int64_t rows = static_cast<int64_t>(w.row_mass.size());
-              for (int64_t t = 0; t < rows; ++t) {
-                const int32_t* uc = w.u_cols.data() + w.u_begin[t];
-                const double* uv = w.u_vals.data() + w.u_begin[t];
-                const int64_t nu = w.u_begin[t + 1] - w.u_begin[t];
-                const int32_t* sc = w.su_cols.data() + w.su_begin[t];
-                const double* sv = w.su_vals.data() + w.su_begin[t];
-                const int64_t ns = w.su_begin[t + 1] - w.su_begin[t];
-                const double mi = w.row_mass[t];
-                const double inv_mi = 1.0 / mi;
-                for (int64_t q = 0; q < ns; ++q) {
-                  const int64_t cb = sc[q];
-                  double* col_s = w.ls.data() + cb * L;
-                  double* col_b = w.lb.data() + cb * L;
-                  const double svq = sv[q];
-                  for (int64_t p = 0; p < nu && uc[p] <= cb; ++p) col_s[uc[p]] += uv[p] * svq;
-                  const double bv = svq * inv_mi;
-                  for (int64_t p = 0; p <= q; ++p) col_b[sc[p]] += sv[p] * bv;
-                }
-                for (int64_t q = 0; q < nu; ++q) {
-                  double* col_m = w.lm.data() + static_cast<int64_t>(uc[q]) * L;
-                  const double mv = uv[q] * mi;
-                  for (int64_t p = 0; p <= q; ++p) col_m[uc[p]] += uv[p] * mv;
-                }
-              }
-              // Add the local sums to the band accumulators.
-              for (int64_t lcol = 0; lcol < L; ++lcol) {
-                const int64_t c = w.local_cols[lcol];
-                if (c < band_begin || c >= band_end) continue;
-                const int64_t base = (c - band_begin) * d;
-                const double* ls = w.ls.data() + lcol * L;
-                const double* lbv = w.lb.data() + lcol * L;
-                const double* lm = w.lm.data() + lcol * L;
-                for (int64_t lrow = 0; lrow <= lcol; ++lrow) {
-                  const int64_t a = w.local_cols[lrow];
-                  w.s[base + a] += ls[lrow];
-                  w.b[base + a] += lbv[lrow];
-                  w.m[base + a] += lm[lrow];
-                }
-              }
-              for (int32_t c : w.local_cols) w.local_of[c] = -1;
-            }
-          });
-      // Reduce the thread-local accumulators and keep the entries of this band.
-      ProductWorkspace* total = nullptr;
-      for (ProductWorkspace& w : workspaces) {
-        if (w.s.size() != static_cast<size_t>(width * d)) continue;
-        if (total == nullptr) {
-          total = &w;
-          continue;
-        }
-        tbb::parallel_for(tbb::blocked_range<int64_t>(0, width * d, 1 << 16),
-                          [&](const tbb::blocked_range<int64_t>& r) {
-                            for (int64_t t = r.begin(); t < r.end(); ++t) {
-                              total->s[t] += w.s[t];
-                              total->b[t] += w.b[t];
-                              total->m[t] += w.m[t];
-                            }
-                          });
-      }
-      if (total == nullptr) continue;
-      for (int64_t c = band_begin; c < band_end; ++c) {
-        const int64_t base = (c - band_begin) * d;
-        for (int64_t a = 0; a <= c; ++a) {
-          const double sv = total->s[base + a];
-          const double bv = total->b[base + a];
-          const double mv = total->m[base + a];
-          if (sv != 0.0 || bv != 0.0 || mv != 0.0) {
-            entries.push_back({static_cast<int32_t>(a), static_cast<int32_t>(c), sv, bv, mv});
-          }
-        }
-      }
-    }
-  };
-  compute_products();
-  if (cancelled.load()) return absl::CancelledError("ReducedSystem: cancelled");
+  ProductPass pass;
+  pass.U = &U;
+  pass.S = &S;
+  pass.row_mass = mass.data();
+  pass.accumulator_budget_bytes = options.accumulator_budget_bytes;
+  pass.cancel = options.cancel;
+  pass.progress = &options.progress;
+  ProductOutput products;
+  if (!ComputeProducts(pass, &products)) return absl::CancelledError("ReducedSystem: cancelled");
+  std::vector<Entry> entries = std::move(products.entries);
 
   // All diagonal entries are stored (the factorization needs them), even an all-zero column's.
   {
@@ -400,6 +506,82 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   sys->basis_ = std::move(basis);
   sys->stats_.total_seconds = SecondsSince(t_start);
   return std::shared_ptr<const ReducedSystem>(std::move(sys));
+}
+
+absl::StatusOr<Eigen::SparseMatrix<double>> WeightedMassMatrix(
+    const ReducedSystem& system, const Eigen::Ref<const Eigen::VectorXd>& dof_weights,
+    const WeightedMassOptions& options) {
+  const BasisMatrix& U = system.basis().U;
+  const int64_t k = U.rows();
+  const int64_t d = U.cols();
+  if (dof_weights.size() != k) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("WeightedMassMatrix: ", dof_weights.size(), " weights for ", k, " DOFs"));
+  }
+  if (options.accumulator_budget_bytes <= 0) {
+    return absl::InvalidArgumentError("WeightedMassMatrix: the accumulator budget must be > 0");
+  }
+  for (int64_t i = 0; i < k; ++i) {
+    if (!std::isfinite(dof_weights[i]) || dof_weights[i] < 0) {
+      return absl::InvalidArgumentError(absl::StrCat("WeightedMassMatrix: weight of DOF ", i,
+                                                     " is ", dof_weights[i],
+                                                     "; must be finite and >= 0"));
+    }
+  }
+  const Eigen::VectorXd row_mass = system.mass().cwiseProduct(dof_weights);
+  Eigen::SparseMatrix<double> C = system.mass_matrix();
+  ProductPass pass;
+  pass.U = &U;
+  pass.row_mass = row_mass.data();
+  pass.accumulator_budget_bytes = options.accumulator_budget_bytes;
+  pass.cancel = options.cancel;
+  pass.pattern = &C;
+  ProductOutput products;
+  if (!ComputeProducts(pass, &products)) {
+    return absl::CancelledError("WeightedMassMatrix: cancelled");
+  }
+  if (products.outside_pattern) {
+    // A nonzero where U^T S U, U^T B U and U^T M U all vanish (exact cancellation): compute the
+    // entries instead and return the union of both patterns (the caller analyzes it separately).
+    pass.pattern = nullptr;
+    if (!ComputeProducts(pass, &products)) {
+      return absl::CancelledError("WeightedMassMatrix: cancelled");
+    }
+    std::vector<Eigen::Triplet<double>> triplets;
+    triplets.reserve(static_cast<size_t>(C.nonZeros()) + 2 * products.entries.size());
+    for (int64_t c = 0; c < d; ++c) {
+      for (Eigen::SparseMatrix<double>::InnerIterator it(C, c); it; ++it) {
+        triplets.emplace_back(it.row(), c, 0.0);
+      }
+    }
+    for (const Entry& en : products.entries) {
+      triplets.emplace_back(en.row, en.col, en.m);
+      if (en.row != en.col) triplets.emplace_back(en.col, en.row, en.m);
+    }
+    Eigen::SparseMatrix<double> union_matrix(d, d);
+    union_matrix.setFromTriplets(triplets.begin(), triplets.end());
+    union_matrix.makeCompressed();
+    return union_matrix;
+  }
+  // The upper triangle came from the pass; mirror it below the diagonal column by column (a
+  // transpose with one cursor per column).
+  const int* outer = C.outerIndexPtr();
+  const int* inner = C.innerIndexPtr();
+  double* values = C.valuePtr();
+  std::copy(products.pattern_values.begin(), products.pattern_values.end(), values);
+  std::vector<int64_t> cursor(outer, outer + d);
+  for (int64_t c = 0; c < d; ++c) {
+    for (int64_t q = outer[c]; q < outer[c + 1]; ++q) {
+      const int64_t r = inner[q];
+      if (r <= c) continue;
+      // (r, c) below the diagonal mirrors (c, r) in column r; rows of column r are visited in
+      // ascending order c as c grows.
+      int64_t& t = cursor[r];
+      while (inner[t] < c) ++t;
+      values[q] = values[t];
+    }
+  }
+  return C;
 }
 
 }  // namespace fieldspace

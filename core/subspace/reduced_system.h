@@ -102,6 +102,29 @@ class ReducedSystem {
   ReducedSystemStats stats_;
 };
 
+struct WeightedMassOptions {
+  // As ReducedSystemOptions::accumulator_budget_bytes; used only in the degenerate case below
+  // (the regular pass keeps one array of the pattern's values per thread).
+  int64_t accumulator_budget_bytes = int64_t{768} << 20;
+  // Checked for every group of rows of U: Cancelled once true. Not owned; may be null.
+  const CancelFlag* cancel = nullptr;
+};
+
+// U^T W M U (d x d, symmetric PSD, both triangles stored) for per-DOF weights W = diag(w)
+// (`dof_weights`: k values, finite, >= 0): the mass matrix of a data term weighted per face or
+// per DOF. Computed by the same parallel product pass over U as ReducedSystem::Build (only the
+// mass product, accumulated straight onto the shared pattern): O(nnz(U) * nonzeros per row of U)
+// work, O(nnz of the pattern) memory per thread. The result has the pattern of
+// system.mass_matrix() (so that
+// SupernodalSymbolic::SamePattern holds and weighted sums with the other reduced matrices are
+// formed value by value), except in the degenerate case that it has a nonzero where all three
+// precomputed matrices vanish exactly (cancellation): then it is returned on the union of both
+// patterns. With w = 1 it equals mass_matrix() up to rounding. InvalidArgument for a wrong size or
+// a negative or non-finite weight; Cancelled.
+absl::StatusOr<Eigen::SparseMatrix<double>> WeightedMassMatrix(
+    const ReducedSystem& system, const Eigen::Ref<const Eigen::VectorXd>& dof_weights,
+    const WeightedMassOptions& options = {});
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_SUBSPACE_REDUCED_SYSTEM_H_
