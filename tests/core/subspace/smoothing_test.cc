@@ -410,5 +410,30 @@ TEST(SmoothingTest, SmoothingLowersTheEnergy) {
   EXPECT_LT(x.dot(op.stiffness * x), 0.5 * field.dot(op.stiffness * field));
 }
 
+// A stronger data term moves the minimizer closer to the input (in the M norm) and raises its
+// energy: both monotonically.
+TEST(SmoothingTest, DataWeightTradesEnergyForFidelity) {
+  const TriangleMesh mesh = Torus(16, 8);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::NField(2));
+  auto sys = ReducedSystem::Build(RandomBasis(FieldType::NField(2), op.dofs(), 80, 25, 41), op);
+  ASSERT_TRUE(sys.ok());
+  const Eigen::VectorXd field = RandomVector(op.dofs(), 42);
+  auto smoother = ReducedSmoother::Create(*sys, field);
+  ASSERT_TRUE(smoother.ok());
+  double last_residual = std::numeric_limits<double>::infinity(), last_energy = 0;
+  for (const double mu_c : {0.01, 0.1, 1.0, 10.0, 100.0}) {
+    auto result = smoother->Solve({1.0, 0.01, mu_c});
+    ASSERT_TRUE(result.ok()) << result.status();
+    auto residual = RelativeResiduals(**sys, field, result->coefficients);
+    ASSERT_TRUE(residual.ok());
+    const Eigen::VectorXd& x = result->coefficients;
+    const double energy = x.dot((*sys)->stiffness() * x) + 0.01 * x.dot((*sys)->bilaplacian() * x);
+    EXPECT_LT((*residual)[0], last_residual) << mu_c;
+    EXPECT_GT(energy, last_energy) << mu_c;
+    last_residual = (*residual)[0];
+    last_energy = energy;
+  }
+}
+
 }  // namespace
 }  // namespace fieldspace
