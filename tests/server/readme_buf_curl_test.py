@@ -76,7 +76,8 @@ def main():
         for expected in ('{"status":"SERVING"}', '"relative_error":', '"eigenvalues":',
                          '"edit":"weights"', '"refactorized":true', '"field":"nfield4"'):
             check(expected in cli_out, "CLI block output lacks %s:\n%s" % (expected, cli_out[-3000:]))
-        for expected in ('"euler_characteristic":2', '"index_sum":2', '"k_min":'):
+        for expected in ('"euler_characteristic":2', '"index_sum":2', '"k_min":',
+                         '"factorize_ms":'):
             check(expected in cli_out, "CLI block output lacks %s:\n%s" % (expected, cli_out[-3000:]))
         check(len([l for l in cli_out.splitlines() if l.startswith('{"seq":')]) == 6,
               "design printed open + 5 updates")
