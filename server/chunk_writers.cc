@@ -13,9 +13,6 @@
 namespace fieldspace::server {
 namespace {
 
-constexpr int32_t kDefaultChunkFaces = 65536;
-constexpr int32_t kMaxChunkFaces = 1 << 19;
-
 class GeometryWriter final : public ChunkWriter<v1::MeshGeometryChunk> {
  public:
   GeometryWriter(FieldService* service, grpc::CallbackServerContext* context,
@@ -29,8 +26,8 @@ class GeometryWriter final : public ChunkWriter<v1::MeshGeometryChunk> {
     if (request_.chunk_faces() < 0) {
       return absl::InvalidArgumentError("chunk_faces must not be negative");
     }
-    chunk_ = request_.chunk_faces() == 0 ? kDefaultChunkFaces
-                                         : std::min(request_.chunk_faces(), kMaxChunkFaces);
+    // A chunk carries up to chunk_ vertices (24 bytes) and chunk_ faces (12 bytes).
+    chunk_ = service()->options().ChunkFaces(request_.chunk_faces(), 36);
     ASSIGN_OR_RETURN(mesh_, service()->registry()->GetMesh(request_.mesh_id()));
     return absl::OkStatus();
   }
@@ -56,7 +53,7 @@ class GeometryWriter final : public ChunkWriter<v1::MeshGeometryChunk> {
 
   const v1::GetMeshGeometryRequest request_;
   std::shared_ptr<const TriangleMesh> mesh_;
-  int32_t chunk_ = kDefaultChunkFaces;
+  int32_t chunk_ = 0;
   int32_t next_vertex_ = 0;
   int32_t next_face_ = 0;
   bool sent_any_ = false;
@@ -78,9 +75,11 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
     if (request_.chunk_faces() < 0) {
       return absl::InvalidArgumentError("chunk_faces must not be negative");
     }
-    chunk_ = request_.chunk_faces() == 0 ? kDefaultChunkFaces
-                                         : std::min(request_.chunk_faces(), kMaxChunkFaces);
     RETURN_IF_ERROR(CheckFaces(request_.faces(), basis_->mesh->num_faces(), "lift"));
+    // Per face: its values (float) and, for subset lifts, its index.
+    chunk_ = service()->options().ChunkFaces(
+        request_.chunk_faces(),
+        4 * ValuesPerFace(basis_->basis->type, encoding_) + (request_.faces().empty() ? 0 : 4));
     subset_ = !request_.faces().empty();
     total_ = subset_ ? request_.faces().size() : basis_->mesh->num_faces();
     return absl::OkStatus();
@@ -115,7 +114,7 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
   FieldEncoding encoding_ = FieldEncoding::kDof;
   std::vector<int32_t> faces_;
   bool subset_ = false;
-  int32_t chunk_ = kDefaultChunkFaces;
+  int32_t chunk_ = 0;
   int32_t total_ = 0;
   int32_t next_ = 0;
   bool sent_any_ = false;
@@ -139,8 +138,10 @@ class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
     if (request_.chunk_faces() < 0) {
       return absl::InvalidArgumentError("chunk_faces must not be negative");
     }
-    chunk_ = request_.chunk_faces() == 0 ? kDefaultChunkFaces
-                                         : std::min(request_.chunk_faces(), kMaxChunkFaces);
+    // Per face: the tensor (6 or 3 floats) and, on request, k1, k2, d1, d2 (8 floats).
+    chunk_ = service()->options().ChunkFaces(
+        request_.chunk_faces(),
+        4 * (ValuesPerFace(FieldType::Tensor(), encoding_) + (request_.principal() ? 8 : 0)));
     ShapeOperatorOptions options;
     switch (request_.estimator()) {
       case v1::CURVATURE_ESTIMATOR_JET:
@@ -202,7 +203,7 @@ class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
   PrincipalCurvatures principal_;
   FieldEncoding encoding_ = FieldEncoding::kDof;
   std::vector<int32_t> faces_;
-  int32_t chunk_ = kDefaultChunkFaces;
+  int32_t chunk_ = 0;
   int32_t next_ = 0;
   double server_ms_ = 0;
 };

@@ -23,6 +23,7 @@ absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* u
   }
   const double edit_ms = MsSince(edit_start_);
   const Eigen::VectorXd& x = session_->coefficients();
+  RETURN_IF_ERROR(CheckSolutionFinite(x));
   update->mutable_coefficients()->Add(x.data(), x.data() + x.size());
   const auto lift_start = Clock::now();
   update->mutable_watched()->set_encoding(EncodingToProto(watch_encoding_));

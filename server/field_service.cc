@@ -32,6 +32,14 @@ constexpr int32_t kMaxConstraints = 1 << 20;
 
 }  // namespace
 
+int32_t ServiceOptions::ChunkFaces(int32_t requested, int64_t bytes_per_face) const {
+  constexpr int32_t kDefaultChunkFaces = 65536;
+  constexpr int32_t kMaxChunkFaces = 1 << 19;
+  const int32_t wanted = requested == 0 ? kDefaultChunkFaces : std::min(requested, kMaxChunkFaces);
+  const int64_t fits = std::max<int64_t>(1, message_room() / std::max<int64_t>(1, bytes_per_face));
+  return static_cast<int32_t>(std::min<int64_t>(wanted, fits));
+}
+
 FieldService::FieldService(Registry* registry, ComputePool* pool, ServiceOptions options)
     : registry_(registry), pool_(pool), options_(std::move(options)) {}
 
@@ -241,7 +249,7 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
         if (request->return_field()) {
           const int64_t bytes =
               int64_t{4} * ValuesPerFace(basis->basis->type, encoding) * basis->mesh->num_faces();
-          if (bytes > options_.max_message_bytes - (int64_t{1} << 20)) {
+          if (bytes > options_.message_room()) {
             return absl::ResourceExhaustedError(absl::StrCat(
                 "the lifted field (", bytes, " bytes) exceeds the message size limit; use Lift"));
           }
@@ -252,6 +260,7 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
         ASSIGN_OR_RETURN(ReducedSolution result,
                          SolveReducedModelProblem(*basis->system, problem, options));
         const double solve_ms = MsSince(solve_start);
+        RETURN_IF_ERROR(CheckSolutionFinite(result.coefficients));
         response->mutable_coefficients()->Add(
             result.coefficients.data(), result.coefficients.data() + result.coefficients.size());
         double lift_ms = 0;
@@ -291,7 +300,7 @@ grpc::ServerUnaryReactor* FieldService::Eigenfields(grpc::CallbackServerContext*
           return absl::InvalidArgumentError(absl::StrCat(
               "count must be in [1, ", d, "] (the basis dimension), got ", request->count()));
         }
-        if (int64_t{8} * d * request->count() > options_.max_message_bytes - (int64_t{1} << 20)) {
+        if (int64_t{8} * (d + 1) * request->count() > options_.message_room()) {
           return absl::ResourceExhaustedError(
               "count x dimension coefficients exceed the message size limit");
         }
@@ -397,7 +406,7 @@ grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* cont
         if (request->return_field()) {
           const int64_t bytes =
               int64_t{4} * ValuesPerFace(basis->basis->type, encoding) * basis->mesh->num_faces();
-          if (bytes > options_.max_message_bytes - (int64_t{1} << 20)) {
+          if (bytes > options_.message_room()) {
             return absl::ResourceExhaustedError(absl::StrCat(
                 "the smoothed field (", bytes, " bytes) exceeds the message size limit; use Lift"));
           }
@@ -405,9 +414,9 @@ grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* cont
         SmoothingOptions options;
         options.scale_free = request->scale_free();
         options.cancel = cancel;
-        ASSIGN_OR_RETURN(SmoothingResult result,
-                         SmoothReduced(*basis->system, X0, weights, request->face_weights(),
-                                       options));
+        ASSIGN_OR_RETURN(SmoothingResult result, SmoothReduced(*basis->system, X0, weights,
+                                                               request->face_weights(), options));
+        RETURN_IF_ERROR(CheckSolutionFinite(result.coefficients));
         response->mutable_coefficients()->Add(
             result.coefficients.data(), result.coefficients.data() + result.coefficients.size());
         double lift_ms = 0;

@@ -4,6 +4,7 @@
 // Includes generated code: keep this header out of widely included headers (only field_server.cc
 // and tests include it).
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <mutex>
@@ -24,6 +25,15 @@ struct ServiceOptions {
   // Design sessions check every k-th edit's solution against the true system (and the risky
   // ones always): DesignSessionOptions::verify_interval.
   int32_t design_verify_interval = 16;
+
+  // Bytes of payload (numbers) one response message may carry: the message limit less room for
+  // the rest of the message (ids, timings, framing): 1/8 of the limit, at most 1 MiB.
+  int64_t message_room() const {
+    return max_message_bytes - std::min<int64_t>(int64_t{1} << 20, max_message_bytes / 8);
+  }
+  // Faces per streamed chunk for `bytes_per_face` of payload each: `requested` (0: 65,536),
+  // at most 2^19 and at most what fits in message_room().
+  int32_t ChunkFaces(int32_t requested, int64_t bytes_per_face) const;
 };
 
 // Reference counting for reactors that other threads may touch after gRPC is done with them:

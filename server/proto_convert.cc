@@ -178,6 +178,15 @@ absl::StatusOr<Eigen::VectorXd> ConstraintValueFromProto(const ServedBasis& basi
         what, ": value has ", value.size(), " numbers; a ", type.ToString(), " constraint in ",
         enc == FieldEncoding::kAmbient ? "ambient" : "DOF", " encoding needs ", vpf));
   }
+  // Finite but absurd values would overflow the solve (the design session would then hold a
+  // field of infinities): refuse them here, where the message can name the request part.
+  constexpr double kMaxValue = 1e100;
+  for (double v : value) {
+    if (std::abs(v) > kMaxValue) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(what, ": value ", v, " is out of range (|value| <= 1e100)"));
+    }
+  }
   Eigen::VectorXd dofs(type.dofs_per_face());
   RETURN_IF_ERROR(
       ValuesToDofs(mesh, type, enc, faces, value, absl::MakeSpan(dofs.data(), dofs.size())));
@@ -241,6 +250,14 @@ absl::StatusOr<Eigen::VectorXd> FieldFromProto(const v1::FieldValues& field,
   return X;
 }
 
+absl::Status CheckSolutionFinite(const Eigen::VectorXd& x) {
+  if (!x.allFinite()) {
+    return absl::InvalidArgumentError(
+        "the solution is not finite: the input values are too large for double precision");
+  }
+  return absl::OkStatus();
+}
+
 absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
                           absl::Span<const int32_t> faces, FieldEncoding encoding,
                           google::protobuf::RepeatedField<float>* out) {
@@ -250,8 +267,16 @@ absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
   const int32_t vpf = ValuesPerFace(type, encoding);
   const int old = out->size();
   out->Resize(old + static_cast<int>(faces.size()) * vpf, 0.0f);
-  return DofsToValues(*basis.mesh, type, encoding, faces, dofs,
-                      absl::MakeSpan(out->mutable_data() + old, faces.size() * vpf));
+  const absl::Span<float> values = absl::MakeSpan(out->mutable_data() + old, faces.size() * vpf);
+  RETURN_IF_ERROR(DofsToValues(*basis.mesh, type, encoding, faces, dofs, values));
+  for (float v : values) {
+    if (!std::isfinite(v)) {
+      return absl::InvalidArgumentError(
+          "the lifted field overflows float (values beyond 3.4e38): the coefficients are too "
+          "large");
+    }
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace fieldspace::server

@@ -60,7 +60,12 @@ absl::StatusOr<Eigen::VectorXd> CoefficientsFromProto(absl::Span<const double> c
 absl::StatusOr<Eigen::VectorXd> FieldFromProto(const v1::FieldValues& field,
                                                const ServedBasis& basis);
 
-// Lifts `x` at `faces` through the basis's LiftPlan and appends the values in `encoding` to `out`.
+// InvalidArgument unless every coefficient is finite: huge inputs (e.g. a constraint value of
+// 1e308) can overflow a solve, and the answer must then be an error, not infinities with OK.
+absl::Status CheckSolutionFinite(const Eigen::VectorXd& x);
+
+// Lifts `x` at `faces` through the basis's LiftPlan and appends the values in `encoding` to `out`
+// (InvalidArgument when a value overflows float).
 absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
                           absl::Span<const int32_t> faces, FieldEncoding encoding,
                           google::protobuf::RepeatedField<float>* out);

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "core/mesh/shapes.h"
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
@@ -90,6 +91,164 @@ TEST_F(HostileInputTest, BearerSchemeIsCaseInsensitive) {
   EXPECT_EQ(list("Basic s3cret"), grpc::StatusCode::UNAUTHENTICATED);
   EXPECT_EQ(list("Bearer"), grpc::StatusCode::UNAUTHENTICATED);
   EXPECT_EQ(list("s3cret"), grpc::StatusCode::UNAUTHENTICATED);
+}
+
+// B9: with --max-message-mb 1, Eigenfields and Solve return_field always failed (a fixed 1 MiB
+// was subtracted from the limit), and GetMeshGeometry / Lift sent chunks larger than the limit.
+TEST_F(HostileInputTest, SmallMessageLimitStillServesEverything) {
+  FieldServerOptions options;
+  options.max_message_mb = 1;
+  Start(options);
+  auto arrays = MakeIcosphere(6, 1.0);  // 81,920 faces, 40,962 vertices: 2.9 MB of geometry
+  ASSERT_TRUE(arrays.ok());
+  std::string bytes(reinterpret_cast<const char*>(arrays->vertices.data()),
+                    sizeof(double) * arrays->vertices.size());
+  bytes.append(reinterpret_cast<const char*>(arrays->faces.data()),
+               sizeof(int32_t) * arrays->faces.size());
+  v1::MeshInfo mesh;
+  {
+    grpc::ClientContext context;
+    auto writer = stub_->UploadMesh(&context, &mesh);
+    v1::UploadMeshRequest header;
+    header.mutable_header()->set_name("ico6");
+    header.mutable_header()->set_format(v1::MESH_FORMAT_RAW);
+    header.mutable_header()->set_num_vertices(arrays->vertices.rows());
+    header.mutable_header()->set_num_faces(arrays->faces.rows());
+    ASSERT_TRUE(writer->Write(header));
+    for (size_t offset = 0; offset < bytes.size(); offset += 512 << 10) {
+      v1::UploadMeshRequest chunk;
+      chunk.set_offset(offset);
+      chunk.set_data(bytes.substr(offset, 512 << 10));
+      ASSERT_TRUE(writer->Write(chunk));
+    }
+    writer->WritesDone();
+    ASSERT_TRUE(writer->Finish().ok());
+  }
+  {
+    grpc::ClientContext context;
+    v1::GetMeshGeometryRequest request;
+    request.set_mesh_id(mesh.id());
+    auto reader = stub_->GetMeshGeometry(&context, request);
+    v1::MeshGeometryChunk chunk;
+    int64_t vertices = 0, faces = 0;
+    while (reader->Read(&chunk)) {
+      EXPECT_LE(chunk.ByteSizeLong(), size_t{1} << 20);
+      vertices += chunk.vertices_size() / 3;
+      faces += chunk.faces_size() / 3;
+    }
+    EXPECT_TRUE(reader->Finish().ok());
+    EXPECT_EQ(vertices, 40962);
+    EXPECT_EQ(faces, 81920);
+  }
+  std::string basis_id;
+  {
+    grpc::ClientContext context;
+    v1::BuildBasisRequest request;
+    request.set_mesh_id(mesh.id());
+    request.mutable_field()->set_kind(v1::FIELD_KIND_TENSOR);
+    request.set_dimension(30);
+    auto reader = stub_->BuildBasis(&context, request);
+    v1::BuildBasisProgress progress;
+    while (reader->Read(&progress)) {
+      if (progress.has_basis()) basis_id = progress.basis().id();
+    }
+    ASSERT_TRUE(reader->Finish().ok());
+  }
+  {
+    // Ambient tensors: 24 bytes per face, 1.9 MB in all.
+    grpc::ClientContext context;
+    v1::LiftRequest request;
+    request.set_basis_id(basis_id);
+    request.mutable_coefficients()->Resize(30, 0.1);
+    request.set_encoding(v1::FIELD_ENCODING_AMBIENT);
+    auto reader = stub_->Lift(&context, request);
+    v1::FieldChunk chunk;
+    int64_t values = 0;
+    while (reader->Read(&chunk)) {
+      EXPECT_LE(chunk.ByteSizeLong(), size_t{1} << 20);
+      values += chunk.field().values_size();
+    }
+    EXPECT_TRUE(reader->Finish().ok());
+    EXPECT_EQ(values, 6 * 81920);
+  }
+  {
+    grpc::ClientContext context;
+    v1::EigenfieldsRequest request;
+    request.set_basis_id(basis_id);
+    request.set_count(5);
+    v1::EigenfieldsResponse response;
+    EXPECT_TRUE(stub_->Eigenfields(&context, request, &response).ok());
+    EXPECT_EQ(response.eigenvalues_size(), 5);
+  }
+  {
+    // 81,920 faces x 3 DOFs x 4 bytes = 983 kB does not fit in 1 MiB with the rest: refused
+    // up front, with a pointer to Lift.
+    grpc::ClientContext context;
+    v1::SolveRequest request;
+    request.set_basis_id(basis_id);
+    request.mutable_weights()->set_mu_s(1);
+    request.mutable_weights()->set_mu_c(1);
+    request.set_return_field(true);
+    request.set_field_encoding(v1::FIELD_ENCODING_DOF);
+    v1::SolveResponse response;
+    const grpc::Status status = stub_->Solve(&context, request, &response);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  }
+}
+
+// B9: a constraint value of 1e308 gave infinite lifted values with OK.
+TEST_F(HostileInputTest, AbsurdConstraintValuesAreRefused) {
+  Start(FieldServerOptions());
+  auto arrays = MakeIcosphere(2, 1.0);
+  ASSERT_TRUE(arrays.ok());
+  std::string bytes(reinterpret_cast<const char*>(arrays->vertices.data()),
+                    sizeof(double) * arrays->vertices.size());
+  bytes.append(reinterpret_cast<const char*>(arrays->faces.data()),
+               sizeof(int32_t) * arrays->faces.size());
+  v1::MeshInfo mesh;
+  {
+    grpc::ClientContext context;
+    auto writer = stub_->UploadMesh(&context, &mesh);
+    v1::UploadMeshRequest request;
+    request.mutable_header()->set_name("ico2");
+    request.mutable_header()->set_format(v1::MESH_FORMAT_RAW);
+    request.mutable_header()->set_num_vertices(arrays->vertices.rows());
+    request.mutable_header()->set_num_faces(arrays->faces.rows());
+    request.set_data(bytes);
+    ASSERT_TRUE(writer->Write(request));
+    writer->WritesDone();
+    ASSERT_TRUE(writer->Finish().ok());
+  }
+  std::string basis_id;
+  {
+    grpc::ClientContext context;
+    v1::BuildBasisRequest request;
+    request.set_mesh_id(mesh.id());
+    request.mutable_field()->set_kind(v1::FIELD_KIND_VECTOR);
+    request.set_dimension(20);
+    auto reader = stub_->BuildBasis(&context, request);
+    v1::BuildBasisProgress progress;
+    while (reader->Read(&progress)) {
+      if (progress.has_basis()) basis_id = progress.basis().id();
+    }
+    ASSERT_TRUE(reader->Finish().ok());
+  }
+  for (double value : {1e308, -1e200}) {
+    grpc::ClientContext context;
+    v1::SolveRequest request;
+    request.set_basis_id(basis_id);
+    request.mutable_weights()->set_mu_s(1);
+    request.mutable_weights()->set_mu_c(1);
+    v1::Constraint* c = request.add_constraints();
+    c->set_face(3);
+    c->add_value(value);
+    c->add_value(0);
+    c->set_encoding(v1::FIELD_ENCODING_DOF);
+    v1::SolveResponse response;
+    EXPECT_EQ(stub_->Solve(&context, request, &response).error_code(),
+              grpc::StatusCode::INVALID_ARGUMENT)
+        << value;
+  }
 }
 
 }  // namespace
