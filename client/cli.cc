@@ -61,6 +61,10 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
                                       the field closest to FIELD_FILE (M-weighted) with harmonic
                                       and biharmonic fairness; scale-free weights unless
                                       --raw-weights (defaults 0.001, 0, 1)
+  align BASIS_ID --curvature [--n 2|4] [--smooth-mu X] [--mu-b X] [--mu-c X] [--out FIELD_FILE]
+        [--encoding ambient|dof] [--estimator jet|normal-differences]
+                                      a smooth n-field (n-field basis, n = 2 or 4) aligned to
+                                      the principal curvature directions (defaults 0.001, 0, 1)
   singularities BASIS_ID COEFFS_FILE [--zero-tolerance T]
                                       vertex indices (in turns) of the lifted field
   design BASIS_ID --script EDITS.jsonl [--mu-s X] [--mu-b X] [--mu-c X] [--watch F1,F2,...]
@@ -256,6 +260,10 @@ class Cli {
   int Smoothest(const CommandLine& a);
   int Singularities(const CommandLine& a);
   int Smooth(const CommandLine& a);
+  int Align(const CommandLine& a);
+  // Prints a Smooth / Align answer (and writes --out) as `smooth` and `align` do.
+  int EmitSmoothed(const CommandLine& a, const std::string& basis_id, bool scale_free,
+                   const v1::SmoothResponse& response);
 
   // Lifts all faces of `basis_id` and writes FIELD_FILE (text, or PLY with the mesh).
   int LiftToFile(const std::string& basis_id, const std::vector<double>& coefficients,
@@ -331,6 +339,9 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"curvature", {Flags({"out", "encoding", "estimator", "principal"}), 1, &Cli::Curvature}},
         {"smoothest", {Flags({"out", "encoding"}), 1, &Cli::Smoothest}},
         {"singularities", {Flags({"zero-tolerance"}), 2, &Cli::Singularities}},
+        {"align",
+         {Flags({"n", "smooth-mu", "mu-b", "mu-c", "out", "encoding", "estimator"}, {"curvature"}),
+          1, &Cli::Align}},
         {"smooth",
          {Flags({"mu-s", "mu-b", "mu-c", "face-weights", "out", "encoding"}, {"raw-weights"}), 2,
           &Cli::Smooth}},
@@ -851,27 +862,60 @@ int Cli::Smooth(const CommandLine& a) {
     if (!text.ok()) return Fail(text.status());
     absl::StatusOr<std::vector<double>> weights = ParseCoefficients(*text);
     if (!weights.ok()) {
-      return Fail(
-          absl::InvalidArgumentError(absl::StrCat(path, ": ", weights.status().message())));
+      return Fail(absl::InvalidArgumentError(absl::StrCat(path, ": ", weights.status().message())));
     }
     request.mutable_face_weights()->Add(weights->begin(), weights->end());
   }
   absl::StatusOr<v1::SmoothResponse> response = client_->Smooth(request);
   if (!response.ok()) return Fail(response.status(), "Smooth");
-  const std::vector<double> coefficients(response->coefficients().begin(),
-                                         response->coefficients().end());
+  return EmitSmoothed(a, request.basis_id(), request.scale_free(), *response);
+}
+
+int Cli::Align(const CommandLine& a) {
+  if (!a.Has("curvature")) {
+    throw UsageError("align needs --curvature (the only target so far: the principal directions)");
+  }
+  v1::GetBasisRequest basis_request;
+  basis_request.set_basis_id(a.positional()[0]);
+  absl::StatusOr<v1::BasisInfo> basis = client_->GetBasis(basis_request);
+  if (!basis.ok()) return Fail(basis.status(), "GetBasis");
+  if (a.Has("n") && (basis->field().kind() != v1::FIELD_KIND_NFIELD ||
+                     ParseInt(a, "n", 0) != basis->field().n())) {
+    return Fail(absl::InvalidArgumentError(
+        absl::StrCat("--n ", ParseInt(a, "n", 0), " does not match the basis's field type ",
+                     FieldKindName(basis->field()), " (align uses the basis's n)")));
+  }
+  v1::AlignRequest request;
+  request.set_basis_id(a.positional()[0]);
+  request.mutable_weights()->set_mu_s(ParseDouble(a, "smooth-mu", 0.001));
+  request.mutable_weights()->set_mu_b(ParseDouble(a, "mu-b", 0.0));
+  request.mutable_weights()->set_mu_c(ParseDouble(a, "mu-c", 1.0));
+  const std::string estimator = GetString(a, "estimator", "jet");
+  if (estimator != "jet" && estimator != "normal-differences") {
+    throw UsageError("--estimator must be jet or normal-differences");
+  }
+  request.set_estimator(estimator == "jet" ? v1::CURVATURE_ESTIMATOR_JET
+                                           : v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES);
+  absl::StatusOr<v1::SmoothResponse> response = client_->Align(request);
+  if (!response.ok()) return Fail(response.status(), "Align");
+  return EmitSmoothed(a, request.basis_id(), true, *response);
+}
+
+int Cli::EmitSmoothed(const CommandLine& a, const std::string& basis_id, bool scale_free,
+                      const v1::SmoothResponse& response) {
+  const std::vector<double> coefficients(response.coefficients().begin(),
+                                         response.coefficients().end());
   if (a.Has("out")) {
-    if (int rc = LiftToFile(request.basis_id(), coefficients, ParseEncoding(a),
-                            GetString(a, "out"));
+    if (int rc = LiftToFile(basis_id, coefficients, ParseEncoding(a), GetString(a, "out"));
         rc != 0) {
       return rc;
     }
   }
-  const v1::SmoothTimings& t = response->timings();
+  const v1::SmoothTimings& t = response.timings();
   JsonWriter j;
   j.BeginObject();
-  j.Key("basis_id").String(request.basis_id());
-  j.Key("scale_free").Bool(request.scale_free());
+  j.Key("basis_id").String(basis_id);
+  j.Key("scale_free").Bool(scale_free);
   j.Key("timings").BeginObject();
   j.Key("rhs_ms").Number(t.rhs_ms());
   j.Key("weighted_mass_ms").Number(t.weighted_mass_ms());

@@ -279,6 +279,10 @@ absl::StatusOr<v1::SmoothResponse> FieldClient::Smooth(const v1::SmoothRequest& 
   return Unary(&v1::FieldSpace::Stub::Smooth, request);
 }
 
+absl::StatusOr<v1::SmoothResponse> FieldClient::Align(const v1::AlignRequest& request) const {
+  return Unary(&v1::FieldSpace::Stub::Align, request);
+}
+
 absl::StatusOr<v1::EigenfieldsResponse> FieldClient::Eigenfields(
     const v1::EigenfieldsRequest& request) const {
   return Unary(&v1::FieldSpace::Stub::Eigenfields, request);

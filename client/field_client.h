@@ -119,6 +119,8 @@ class FieldClient {
       const fieldspace::v1::SingularitiesRequest& request) const;
   absl::StatusOr<fieldspace::v1::SmoothResponse> Smooth(
       const fieldspace::v1::SmoothRequest& request) const;
+  absl::StatusOr<fieldspace::v1::SmoothResponse> Align(
+      const fieldspace::v1::AlignRequest& request) const;
 
   // Starts a Design call; send `open` first (DesignStream::Open).
   std::unique_ptr<DesignStream> Design() const;

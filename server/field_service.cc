@@ -15,6 +15,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/mesh/mesh_io.h"
+#include "core/operators/curvature.h"
 #include "core/operators/singularities.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/projection.h"
@@ -266,11 +267,9 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
         double lift_ms = 0;
         if (request->return_field()) {
           const auto lift_start = Clock::now();
-          std::vector<int32_t> faces(basis->mesh->num_faces());
-          std::iota(faces.begin(), faces.end(), 0);
           response->mutable_field()->set_encoding(EncodingToProto(encoding));
-          RETURN_IF_ERROR(LiftToValues(*basis, result.coefficients, faces, encoding,
-                                       response->mutable_field()->mutable_values()));
+          RETURN_IF_ERROR(LiftAllToValues(*basis, result.coefficients, encoding,
+                                          response->mutable_field()->mutable_values()));
           lift_ms = MsSince(lift_start);
         }
         v1::SolveTimings* t = response->mutable_timings();
@@ -390,54 +389,107 @@ grpc::ServerUnaryReactor* FieldService::Singularities(grpc::CallbackServerContex
       });
 }
 
+namespace {
+
+// Smooths `X0` in `basis` (per-face `face_weights`, empty for 1) and fills `response`: the
+// coefficients, the lifted field on request and the timings. Shared by Smooth and Align.
+absl::Status SmoothInto(const ServedBasis& basis, const Eigen::VectorXd& X0,
+                        const EnergyWeights& weights, absl::Span<const double> face_weights,
+                        bool scale_free, bool return_field, int field_encoding,
+                        const ServiceOptions& service, const std::atomic<bool>* cancel,
+                        Clock::time_point start, v1::SmoothResponse* response) {
+  RETURN_IF_ERROR(ValidateWeights(weights));
+  ASSIGN_OR_RETURN(FieldEncoding encoding, EncodingFromProto(field_encoding));
+  if (return_field) {
+    const int64_t bytes =
+        int64_t{4} * ValuesPerFace(basis.basis->type, encoding) * basis.mesh->num_faces();
+    if (bytes > service.message_room()) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          "the smoothed field (", bytes, " bytes) exceeds the message size limit; use Lift"));
+    }
+  }
+  SmoothingOptions options;
+  options.scale_free = scale_free;
+  options.cancel = cancel;
+  ASSIGN_OR_RETURN(SmoothingResult result,
+                   SmoothReduced(*basis.system, X0, weights, face_weights, options));
+  RETURN_IF_ERROR(CheckSolutionFinite(result.coefficients));
+  response->mutable_coefficients()->Add(result.coefficients.data(),
+                                        result.coefficients.data() + result.coefficients.size());
+  double lift_ms = 0;
+  if (return_field) {
+    const auto lift_start = Clock::now();
+    response->mutable_field()->set_encoding(EncodingToProto(encoding));
+    RETURN_IF_ERROR(LiftAllToValues(basis, result.coefficients, encoding,
+                                    response->mutable_field()->mutable_values()));
+    lift_ms = MsSince(lift_start);
+  }
+  v1::SmoothTimings* t = response->mutable_timings();
+  t->set_rhs_ms(result.timings.rhs_ms);
+  t->set_weighted_mass_ms(result.timings.weighted_mass_ms);
+  t->set_factorize_ms(result.timings.factorize_ms);
+  t->set_solve_ms(result.timings.solve_ms);
+  t->set_lift_ms(lift_ms);
+  t->set_total_ms(MsSince(start));
+  response->set_backward_error(result.backward_error);
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* context,
                                                const v1::SmoothRequest* request,
                                                v1::SmoothResponse* response) {
+  return RunUnary(this, context, Where::kPool,
+                  [this, request, response](const std::atomic<bool>* cancel) -> absl::Status {
+                    const auto start = Clock::now();
+                    ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
+                                     registry_->GetBasis(request->basis_id()));
+                    ASSIGN_OR_RETURN(Eigen::VectorXd X0, FieldFromProto(request->field(), *basis));
+                    return SmoothInto(*basis, X0, WeightsFromProto(request->weights()),
+                                      request->face_weights(), request->scale_free(),
+                                      request->return_field(), request->field_encoding(), options_,
+                                      cancel, start, response);
+                  });
+}
+
+grpc::ServerUnaryReactor* FieldService::Align(grpc::CallbackServerContext* context,
+                                              const v1::AlignRequest* request,
+                                              v1::SmoothResponse* response) {
   return RunUnary(
       this, context, Where::kPool,
       [this, request, response](const std::atomic<bool>* cancel) -> absl::Status {
         const auto start = Clock::now();
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
                          registry_->GetBasis(request->basis_id()));
-        ASSIGN_OR_RETURN(Eigen::VectorXd X0, FieldFromProto(request->field(), *basis));
-        const EnergyWeights weights = WeightsFromProto(request->weights());
-        RETURN_IF_ERROR(ValidateWeights(weights));
-        ASSIGN_OR_RETURN(FieldEncoding encoding, EncodingFromProto(request->field_encoding()));
-        if (request->return_field()) {
-          const int64_t bytes =
-              int64_t{4} * ValuesPerFace(basis->basis->type, encoding) * basis->mesh->num_faces();
-          if (bytes > options_.message_room()) {
-            return absl::ResourceExhaustedError(absl::StrCat(
-                "the smoothed field (", bytes, " bytes) exceeds the message size limit; use Lift"));
-          }
+        const FieldType& type = basis->basis->type;
+        if (type.kind != FieldKind::kNField || (type.n != 2 && type.n != 4)) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              "Align needs an n-field basis with n = 2 (maximum principal direction) or n = 4 "
+              "(principal cross), not ",
+              type.ToString()));
         }
-        SmoothingOptions options;
-        options.scale_free = request->scale_free();
-        options.cancel = cancel;
-        ASSIGN_OR_RETURN(SmoothingResult result, SmoothReduced(*basis->system, X0, weights,
-                                                               request->face_weights(), options));
-        RETURN_IF_ERROR(CheckSolutionFinite(result.coefficients));
-        response->mutable_coefficients()->Add(
-            result.coefficients.data(), result.coefficients.data() + result.coefficients.size());
-        double lift_ms = 0;
-        if (request->return_field()) {
-          const auto lift_start = Clock::now();
-          std::vector<int32_t> faces(basis->mesh->num_faces());
-          std::iota(faces.begin(), faces.end(), 0);
-          response->mutable_field()->set_encoding(EncodingToProto(encoding));
-          RETURN_IF_ERROR(LiftToValues(*basis, result.coefficients, faces, encoding,
-                                       response->mutable_field()->mutable_values()));
-          lift_ms = MsSince(lift_start);
+        ShapeOperatorOptions curvature;
+        curvature.estimator = request->estimator() == v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES
+                                  ? CurvatureEstimator::kNormalDifferences
+                                  : CurvatureEstimator::kJetFit;
+        ASSIGN_OR_RETURN(Eigen::VectorXd shape, ComputeShapeOperator(*basis->mesh, curvature));
+        ASSIGN_OR_RETURN(CurvatureAlignedTargets targets,
+                         ComputeCurvatureAlignedTargets(*basis->mesh, shape, type.n));
+        // Anisotropy |k1 - k2| is 1/length: divided by its area-weighted mean it is
+        // dimensionless, like the scale-free weights.
+        const Eigen::VectorXd& area = basis->mesh->face_areas();
+        const double mean = targets.weights.dot(area) / area.sum();
+        if (!(mean > 0)) {
+          return absl::FailedPreconditionError(
+              "the surface has no curvature anisotropy anywhere (umbilic, e.g. a sphere): there "
+              "is no direction to align to");
         }
-        v1::SmoothTimings* t = response->mutable_timings();
-        t->set_rhs_ms(result.timings.rhs_ms);
-        t->set_weighted_mass_ms(result.timings.weighted_mass_ms);
-        t->set_factorize_ms(result.timings.factorize_ms);
-        t->set_solve_ms(result.timings.solve_ms);
-        t->set_lift_ms(lift_ms);
-        t->set_total_ms(MsSince(start));
-        response->set_backward_error(result.backward_error);
-        return absl::OkStatus();
+        const Eigen::VectorXd w = targets.weights / mean;
+        return SmoothInto(*basis, targets.dofs, WeightsFromProto(request->weights()),
+                          absl::MakeConstSpan(w.data(), w.size()), /*scale_free=*/true,
+                          request->return_field(), request->field_encoding(), options_, cancel,
+                          start, response);
       });
 }
 

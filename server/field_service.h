@@ -135,6 +135,9 @@ class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
   grpc::ServerUnaryReactor* Smooth(grpc::CallbackServerContext* context,
                                    const fieldspace::v1::SmoothRequest* request,
                                    fieldspace::v1::SmoothResponse* response) override;
+  grpc::ServerUnaryReactor* Align(grpc::CallbackServerContext* context,
+                                  const fieldspace::v1::AlignRequest* request,
+                                  fieldspace::v1::SmoothResponse* response) override;
 
  private:
   Registry* const registry_;

@@ -258,17 +258,15 @@ absl::Status CheckSolutionFinite(const Eigen::VectorXd& x) {
   return absl::OkStatus();
 }
 
-absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
-                          absl::Span<const int32_t> faces, FieldEncoding encoding,
-                          google::protobuf::RepeatedField<float>* out) {
-  const FieldType& type = basis.basis->type;
-  std::vector<double> dofs(faces.size() * type.dofs_per_face());
-  RETURN_IF_ERROR(LiftFacesInto(*basis.system, x, faces, absl::MakeSpan(dofs)));
-  const int32_t vpf = ValuesPerFace(type, encoding);
-  const int old = out->size();
-  out->Resize(old + static_cast<int>(faces.size()) * vpf, 0.0f);
-  const absl::Span<float> values = absl::MakeSpan(out->mutable_data() + old, faces.size() * vpf);
-  RETURN_IF_ERROR(DofsToValues(*basis.mesh, type, encoding, faces, dofs, values));
+absl::Status EncodeDofs(const ServedBasis& basis, absl::Span<const int32_t> faces,
+                        absl::Span<const double> dofs, FieldEncoding encoding,
+                        google::protobuf::RepeatedField<float>* out) {
+  const int32_t vpf = ValuesPerFace(basis.basis->type, encoding);
+  const int count = static_cast<int>(faces.size()) * vpf;
+  out->Reserve(out->size() + count);
+  // Uninitialized: DofsToValues writes every value (no zero-fill pass over large lifts).
+  const absl::Span<float> values = absl::MakeSpan(out->AddNAlreadyReserved(count), count);
+  RETURN_IF_ERROR(DofsToValues(*basis.mesh, basis.basis->type, encoding, faces, dofs, values));
   for (float v : values) {
     if (!std::isfinite(v)) {
       return absl::InvalidArgumentError(
@@ -277,6 +275,22 @@ absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
     }
   }
   return absl::OkStatus();
+}
+
+absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
+                          absl::Span<const int32_t> faces, FieldEncoding encoding,
+                          google::protobuf::RepeatedField<float>* out) {
+  std::vector<double> dofs(faces.size() * basis.basis->type.dofs_per_face());
+  RETURN_IF_ERROR(LiftFacesInto(*basis.system, x, faces, absl::MakeSpan(dofs)));
+  return EncodeDofs(basis, faces, dofs, encoding, out);
+}
+
+absl::Status LiftAllToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
+                             FieldEncoding encoding, google::protobuf::RepeatedField<float>* out) {
+  ASSIGN_OR_RETURN(Eigen::VectorXd dofs, Lift(*basis.system, x));
+  std::vector<int32_t> faces(basis.mesh->num_faces());
+  std::iota(faces.begin(), faces.end(), 0);
+  return EncodeDofs(basis, faces, absl::MakeConstSpan(dofs.data(), dofs.size()), encoding, out);
 }
 
 }  // namespace fieldspace::server

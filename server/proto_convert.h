@@ -64,11 +64,20 @@ absl::StatusOr<Eigen::VectorXd> FieldFromProto(const v1::FieldValues& field,
 // 1e308) can overflow a solve, and the answer must then be an error, not infinities with OK.
 absl::Status CheckSolutionFinite(const Eigen::VectorXd& x);
 
-// Lifts `x` at `faces` through the basis's LiftPlan and appends the values in `encoding` to `out`
-// (InvalidArgument when a value overflows float).
+// Appends the DOFs of `faces` (faces.size() * dofs_per_face, in face order) to `out` in
+// `encoding` (InvalidArgument when a value overflows float).
+absl::Status EncodeDofs(const ServedBasis& basis, absl::Span<const int32_t> faces,
+                        absl::Span<const double> dofs, FieldEncoding encoding,
+                        google::protobuf::RepeatedField<float>* out);
+
+// Lifts `x` at `faces` through the basis's LiftPlan and appends the values in `encoding` to `out`.
 absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
                           absl::Span<const int32_t> faces, FieldEncoding encoding,
                           google::protobuf::RepeatedField<float>* out);
+
+// The same for all faces: one parallel pass of the LiftPlan over every row of U.
+absl::Status LiftAllToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
+                             FieldEncoding encoding, google::protobuf::RepeatedField<float>* out);
 
 }  // namespace fieldspace::server
 

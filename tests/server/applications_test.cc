@@ -11,6 +11,7 @@
 #include <random>
 #include <string>
 
+#include "Eigen/Geometry"
 #include "absl/strings/str_cat.h"
 #include "client/field_client.h"
 #include "core/mesh/shapes.h"
@@ -270,6 +271,69 @@ TEST_F(ApplicationsTest, SmoothWeightsAreScaleFree) {
   bad.mutable_weights()->set_mu_s(1);
   bad.mutable_field()->mutable_values()->RemoveLast();
   EXPECT_THAT(client_->Smooth(bad).status(), StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
+// An open tube of radius 1 along z, faces oriented outward (so k1 = 1/r around the tube).
+MeshArrays Tube(int around, int along, double height) {
+  MeshArrays m;
+  m.vertices.resize(int64_t{around} * (along + 1), 3);
+  for (int j = 0; j <= along; ++j) {
+    for (int i = 0; i < around; ++i) {
+      const double t = 2 * M_PI * i / around;
+      m.vertices.row(j * around + i) << std::cos(t), std::sin(t), -height / 2 + height * j / along;
+    }
+  }
+  m.faces.resize(int64_t{2} * around * along, 3);
+  int f = 0;
+  for (int j = 0; j < along; ++j) {
+    for (int i = 0; i < around; ++i) {
+      const int a = j * around + i, b = j * around + (i + 1) % around;
+      const int c = b + around, d = a + around;
+      m.faces.row(f++) << a, b, c;
+      m.faces.row(f++) << a, c, d;
+    }
+  }
+  return m;
+}
+
+// Align: on a cylinder the curvature-aligned 2-field runs along the circles (the maximum
+// principal direction) to within a degree away from the open ends.
+TEST_F(ApplicationsTest, AlignedLineFieldOnACylinderFollowsTheCircles) {
+  const MeshArrays tube = Tube(64, 40, 4.0);
+  const std::string basis_id = Build(Upload(tube, "tube"), v1::FIELD_KIND_NFIELD, 2, 120);
+  v1::AlignRequest request;
+  request.set_basis_id(basis_id);
+  request.mutable_weights()->set_mu_s(0.001);
+  request.mutable_weights()->set_mu_c(1.0);
+  request.set_return_field(true);
+  request.set_field_encoding(v1::FIELD_ENCODING_DOF);
+  auto response = client_->Align(request);
+  ASSERT_THAT(response.status(), IsOk());
+  ASSERT_EQ(response->field().values_size(), 2 * tube.faces.rows());
+  double worst = 0;
+  int checked = 0;
+  for (int64_t f = 0; f < tube.faces.rows(); ++f) {
+    const Eigen::Vector3d p0 = tube.vertices.row(tube.faces(f, 0));
+    const Eigen::Vector3d p1 = tube.vertices.row(tube.faces(f, 1));
+    const Eigen::Vector3d p2 = tube.vertices.row(tube.faces(f, 2));
+    const Eigen::Vector3d center = (p0 + p1 + p2) / 3;
+    if (std::abs(center.z()) > 1.0) continue;  // away from the open ends
+    const Eigen::Vector3d x = (p1 - p0).normalized();
+    const Eigen::Vector3d n = (p1 - p0).cross(p2 - p0).normalized();
+    const Eigen::Vector3d y = n.cross(x);
+    const Eigen::Vector3d around(-center.y(), center.x(), 0);
+    const double expected = 2 * std::atan2(around.dot(y), around.dot(x));  // angle times n = 2
+    const double got =
+        std::atan2(response->field().values(2 * f + 1), response->field().values(2 * f));
+    const double diff = std::remainder(got - expected, 2 * M_PI) / 2;  // back to directions
+    worst = std::max(worst, std::abs(diff));
+    ++checked;
+  }
+  EXPECT_GT(checked, 1000);
+  EXPECT_LT(worst * 180 / M_PI, 1.0);
+  // Only n = 2 or 4 n-field bases; a sphere has nothing to align to.
+  request.set_basis_id(Build(Upload(tube, "tube"), v1::FIELD_KIND_VECTOR, 0, 40));
+  EXPECT_THAT(client_->Align(request).status(), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST_F(ApplicationsTest, SingularitiesErrorsHaveExactCodes) {
