@@ -106,6 +106,18 @@ int64_t ParseInt(const CommandLine& args, const std::string& flag, int64_t fallb
   return OrUsageError(args.GetInt(flag, fallback));
 }
 
+// A file of numbers (coefficients, per-face weights): the JSON printed by solve / project /
+// smoothest, a JSON array, or plain numbers. Errors name the file.
+absl::StatusOr<std::vector<double>> ReadNumbersFile(const std::string& path) {
+  absl::StatusOr<std::string> text = ReadFile(path);
+  if (!text.ok()) return text.status();
+  absl::StatusOr<std::vector<double>> numbers = ParseCoefficients(*text);
+  if (!numbers.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": ", numbers.status().message()));
+  }
+  return numbers;
+}
+
 std::vector<int32_t> ParseFaceList(const std::string& text) {
   std::vector<int32_t> faces;
   for (absl::string_view token : absl::StrSplit(text, ',', absl::SkipEmpty())) {
@@ -636,13 +648,8 @@ int Cli::Solve(const CommandLine& a) {
 }
 
 int Cli::Lift(const CommandLine& a) {
-  absl::StatusOr<std::string> text = ReadFile(a.positional()[1]);
-  if (!text.ok()) return Fail(text.status());
-  absl::StatusOr<std::vector<double>> coefficients = ParseCoefficients(*text);
-  if (!coefficients.ok()) {
-    return Fail(absl::InvalidArgumentError(
-        absl::StrCat(a.positional()[1], ": ", coefficients.status().message())));
-  }
+  absl::StatusOr<std::vector<double>> coefficients = ReadNumbersFile(a.positional()[1]);
+  if (!coefficients.ok()) return Fail(coefficients.status());
   const v1::FieldEncoding encoding = ParseEncoding(a);
   if (a.Has("out") == a.Has("faces")) {
     throw UsageError("lift needs exactly one of --out FIELD_FILE and --faces F1,F2,...");
@@ -811,13 +818,8 @@ int Cli::Smoothest(const CommandLine& a) {
 }
 
 int Cli::Singularities(const CommandLine& a) {
-  absl::StatusOr<std::string> text = ReadFile(a.positional()[1]);
-  if (!text.ok()) return Fail(text.status());
-  absl::StatusOr<std::vector<double>> coefficients = ParseCoefficients(*text);
-  if (!coefficients.ok()) {
-    return Fail(absl::InvalidArgumentError(
-        absl::StrCat(a.positional()[1], ": ", coefficients.status().message())));
-  }
+  absl::StatusOr<std::vector<double>> coefficients = ReadNumbersFile(a.positional()[1]);
+  if (!coefficients.ok()) return Fail(coefficients.status());
   v1::SingularitiesRequest request;
   request.set_basis_id(a.positional()[0]);
   request.mutable_coefficients()->Add(coefficients->begin(), coefficients->end());

@@ -24,9 +24,9 @@
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
-#include "server/served_basis.h"
 #include "server/field_server.h"
 #include "server/registry.h"
+#include "server/served_basis.h"
 
 namespace fieldspace::server {
 namespace {

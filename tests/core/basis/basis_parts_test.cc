@@ -15,8 +15,8 @@
 #include "core/basis/local_eigensolver.h"
 #include "core/basis/regions.h"
 #include "core/basis/sampling.h"
-#include "gmock/gmock.h"
 #include "core/common/cancel.h"
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
 #include "tests/testing/matchers.h"
@@ -170,7 +170,8 @@ TEST(RegionsTest, RegionsAreDualDisks) {
   regions = GrowRegions(*g, samples, options, nullptr);
   ASSERT_TRUE(regions.ok());
   EXPECT_EQ((*regions)[0].size(), 4u);
-  EXPECT_THAT(GrowRegions(*g, samples, options, &kCancelled), StatusIs(absl::StatusCode::kCancelled));
+  EXPECT_THAT(GrowRegions(*g, samples, options, &kCancelled),
+              StatusIs(absl::StatusCode::kCancelled));
 }
 
 // S = 1D Dirichlet Laplacian (tridiagonal 2, -1): eigenvalues 2 - 2 cos(k pi / (n + 1)).
@@ -232,7 +233,8 @@ TEST(LocalEigensolverTest, LowestEigenpairsOfPathLaplacian) {
               StatusIs(absl::StatusCode::kInvalidArgument));
   PathOperator big(500, 1e-3);
   options.count = 2;
-  EXPECT_THAT(basis_internal::SolveLocalEigenproblem(big, options, &kCancelled), StatusIs(absl::StatusCode::kCancelled));
+  EXPECT_THAT(basis_internal::SolveLocalEigenproblem(big, options, &kCancelled),
+              StatusIs(absl::StatusCode::kCancelled));
 }
 
 TEST(LocalEigensolverTest, FallsBackToLanczosWhenLobpcgDoesNotConverge) {

@@ -75,7 +75,8 @@ TEST_P(ReferenceSolversTest, SoftConstraintsGiveZeroGradient) {
   p.weights.mu_b = 0.02;
   p.weights.mu_c = 10.0;
   std::uniform_int_distribution<int> face(0, mesh_->num_faces() - 1);
-  for (int i = 0; i < 30; ++i) p.constraints.push_back({face(rng), RandomValue(rng), 0.5 + i * 0.1});
+  for (int i = 0; i < 30; ++i)
+    p.constraints.push_back({face(rng), RandomValue(rng), 0.5 + i * 0.1});
   auto X = SolveModelProblem(op_, p);
   ASSERT_TRUE(X.ok()) << X.status();
   const Eigen::VectorXd g = HalfGradient(p, *X);
@@ -205,7 +206,8 @@ TEST_P(ReferenceSolversTest, ErrorsHaveExactCodes) {
   // No energy at all (A = 0 would be singular): refused by ValidateWeights, naming the weights.
   p = {};
   p.weights = {.mu_s = 0, .mu_b = 0, .mu_c = 0};
-  EXPECT_THAT(status_of(p), StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("mu_s and mu_b")));
+  EXPECT_THAT(status_of(p),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("mu_s and mu_b")));
 
   EXPECT_THAT(SmoothField(op_, Eigen::VectorXd::Zero(op_.dofs()), -1),
               StatusIs(absl::StatusCode::kInvalidArgument));

@@ -340,10 +340,10 @@ TEST_P(DesignSessionTest, ConcurrentSessionsShareTheSystem) {
     for (int64_t id = 0; id < 12; ++id) {
       FieldConstraint c = RandomConstraint(rng);
       c.face = static_cast<int32_t>((id * 23) % mesh_->num_faces());
-      ASSERT_TRUE(
-          (*session)
-              ->AddConstraint(id, As(id % 4 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft, c))
-              .ok());
+      ASSERT_TRUE((*session)
+                      ->AddConstraint(
+                          id, As(id % 4 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft, c))
+                      .ok());
       out->push_back((*session)->coefficients());
     }
   };
@@ -381,9 +381,10 @@ TEST(DesignSessionTorusTest, SingularEnergyWithConstraints) {
     FieldConstraint c;
     c.face = static_cast<int32_t>((id * 37 + 5) % mesh.num_faces());
     c.value = Eigen::Vector2d(std::cos(id), std::sin(id));
-    ASSERT_TRUE((*session)
-                    ->AddConstraint(id, As(id < 3 ? ConstraintKind::kHard : ConstraintKind::kSoft, c))
-                    .ok());
+    ASSERT_TRUE(
+        (*session)
+            ->AddConstraint(id, As(id < 3 ? ConstraintKind::kHard : ConstraintKind::kSoft, c))
+            .ok());
   }
   auto fresh = SolveReducedModelProblem(**sys, (*session)->problem());
   ASSERT_TRUE(fresh.ok());
