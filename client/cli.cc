@@ -280,6 +280,12 @@ class Cli {
   // Lifts all faces of `basis_id` and writes FIELD_FILE (text, or PLY with the mesh).
   int LiftToFile(const std::string& basis_id, const std::vector<double>& coefficients,
                  v1::FieldEncoding encoding, const std::string& path);
+  // LiftToFile to --out (in --encoding) when the command was given --out; 0 otherwise.
+  int LiftToOut(const CommandLine& a, const std::string& basis_id,
+                const std::vector<double>& coefficients) {
+    if (!a.Has("out")) return 0;
+    return LiftToFile(basis_id, coefficients, ParseEncoding(a), GetString(a, "out"));
+  }
 
   std::ostream& out_;
   std::ostream& err_;
@@ -624,13 +630,7 @@ int Cli::Solve(const CommandLine& a) {
   if (!response.ok()) return Fail(response.status(), "Solve");
   std::vector<double> coefficients(response->coefficients().begin(),
                                    response->coefficients().end());
-  if (a.Has("out")) {
-    if (int rc =
-            LiftToFile(request.basis_id(), coefficients, ParseEncoding(a), GetString(a, "out"));
-        rc != 0) {
-      return rc;
-    }
-  }
+  if (int rc = LiftToOut(a, request.basis_id(), coefficients); rc != 0) return rc;
   JsonWriter j;
   j.BeginObject();
   j.Key("basis_id").String(request.basis_id());
@@ -795,13 +795,7 @@ int Cli::Smoothest(const CommandLine& a) {
   if (!response.ok()) return Fail(response.status(), "Eigenfields");
   const std::vector<double> coefficients(response->coefficients().begin(),
                                          response->coefficients().end());
-  if (a.Has("out")) {
-    if (int rc =
-            LiftToFile(request.basis_id(), coefficients, ParseEncoding(a), GetString(a, "out"));
-        rc != 0) {
-      return rc;
-    }
-  }
+  if (int rc = LiftToOut(a, request.basis_id(), coefficients); rc != 0) return rc;
   JsonWriter j;
   j.BeginObject();
   j.Key("basis_id").String(request.basis_id());
@@ -907,12 +901,7 @@ int Cli::EmitSmoothed(const CommandLine& a, const std::string& basis_id, bool sc
                       const v1::SmoothResponse& response) {
   const std::vector<double> coefficients(response.coefficients().begin(),
                                          response.coefficients().end());
-  if (a.Has("out")) {
-    if (int rc = LiftToFile(basis_id, coefficients, ParseEncoding(a), GetString(a, "out"));
-        rc != 0) {
-      return rc;
-    }
-  }
+  if (int rc = LiftToOut(a, basis_id, coefficients); rc != 0) return rc;
   const v1::SmoothTimings& t = response.timings();
   JsonWriter j;
   j.BeginObject();

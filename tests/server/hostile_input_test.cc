@@ -45,6 +45,50 @@ class HostileInputTest : public ::testing::Test {
         grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials()));
   }
 
+  // Uploads `arrays` as raw arrays in chunks of at most 512 KiB; the mesh id, or "" on failure.
+  std::string UploadRaw(const MeshArrays& arrays, const std::string& name) {
+    std::string bytes(reinterpret_cast<const char*>(arrays.vertices.data()),
+                      sizeof(double) * arrays.vertices.size());
+    bytes.append(reinterpret_cast<const char*>(arrays.faces.data()),
+                 sizeof(int32_t) * arrays.faces.size());
+    v1::MeshInfo mesh;
+    grpc::ClientContext context;
+    auto writer = stub_->UploadMesh(&context, &mesh);
+    v1::UploadMeshRequest header;
+    header.mutable_header()->set_name(name);
+    header.mutable_header()->set_format(v1::MESH_FORMAT_RAW);
+    header.mutable_header()->set_num_vertices(arrays.vertices.rows());
+    header.mutable_header()->set_num_faces(arrays.faces.rows());
+    writer->Write(header);
+    for (size_t offset = 0; offset < bytes.size(); offset += 512 << 10) {
+      v1::UploadMeshRequest chunk;
+      chunk.set_offset(offset);
+      chunk.set_data(bytes.substr(offset, 512 << 10));
+      writer->Write(chunk);
+    }
+    writer->WritesDone();
+    const grpc::Status status = writer->Finish();
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return status.ok() ? mesh.id() : "";
+  }
+  // Builds a basis of `kind` and dimension `d`; its id, or "" on failure.
+  std::string Build(const std::string& mesh_id, v1::FieldKind kind, int d) {
+    grpc::ClientContext context;
+    v1::BuildBasisRequest request;
+    request.set_mesh_id(mesh_id);
+    request.mutable_field()->set_kind(kind);
+    request.set_dimension(d);
+    auto reader = stub_->BuildBasis(&context, request);
+    v1::BuildBasisProgress progress;
+    std::string id;
+    while (reader->Read(&progress)) {
+      if (progress.has_basis()) id = progress.basis().id();
+    }
+    const grpc::Status status = reader->Finish();
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return status.ok() ? id : "";
+  }
+
   fs::path root_;
   std::unique_ptr<FieldServer> server_;
   std::unique_ptr<v1::FieldSpace::Stub> stub_;
@@ -101,29 +145,9 @@ TEST_F(HostileInputTest, SmallMessageLimitStillServesEverything) {
   Start(options);
   auto arrays = MakeIcosphere(6, 1.0);  // 81,920 faces, 40,962 vertices: 2.9 MB of geometry
   ASSERT_TRUE(arrays.ok());
-  std::string bytes(reinterpret_cast<const char*>(arrays->vertices.data()),
-                    sizeof(double) * arrays->vertices.size());
-  bytes.append(reinterpret_cast<const char*>(arrays->faces.data()),
-               sizeof(int32_t) * arrays->faces.size());
   v1::MeshInfo mesh;
-  {
-    grpc::ClientContext context;
-    auto writer = stub_->UploadMesh(&context, &mesh);
-    v1::UploadMeshRequest header;
-    header.mutable_header()->set_name("ico6");
-    header.mutable_header()->set_format(v1::MESH_FORMAT_RAW);
-    header.mutable_header()->set_num_vertices(arrays->vertices.rows());
-    header.mutable_header()->set_num_faces(arrays->faces.rows());
-    ASSERT_TRUE(writer->Write(header));
-    for (size_t offset = 0; offset < bytes.size(); offset += 512 << 10) {
-      v1::UploadMeshRequest chunk;
-      chunk.set_offset(offset);
-      chunk.set_data(bytes.substr(offset, 512 << 10));
-      ASSERT_TRUE(writer->Write(chunk));
-    }
-    writer->WritesDone();
-    ASSERT_TRUE(writer->Finish().ok());
-  }
+  mesh.set_id(UploadRaw(*arrays, "ico6"));
+  ASSERT_FALSE(mesh.id().empty());
   {
     grpc::ClientContext context;
     v1::GetMeshGeometryRequest request;
@@ -140,20 +164,8 @@ TEST_F(HostileInputTest, SmallMessageLimitStillServesEverything) {
     EXPECT_EQ(vertices, 40962);
     EXPECT_EQ(faces, 81920);
   }
-  std::string basis_id;
-  {
-    grpc::ClientContext context;
-    v1::BuildBasisRequest request;
-    request.set_mesh_id(mesh.id());
-    request.mutable_field()->set_kind(v1::FIELD_KIND_TENSOR);
-    request.set_dimension(30);
-    auto reader = stub_->BuildBasis(&context, request);
-    v1::BuildBasisProgress progress;
-    while (reader->Read(&progress)) {
-      if (progress.has_basis()) basis_id = progress.basis().id();
-    }
-    ASSERT_TRUE(reader->Finish().ok());
-  }
+  const std::string basis_id = Build(mesh.id(), v1::FIELD_KIND_TENSOR, 30);
+  ASSERT_FALSE(basis_id.empty());
   {
     // Ambient tensors: 24 bytes per face, 1.9 MB in all.
     grpc::ClientContext context;
@@ -201,38 +213,8 @@ TEST_F(HostileInputTest, AbsurdConstraintValuesAreRefused) {
   Start(FieldServerOptions());
   auto arrays = MakeIcosphere(2, 1.0);
   ASSERT_TRUE(arrays.ok());
-  std::string bytes(reinterpret_cast<const char*>(arrays->vertices.data()),
-                    sizeof(double) * arrays->vertices.size());
-  bytes.append(reinterpret_cast<const char*>(arrays->faces.data()),
-               sizeof(int32_t) * arrays->faces.size());
-  v1::MeshInfo mesh;
-  {
-    grpc::ClientContext context;
-    auto writer = stub_->UploadMesh(&context, &mesh);
-    v1::UploadMeshRequest request;
-    request.mutable_header()->set_name("ico2");
-    request.mutable_header()->set_format(v1::MESH_FORMAT_RAW);
-    request.mutable_header()->set_num_vertices(arrays->vertices.rows());
-    request.mutable_header()->set_num_faces(arrays->faces.rows());
-    request.set_data(bytes);
-    ASSERT_TRUE(writer->Write(request));
-    writer->WritesDone();
-    ASSERT_TRUE(writer->Finish().ok());
-  }
-  std::string basis_id;
-  {
-    grpc::ClientContext context;
-    v1::BuildBasisRequest request;
-    request.set_mesh_id(mesh.id());
-    request.mutable_field()->set_kind(v1::FIELD_KIND_VECTOR);
-    request.set_dimension(20);
-    auto reader = stub_->BuildBasis(&context, request);
-    v1::BuildBasisProgress progress;
-    while (reader->Read(&progress)) {
-      if (progress.has_basis()) basis_id = progress.basis().id();
-    }
-    ASSERT_TRUE(reader->Finish().ok());
-  }
+  const std::string basis_id = Build(UploadRaw(*arrays, "ico2"), v1::FIELD_KIND_VECTOR, 20);
+  ASSERT_FALSE(basis_id.empty());
   for (double value : {1e308, -1e200}) {
     grpc::ClientContext context;
     v1::SolveRequest request;
