@@ -1,11 +1,15 @@
 #include "server/proto_convert.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <numeric>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/projection.h"
+#include "oneapi/tbb/blocked_range.h"
+#include "oneapi/tbb/parallel_for.h"
 
 namespace fieldspace::server {
 
@@ -264,15 +268,31 @@ absl::Status EncodeDofs(const ServedBasis& basis, absl::Span<const int32_t> face
   const int32_t vpf = ValuesPerFace(basis.basis->type, encoding);
   const int count = static_cast<int>(faces.size()) * vpf;
   out->Reserve(out->size() + count);
-  // Uninitialized: DofsToValues writes every value (no zero-fill pass over large lifts).
+  // Uninitialized: every value is written below (no zero-fill pass over large lifts).
   const absl::Span<float> values = absl::MakeSpan(out->AddNAlreadyReserved(count), count);
-  RETURN_IF_ERROR(DofsToValues(*basis.mesh, basis.basis->type, encoding, faces, dofs, values));
-  for (float v : values) {
-    if (!std::isfinite(v)) {
-      return absl::InvalidArgumentError(
-          "the lifted field overflows float (values beyond 3.4e38): the coefficients are too "
-          "large");
+  std::atomic<bool> finite{true};
+  if (encoding == FieldEncoding::kDof) {
+    // The DOF encoding is a narrowing copy: one parallel pass converts and checks each block while
+    // it is in cache (an all-faces lift of 1.38M faces is 2.8M values).
+    if (dofs.size() != values.size()) {
+      return absl::InternalError("EncodeDofs: the DOFs do not match the faces");
     }
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, values.size(), 1 << 16),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        bool ok = true;
+                        for (size_t i = r.begin(); i < r.end(); ++i) {
+                          values[i] = static_cast<float>(dofs[i]);
+                          ok &= std::isfinite(values[i]);
+                        }
+                        if (!ok) finite.store(false, std::memory_order_relaxed);
+                      });
+  } else {
+    RETURN_IF_ERROR(DofsToValues(*basis.mesh, basis.basis->type, encoding, faces, dofs, values));
+    finite = std::all_of(values.begin(), values.end(), [](float v) { return std::isfinite(v); });
+  }
+  if (!finite) {
+    return absl::InvalidArgumentError(
+        "the lifted field overflows float (values beyond 3.4e38): the coefficients are too large");
   }
   return absl::OkStatus();
 }
