@@ -7,8 +7,11 @@ with the build tree's python/ folder (the package with its generated stubs).
 
 import os
 import shutil
+import signal
+import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 import unittest
 
@@ -145,6 +148,13 @@ class FieldTest(unittest.TestCase):
         dofs = CLIENT.lift(NFIELD, x, encoding="dof")
         np.testing.assert_allclose(np.linalg.norm(dofs, axis=1), lengths[:, 0], rtol=1e-5,
                                    atol=1e-6 * lengths.max())
+        # Design sessions watch all four directions too.
+        with CLIENT.design(NFIELD, watch=[1, 2]) as s:
+            u = s.add(1, field[1, 2], hard=True)
+        self.assertEqual(u.watched.shape, (2, 4, 3))
+        np.testing.assert_allclose(u.watched, CLIENT.lift(NFIELD, u.coefficients, faces=[1, 2]))
+        self.assertLess(np.min(np.linalg.norm(u.watched[0] - field[1, 2], axis=1)),
+                        1e-5 * lengths.max())  # the hard constraint holds (in some direction)
         # Any of the four directions, sent back, projects to the same coefficients.
         for j in (0, 3):
             p = CLIENT.project(NFIELD, field[:, j, :])
@@ -340,6 +350,8 @@ class ErrorTest(unittest.TestCase):
             CLIENT.upload(os.path.join(WORK, "missing.obj"))
 
     def test_limits_and_states(self):
+        with self.assertRaises(fs.FailedPrecondition):  # LoadMesh needs --data-root
+            CLIENT.load("sphere.obj")
         with self.assertRaises(fs.ResourceExhausted):
             CLIENT.build(SPHERE.id, "vector", 100000, progress=False)
         with self.assertRaises(fs.FailedPrecondition):  # two hard constraints on one face
@@ -416,6 +428,33 @@ class BuildTest(unittest.TestCase):
         self.wait_gone(basis)
         self.assertLess(time.monotonic() - t0, 5.0)
         self.assertEqual(CLIENT.bases(mesh.id), [])
+        CLIENT.delete_mesh(mesh.id, cascade=True)
+
+    def test_ctrl_c_cancels_the_build_on_the_server(self):
+        """A real SIGINT to a process blocked in build (progress bar on)."""
+        V, F = obj_arrays(icosphere_obj(5)[0])
+        mesh = CLIENT.upload(V, F)
+        child = textwrap.dedent("""
+            import signal, sys
+            import fieldspace
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            def started(p):
+                if p.basis_id and not getattr(started, "said", False):
+                    print(p.basis_id, flush=True)
+                    started.said = True
+            fieldspace.Client(sys.argv[1]).build(sys.argv[2], "vector", 500, seed=2,
+                                                progress=True, on_progress=started)
+            """)
+        proc = subprocess.Popen([sys.executable, "-c", child, DAEMON_PROC.address, mesh.id],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        basis = proc.stdout.readline().strip()
+        self.assertTrue(basis.startswith("b-"), basis)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        self.assertNotEqual(proc.returncode, 0)
+        self.assertIn("KeyboardInterrupt", err)
+        self.assertIn("fieldspace: build %s cancelled on the server" % basis, err)
+        self.wait_gone(basis)
         CLIENT.delete_mesh(mesh.id, cascade=True)
 
 
