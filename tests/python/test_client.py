@@ -128,6 +128,7 @@ class FieldTest(unittest.TestCase):
                                    rtol=1e-5, atol=1e-6 * scale)
         subset = CLIENT.lift(VECTOR, x, faces=[7, 3, 7, 1279])
         np.testing.assert_array_equal(subset, field[[7, 3, 7, 1279]])
+        self.assertEqual(CLIENT.lift(VECTOR, x, faces=[]).shape, (0, 3))
 
     def test_nfield_lift_gives_all_n_directions(self):
         x = self.coefficients(NFIELD, 2)
@@ -152,6 +153,7 @@ class FieldTest(unittest.TestCase):
         with CLIENT.design(NFIELD, watch=[1, 2]) as s:
             u = s.add(1, field[1, 2], hard=True)
         self.assertEqual(u.watched.shape, (2, 4, 3))
+        self.assertEqual(CLIENT.lift(NFIELD, x, faces=[]).shape, (0, 4, 3))
         np.testing.assert_allclose(u.watched, CLIENT.lift(NFIELD, u.coefficients, faces=[1, 2]))
         self.assertLess(np.min(np.linalg.norm(u.watched[0] - field[1, 2], axis=1)),
                         1e-5 * lengths.max())  # the hard constraint holds (in some direction)

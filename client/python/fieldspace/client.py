@@ -437,6 +437,8 @@ class Client:
         subset = None
         if faces is not None:
             subset = np.asarray(faces, dtype=np.int64).ravel()
+            if len(subset) == 0:  # on the wire, no faces means all faces
+                return fld.decode(np.zeros(0), field_type, encoding, np.zeros((0, 3)))
             request.faces.extend(subset.tolist())
         chunks = self._collect(what, self._stub.Lift, request, timeout)
         vpf = fld.values_per_face(field_type, encoding)
