@@ -350,6 +350,7 @@ class Client:
         return [BasisInfo.from_proto(b) for b in response.bases]
 
     def delete_basis(self, basis, timeout=_DEFAULT):
+        """Deletes a built basis (FailedPrecondition while it is being built: cancel it)."""
         self._unary("DeleteBasis", self._stub.DeleteBasis,
                     pb.DeleteBasisRequest(basis_id=_id(basis)), timeout)
 
