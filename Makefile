@@ -1,10 +1,11 @@
 # Newcomer entry points. `make run`: install deps, build, start the daemon on a demo mesh.
-# `make test`: install deps, build, run the test suite.
+# `make test`: install deps, build, run the test suite. `make install PREFIX=DIR`: programs and
+# the Python package into DIR.
 BUILD_DIR ?= build
 BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 
-.PHONY: all deps configure build test run format clean
+.PHONY: all deps configure build test install run format clean
 
 all: build
 
@@ -21,6 +22,13 @@ build: configure
 
 test: build
 	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
+
+# Installs fieldspaced, fieldspace and fieldspace-bench into $(PREFIX)/bin and the Python package
+# into $(PREFIX)/lib/python3/dist-packages/fieldspace (put $(PREFIX)/lib/python3/dist-packages on
+# PYTHONPATH).
+PREFIX ?= /usr/local
+install: build
+	cmake --install $(BUILD_DIR) --prefix $(PREFIX)
 
 # Starts the daemon on loopback with the bundled demo mesh (a ~49k-face torus-knot tube made by
 # core/mesh/shapes.h), stored under STORE; its default vector basis builds in the background.

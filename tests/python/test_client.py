@@ -1,0 +1,492 @@
+#!/usr/bin/env python3
+"""Tests of the Python package `fieldspace` against live fieldspaced daemons.
+
+Environment (set by tests/python/CMakeLists.txt): FIELDSPACED (the daemon binary) and PYTHONPATH
+with the build tree's python/ folder (the package with its generated stubs).
+"""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+import unittest
+
+import grpc
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "server"))
+from fs_testlib import Daemon, icosphere_obj, torus_obj  # noqa: E402
+
+import fieldspace as fs  # noqa: E402
+
+DAEMON = os.environ.get("FIELDSPACED")
+
+
+def obj_arrays(text):
+    """(V, F) of OBJ text with `v` and triangle `f` lines."""
+    V, F = [], []
+    for line in text.splitlines():
+        parts = line.split()
+        if parts and parts[0] == "v":
+            V.append([float(x) for x in parts[1:4]])
+        elif parts and parts[0] == "f":
+            F.append([int(x) - 1 for x in parts[1:4]])
+    return np.array(V), np.array(F, dtype=np.int32)
+
+
+def normals_of(V, F):
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+def roughness(field):
+    """Mean |X_f - X_g| over the pairs of faces sharing an edge of the sphere."""
+    edges = {}
+    for f, (a, b, c) in enumerate(SF):
+        for u, v in ((a, b), (b, c), (c, a)):
+            edges.setdefault((min(u, v), max(u, v)), []).append(f)
+    pairs = np.array([fs_ for fs_ in edges.values()])
+    return float(np.mean(np.linalg.norm(field[pairs[:, 0]] - field[pairs[:, 1]], axis=1)))
+
+
+def setUpModule():
+    global WORK, DAEMON_PROC, CLIENT, SPHERE, SV, SF, VECTOR, NFIELD, TENSOR
+    if not DAEMON:
+        raise RuntimeError("set FIELDSPACED to the fieldspaced binary")
+    WORK = tempfile.mkdtemp(prefix="fs_python_")
+    DAEMON_PROC = Daemon(DAEMON, os.path.join(WORK, "store")).start()
+    CLIENT = fs.Client(DAEMON_PROC.address, timeout=60)
+    SV, SF = obj_arrays(icosphere_obj(3)[0])
+    SPHERE = CLIENT.upload(SV, SF, name="icosphere")
+    VECTOR = CLIENT.build(SPHERE.id, "vector", 100, progress=False)
+    NFIELD = CLIENT.build(SPHERE.id, "nfield", 60, n=4, progress=False)
+    TENSOR = CLIENT.build(SPHERE.id, "tensor", 60, progress=False)
+
+
+def tearDownModule():
+    CLIENT.close()
+    try:
+        assert DAEMON_PROC.stop() == 0, "daemon exits 0 on SIGTERM"
+    finally:
+        if DAEMON_PROC.alive():
+            DAEMON_PROC.proc.kill()
+        shutil.rmtree(WORK, ignore_errors=True)
+
+
+class MeshTest(unittest.TestCase):
+    def test_arrays_round_trip_through_mesh_geometry(self):
+        self.assertEqual(SPHERE.num_faces, 1280)
+        self.assertEqual(SPHERE.num_vertices, len(SV))
+        self.assertEqual(SPHERE.euler_characteristic, 2)
+        self.assertTrue(SPHERE.id.startswith("m-"))
+        V, F = CLIENT.mesh_geometry(SPHERE.id)
+        self.assertEqual(V.dtype, np.float64)
+        self.assertEqual(F.dtype, np.int32)
+        np.testing.assert_array_equal(V, SV)  # float64 on the wire: bit-exact
+        np.testing.assert_array_equal(F, SF)
+
+    def test_file_and_arrays_give_the_same_id(self):
+        path = os.path.join(WORK, "sphere.obj")
+        with open(path, "w") as f:
+            f.write(icosphere_obj(3)[0])
+        info = CLIENT.upload(path)
+        self.assertEqual(info.id, SPHERE.id)
+        self.assertIn(SPHERE.id, [m.id for m in CLIENT.meshes()])
+        self.assertEqual(CLIENT.mesh(SPHERE.id).num_faces, 1280)
+
+    def test_delete_mesh_needs_cascade(self):
+        V, F = obj_arrays(torus_obj(12, 6)[0])
+        mesh = CLIENT.upload(V, F)
+        basis = CLIENT.build(mesh, "vector", 10, progress=False)
+        with self.assertRaises(fs.FailedPrecondition):
+            CLIENT.delete_mesh(mesh.id)
+        self.assertEqual(CLIENT.delete_mesh(mesh.id, cascade=True), [basis])
+        with self.assertRaises(fs.NotFound):
+            CLIENT.mesh(mesh.id)
+
+
+class FieldTest(unittest.TestCase):
+    def coefficients(self, basis, seed):
+        d = CLIENT.basis(basis).columns
+        return np.random.default_rng(seed).standard_normal(d)
+
+    def test_vector_lift_shapes_and_encodings(self):
+        x = self.coefficients(VECTOR, 1)
+        field = CLIENT.lift(VECTOR, x)
+        self.assertEqual(field.shape, (1280, 3))
+        normals = normals_of(SV, SF)
+        scale = np.abs(field).max()
+        self.assertGreater(scale, 0)
+        self.assertLess(np.abs(np.sum(field * normals, axis=1)).max(), 1e-5 * scale)  # tangent
+        dofs = CLIENT.lift(VECTOR, x, encoding="dof")
+        self.assertEqual(dofs.shape, (1280, 2))
+        np.testing.assert_allclose(np.linalg.norm(dofs, axis=1), np.linalg.norm(field, axis=1),
+                                   rtol=1e-5, atol=1e-6 * scale)
+        subset = CLIENT.lift(VECTOR, x, faces=[7, 3, 7, 1279])
+        np.testing.assert_array_equal(subset, field[[7, 3, 7, 1279]])
+        self.assertEqual(CLIENT.lift(VECTOR, x, faces=[]).shape, (0, 3))
+
+    def test_nfield_lift_gives_all_n_directions(self):
+        x = self.coefficients(NFIELD, 2)
+        field = CLIENT.lift(NFIELD, x)
+        self.assertEqual(field.shape, (1280, 4, 3))
+        normals = normals_of(SV, SF)
+        lengths = np.linalg.norm(field, axis=2)
+        np.testing.assert_allclose(lengths, lengths[:, :1].repeat(4, axis=1), rtol=1e-9)
+        big = lengths[:, 0] > 1e-3 * lengths.max()
+        for j in range(4):
+            # each direction is tangent; the next is the previous one turned by 90 degrees
+            self.assertLess(np.abs(np.sum(field[:, j] * normals, axis=1)).max(),
+                            1e-5 * lengths.max())
+            turned = np.cross(normals, field[:, j])
+            np.testing.assert_allclose(field[big, (j + 1) % 4], turned[big],
+                                       atol=1e-12 * lengths.max())
+        # The DOFs are the representation vector: angle times 4, the same length.
+        dofs = CLIENT.lift(NFIELD, x, encoding="dof")
+        np.testing.assert_allclose(np.linalg.norm(dofs, axis=1), lengths[:, 0], rtol=1e-5,
+                                   atol=1e-6 * lengths.max())
+        # Design sessions watch all four directions too.
+        with CLIENT.design(NFIELD, watch=[1, 2]) as s:
+            u = s.add(1, field[1, 2], hard=True)
+        self.assertEqual(u.watched.shape, (2, 4, 3))
+        self.assertEqual(CLIENT.lift(NFIELD, x, faces=[]).shape, (0, 4, 3))
+        np.testing.assert_allclose(u.watched, CLIENT.lift(NFIELD, u.coefficients, faces=[1, 2]))
+        self.assertLess(np.min(np.linalg.norm(u.watched[0] - field[1, 2], axis=1)),
+                        1e-5 * lengths.max())  # the hard constraint holds (in some direction)
+        # Any of the four directions, sent back, projects to the same coefficients.
+        for j in (0, 3):
+            p = CLIENT.project(NFIELD, field[:, j, :])
+            np.testing.assert_allclose(p.coefficients, x, rtol=0, atol=1e-4 * np.abs(x).max())
+
+    def test_tensor_lift_is_symmetric_and_tangent(self):
+        x = self.coefficients(TENSOR, 3)
+        field = CLIENT.lift(TENSOR, x)
+        self.assertEqual(field.shape, (1280, 3, 3))
+        np.testing.assert_array_equal(field, np.swapaxes(field, 1, 2))
+        normals = normals_of(SV, SF)
+        scale = np.abs(field).max()
+        self.assertLess(np.abs(np.einsum("fij,fj->fi", field, normals)).max(), 1e-5 * scale)
+        self.assertEqual(CLIENT.lift(TENSOR, x, encoding="dof").shape, (1280, 3))
+        # (F, 3, 3), (F, 6) and (F, 3) DOFs are all accepted and mean the same field.
+        six = np.stack([field[:, 0, 0], field[:, 1, 1], field[:, 2, 2], field[:, 0, 1],
+                        field[:, 1, 2], field[:, 2, 0]], axis=1)
+        a = CLIENT.project(TENSOR, field).coefficients
+        b = CLIENT.project(TENSOR, six).coefficients
+        c = CLIENT.project(TENSOR, CLIENT.lift(TENSOR, x, encoding="dof")).coefficients
+        np.testing.assert_allclose(a, x, atol=1e-4 * np.abs(x).max())
+        np.testing.assert_allclose(b, a, atol=1e-9)
+        np.testing.assert_allclose(c, x, atol=1e-4 * np.abs(x).max())
+
+    def test_project_and_smooth_recover_a_field_of_the_basis(self):
+        x = self.coefficients(VECTOR, 4)
+        field = CLIENT.lift(VECTOR, x)
+        p = CLIENT.project(VECTOR, field)
+        self.assertLess(p.relative_error, 1e-5)
+        np.testing.assert_allclose(p.coefficients, x, atol=1e-4 * np.abs(x).max())
+        s = CLIENT.smooth(VECTOR, field, weights=(1e-9, 0, 1), return_field=True)
+        np.testing.assert_allclose(s.coefficients, x, atol=1e-3 * np.abs(x).max())
+        self.assertEqual(s.field.shape, (1280, 3))
+        self.assertIn("total_ms", s.timings)
+        # Noise on every face: weak smoothing keeps it (as far as the basis can represent it),
+        # strong smoothing removes it.
+        noisy = field + 0.5 * np.random.default_rng(5).standard_normal(field.shape)
+        weak = CLIENT.smooth(VECTOR, noisy, weights=(1e-6, 0, 1), return_field=True)
+        strong = CLIENT.smooth(VECTOR, noisy, weights=(0.1, 0, 1), return_field=True)
+        self.assertLess(roughness(strong.field), 0.5 * roughness(weak.field))
+        self.assertLess(roughness(weak.field), roughness(noisy))
+
+    def test_eigen_and_smoothest(self):
+        e = CLIENT.eigen(VECTOR, 8)
+        self.assertEqual(e.eigenvalues.shape, (8,))
+        self.assertEqual(e.coefficients.shape, (8, 100))
+        self.assertTrue(np.all(np.diff(e.eigenvalues) >= 0))
+        s = CLIENT.smoothest(VECTOR, return_field=True)
+        self.assertAlmostEqual(s.energy, e.eigenvalues[0], places=9)
+        self.assertEqual(s.field.shape, (1280, 3))
+        # M-normalized: sum of area |X_f|^2 is 1 (float32 values on the wire).
+        V, F = SV, SF
+        areas = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]),
+                                     axis=1)
+        self.assertAlmostEqual(float(np.sum(areas * np.sum(s.field ** 2, axis=1))), 1.0, places=4)
+
+    def test_singularities_sum_to_the_euler_characteristic(self):
+        s = CLIENT.smoothest(VECTOR)
+        sing = CLIENT.singularities(VECTOR, coefficients=s.coefficients)
+        self.assertEqual(sing.euler_characteristic, 2)
+        self.assertAlmostEqual(sing.index_sum, 2.0, places=9)
+        self.assertAlmostEqual(float(np.sum(sing.turns)), 2.0, places=9)
+        self.assertEqual(sing.positions.shape, (len(sing.vertices), 3))
+        np.testing.assert_allclose(np.linalg.norm(sing.positions, axis=1), 1.0, rtol=1e-9)
+        # The 4-field: indices in quarter turns, still summing to 2.
+        s4 = CLIENT.smoothest(NFIELD, return_field=True)
+        sing4 = CLIENT.singularities(NFIELD, field=s4.field)
+        self.assertEqual(sing4.n, 4)
+        self.assertAlmostEqual(sing4.index_sum, 2.0, places=9)
+        np.testing.assert_allclose(sing4.turns, sing4.index / 4.0)
+
+    def test_curvature_of_the_unit_sphere(self):
+        c = CLIENT.curvature(SPHERE.id, principal=True)
+        self.assertEqual(c.tensor.shape, (1280, 3, 3))
+        normals = normals_of(SV, SF)
+        projector = np.eye(3)[None] - normals[:, :, None] * normals[:, None, :]
+        # +(1/r) I on the tangent planes, for a unit sphere with outward normals
+        self.assertLess(np.abs(c.tensor - projector).max(), 0.05)
+        np.testing.assert_allclose(c.k1, 1.0, atol=0.05)
+        np.testing.assert_allclose(c.k2, 1.0, atol=0.05)
+        self.assertTrue(np.all(c.k1 >= c.k2))
+        np.testing.assert_allclose(np.linalg.norm(c.d1, axis=1), 1.0, rtol=1e-5)
+        self.assertEqual(CLIENT.curvature(SPHERE.id, encoding="dof").tensor.shape, (1280, 3))
+
+    def test_align_follows_the_principal_directions_of_a_torus(self):
+        V, F = obj_arrays(torus_obj(48, 16)[0])
+        torus = CLIENT.upload(V, F, name="torus")
+        lines = CLIENT.build(torus.id, "nfield", 60, n=2, progress=False)
+        aligned = CLIENT.align(lines, return_field=True)
+        self.assertEqual(aligned.field.shape, (len(F), 2, 3))
+        np.testing.assert_allclose(aligned.field[:, 1], -aligned.field[:, 0], atol=1e-12)
+        d1 = CLIENT.curvature(torus.id, principal=True).d1
+        u = aligned.field[:, 0] / np.linalg.norm(aligned.field[:, 0], axis=1, keepdims=True)
+        cosines = np.abs(np.sum(u * d1, axis=1))
+        self.assertGreater(np.median(cosines), 0.98)
+        with self.assertRaises(fs.InvalidArgument):  # align needs n = 2 or 4
+            CLIENT.align(VECTOR)
+
+
+class SolveAndDesignTest(unittest.TestCase):
+    def test_design_session_matches_solve(self):
+        watch = [0, 12, 600]
+        with CLIENT.design(VECTOR, fs.Weights(1.0, 0.0, 1.0), watch=watch) as s:
+            self.assertTrue(s.last.refactorized or s.last.edit == "open")
+            u = s.add(10, [1, 0, 0], weight=2.0)
+            self.assertEqual(u.constraint_id, 1)
+            self.assertEqual(u.num_constraints, 1)
+            self.assertFalse(u.refactorized)
+            s.move(u.constraint_id, 12, [0, 1, 0])
+            h = s.add(600, [0, 0, 1], hard=True)
+            self.assertEqual((h.constraint_id, h.num_hard_constraints), (2, 1))
+            t = s.add(30, [0.3, 0.1, 0.2])
+            s.remove(t.constraint_id)
+            w = s.set_weights(mu_b=0.01)
+            self.assertTrue(w.refactorized)
+            self.assertEqual(s.weights, fs.Weights(1.0, 0.01, 1.0))
+            x = s.coefficients
+            watched = s.last.watched
+            self.assertEqual(watched.shape, (3, 3))
+            np.testing.assert_array_equal(s.last.watched_faces, watch)
+        solved = CLIENT.solve(VECTOR, [12, 600], [[0, 1, 0], [0, 0, 1]],
+                              weights=(1.0, 0.01, 1.0), constraint_weights=[2.0, 1.0],
+                              hard=[False, True], return_field=True)
+        self.assertLess(np.linalg.norm(x - solved.coefficients),
+                        1e-8 * np.linalg.norm(solved.coefficients))
+        np.testing.assert_allclose(watched, solved.field[watch], atol=1e-6)
+        # The hard constraint holds in the tangent plane of face 600 (float32 on the wire).
+        n600 = normals_of(SV, SF)[600]
+        target = np.array([0, 0, 1.0]) - n600[2] * n600
+        np.testing.assert_allclose(solved.field[600], target, atol=1e-5)
+
+    def test_dof_constraints_equal_ambient_ones(self):
+        ambient = CLIENT.solve(VECTOR, [5], [[1.0, 0.0, 0.0]])
+        dofs = CLIENT.lift(VECTOR, ambient.coefficients, faces=[5], encoding="dof")
+        # The constraint [1, 0, 0] in DOFs: its frame coordinates.
+        V, F = SV, SF
+        x_f = V[F[5, 1]] - V[F[5, 0]]
+        x_f /= np.linalg.norm(x_f)
+        y_f = np.cross(normals_of(V, F)[5], x_f)
+        value = [x_f[0], y_f[0]]
+        by_dofs = CLIENT.solve(VECTOR, [5], [value], encoding="dof")
+        np.testing.assert_allclose(by_dofs.coefficients, ambient.coefficients, atol=1e-9)
+        self.assertEqual(dofs.shape, (1, 2))
+
+    def test_design_errors_end_the_session(self):
+        s = CLIENT.design(VECTOR)
+        s.add(3, [1, 0, 0], id=7)
+        with self.assertRaises(fs.AlreadyExists) as caught:
+            s.add(4, [0, 1, 0], id=7)
+        self.assertEqual(caught.exception.code, grpc.StatusCode.ALREADY_EXISTS)
+        self.assertTrue(str(caught.exception).startswith("Design add failed: ALREADY_EXISTS: "))
+        with self.assertRaises(fs.FailedPrecondition):
+            s.remove(7)  # the server ended the stream: the session is over
+        # A bad value is refused before anything is sent; the session goes on.
+        with CLIENT.design(VECTOR) as s2:
+            with self.assertRaises(fs.InvalidArgument):
+                s2.add(3, [1, 0, 0, 0])
+            self.assertEqual(s2.add(3, [1, 0, 0]).num_constraints, 1)
+
+
+class ErrorTest(unittest.TestCase):
+    def test_unknown_ids_are_not_found(self):
+        with self.assertRaises(fs.NotFound) as caught:
+            CLIENT.mesh("m-0000000000000000")
+        e = caught.exception
+        self.assertIsInstance(e, fs.FieldspaceError)
+        self.assertIsInstance(e, LookupError)
+        self.assertEqual(e.code, grpc.StatusCode.NOT_FOUND)
+        self.assertEqual(e.what, "GetMesh")
+        self.assertEqual(str(e), "GetMesh failed: NOT_FOUND: " + e.details)
+        self.assertIn("m-0000000000000000", e.details)
+        with self.assertRaises(fs.NotFound):
+            CLIENT.lift("b-0000000000000000", [1.0])
+        with self.assertRaises(fs.NotFound):
+            CLIENT.cancel("b-0000000000000000")  # no running build
+        with self.assertRaises(fs.FailedPrecondition):
+            CLIENT.cancel(VECTOR)  # built already
+
+    def test_bad_input_is_invalid_argument(self):
+        with self.assertRaises(fs.InvalidArgument) as caught:  # the server's mesh validation
+            CLIENT.upload(np.eye(3), np.array([[0, 1, 1]]))
+        self.assertEqual(caught.exception.code, grpc.StatusCode.INVALID_ARGUMENT)
+        self.assertTrue(str(caught.exception).startswith("UploadMesh failed: INVALID_ARGUMENT: "))
+        with self.assertRaises(fs.InvalidArgument):  # d coefficients expected (server)
+            CLIENT.lift(VECTOR, [1.0, 2.0])
+        with self.assertRaises(fs.InvalidArgument):  # face out of range (server)
+            CLIENT.solve(VECTOR, [5000], [[1, 0, 0]])
+        with self.assertRaises(ValueError):  # shape checked by the client
+            CLIENT.solve(VECTOR, [1], [[1, 0, 0, 0]])
+        with self.assertRaises(fs.InvalidArgument):
+            CLIENT.build(SPHERE.id, "vector", 10, n=3)
+        with self.assertRaises(fs.NotFound):
+            CLIENT.upload(os.path.join(WORK, "missing.obj"))
+
+    def test_limits_and_states(self):
+        with self.assertRaises(fs.FailedPrecondition):  # LoadMesh needs --data-root
+            CLIENT.load("sphere.obj")
+        with self.assertRaises(fs.ResourceExhausted):
+            CLIENT.build(SPHERE.id, "vector", 100000, progress=False)
+        with self.assertRaises(fs.FailedPrecondition):  # two hard constraints on one face
+            CLIENT.solve(VECTOR, [3, 3], [[1, 0, 0], [0, 1, 0]], hard=True)
+
+    def test_unavailable(self):
+        with fs.Client("127.0.0.1:1", timeout=5) as nowhere:
+            with self.assertRaises(fs.Unavailable):
+                nowhere.meshes()
+
+
+class BuildTest(unittest.TestCase):
+    def test_progress_and_idempotent_builds(self):
+        seen = []
+        basis = CLIENT.build(SPHERE.id, "vector", 40, seed=3, progress=False,
+                             on_progress=seen.append)
+        self.assertTrue(basis.startswith("b-"))
+        self.assertTrue(all(p.basis_id == basis for p in seen))
+        overall = [p.overall for p in seen]
+        self.assertEqual(overall, sorted(overall))
+        self.assertEqual(seen[-1].phase, "done")
+        self.assertEqual(seen[-1].basis.columns, 40)
+        info = CLIENT.basis(basis)
+        self.assertTrue(info.ready)
+        self.assertEqual((info.field.kind, info.dimension, info.seed), ("vector", 40, 3))
+        again = []
+        self.assertEqual(CLIENT.build(SPHERE.id, "vector", 40, seed=3, progress=False,
+                                      on_progress=again.append), basis)
+        self.assertEqual(len(again), 1)  # a stored basis: one DONE message
+        CLIENT.delete_basis(basis)
+        self.assertNotIn(basis, [b.id for b in CLIENT.bases(SPHERE.id)])
+
+    def wait_gone(self, basis):
+        """Waits until the server has dropped a cancelled build (it checks every 100 ms)."""
+        deadline = time.monotonic() + 10
+        while True:
+            try:
+                info = CLIENT.basis(basis)
+            except fs.NotFound:
+                return
+            self.assertEqual(info.state, "building")
+            self.assertLess(time.monotonic(), deadline, "the build was not cancelled")
+            time.sleep(0.05)
+
+    def test_deadline_ends_the_stream_not_the_build(self):
+        V, F = obj_arrays(icosphere_obj(5)[0])  # 20,480 faces: a build of a few seconds
+        mesh = CLIENT.upload(V, F)
+        seen = []
+        with self.assertRaises(fs.DeadlineExceeded) as caught:
+            CLIENT.build(mesh.id, "vector", 500, seed=1, progress=False, on_progress=seen.append,
+                         timeout=0.3)
+        self.assertIsInstance(caught.exception, TimeoutError)
+        self.assertTrue(str(caught.exception).startswith("BuildBasis failed: DEADLINE_EXCEEDED"))
+        basis = seen[0].basis_id
+        self.assertEqual(CLIENT.basis(basis).state, "building")  # it goes on
+        CLIENT.cancel(basis)
+        self.wait_gone(basis)
+        CLIENT.delete_mesh(mesh.id, cascade=True)
+
+    def test_keyboard_interrupt_cancels_the_build_on_the_server(self):
+        V, F = obj_arrays(icosphere_obj(5)[0])  # 20,480 faces: a build of a few seconds
+        mesh = CLIENT.upload(V, F)
+        started = []
+
+        def interrupt(progress):
+            started.append(progress)
+            raise KeyboardInterrupt
+
+        t0 = time.monotonic()
+        with self.assertRaises(KeyboardInterrupt):
+            CLIENT.build(mesh.id, "vector", 500, progress=False, on_progress=interrupt)
+        basis = started[0].basis_id
+        self.assertFalse(started[0].joined)
+        self.wait_gone(basis)
+        self.assertLess(time.monotonic() - t0, 5.0)
+        self.assertEqual(CLIENT.bases(mesh.id), [])
+        CLIENT.delete_mesh(mesh.id, cascade=True)
+
+    def test_ctrl_c_cancels_the_build_on_the_server(self):
+        """A real SIGINT to a process blocked in build (progress bar on)."""
+        V, F = obj_arrays(icosphere_obj(5)[0])
+        mesh = CLIENT.upload(V, F)
+        child = textwrap.dedent("""
+            import signal, sys
+            import fieldspace
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+            def started(p):
+                if p.basis_id and not getattr(started, "said", False):
+                    print(p.basis_id, flush=True)
+                    started.said = True
+            fieldspace.Client(sys.argv[1]).build(sys.argv[2], "vector", 500, seed=2,
+                                                progress=True, on_progress=started)
+            """)
+        proc = subprocess.Popen([sys.executable, "-c", child, DAEMON_PROC.address, mesh.id],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        basis = proc.stdout.readline().strip()
+        self.assertTrue(basis.startswith("b-"), basis)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        self.assertNotEqual(proc.returncode, 0)
+        self.assertIn("KeyboardInterrupt", err)
+        self.assertIn("fieldspace: build %s cancelled on the server" % basis, err)
+        self.wait_gone(basis)
+        CLIENT.delete_mesh(mesh.id, cascade=True)
+
+
+class TokenTest(unittest.TestCase):
+    def test_token_is_required_and_accepted(self):
+        token_file = os.path.join(WORK, "token")
+        with open(token_file, "w") as f:
+            f.write("s3cret-token\n")
+        d = Daemon(DAEMON, os.path.join(WORK, "store-token"),
+                   extra=["--auth-token-file", token_file]).start()
+        try:
+            with fs.Client(d.address, timeout=30) as anonymous:
+                self.assertEqual(anonymous.health(), "SERVING")  # health needs no token
+                with self.assertRaises(fs.Unauthenticated) as caught:
+                    anonymous.meshes()
+                self.assertEqual(caught.exception.code, grpc.StatusCode.UNAUTHENTICATED)
+            with fs.Client(d.address, token="wrong", timeout=30) as wrong:
+                with self.assertRaises(fs.Unauthenticated):
+                    wrong.upload(SV, SF)
+            with fs.Client(d.address, token=" s3cret-token\n", timeout=30) as client:
+                self.assertEqual(client.upload(SV, SF).id, SPHERE.id)
+                basis = client.build(SPHERE.id, "vector", 20, progress=False)
+                with client.design(basis) as s:  # streams carry the token too
+                    self.assertEqual(s.add(1, [1, 0, 0]).num_constraints, 1)
+                self.assertEqual([m.id for m in client.meshes()], [SPHERE.id])
+        finally:
+            self.assertEqual(d.stop(), 0)
+            if d.alive():
+                d.proc.kill()
+
+
+if __name__ == "__main__":
+    unittest.main(verbosity=2)
