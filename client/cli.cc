@@ -1,16 +1,22 @@
 #include "client/cli.h"
 
+#include <semaphore.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <limits>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <stdexcept>
+#include <thread>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
@@ -39,9 +45,11 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   mesh MESH_ID                        one mesh
   delete-mesh MESH_ID [--cascade]     delete a mesh (with --cascade: and its bases)
   build MESH_ID --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--seed S]
-        [--fields-per-region M] [--coarse-dim C]
+        [--fields-per-region M] [--coarse-dim C] [--cancel-on-exit]
                                       build a basis: progress on stderr, BasisInfo ("id") on stdout;
-                                      C > 0 adds a coarse level of C of the D columns
+                                      C > 0 adds a coarse level of C of the D columns; Ctrl-C
+                                      leaves the build running on the server (and says how to
+                                      cancel it) unless --cancel-on-exit
   bases [--mesh MESH_ID]              list bases (and running builds)
   basis BASIS_ID                      one basis
   delete-basis BASIS_ID               delete a basis
@@ -73,6 +81,87 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
 FIELD_FILE: text (one face per line; '# encoding: dof' or ambient, the default) or, for output,
 .ply (the mesh with the field as face properties). Formats: README.md.
 )";
+
+// The usage of one command: its lines of kUsage (the line naming it and the indented lines after
+// it), then the global options and the FIELD_FILE note.
+std::string CommandUsage(const std::string& command) {
+  std::string block;
+  bool in_block = false;
+  for (absl::string_view line : absl::StrSplit(kUsage, '\n')) {
+    const bool command_line = absl::StartsWith(line, "  ") && line.size() > 2 && line[2] != ' ';
+    if (command_line) {
+      const absl::string_view name = line.substr(2, line.find(' ', 2) - 2);
+      in_block = name == command;
+    } else if (!absl::StartsWith(line, "  ")) {
+      in_block = false;
+    }
+    if (in_block) absl::StrAppend(&block, line, "\n");
+  }
+  return absl::StrCat(
+      "usage: fieldspace [--server HOST:PORT] [--token FILE] [--timeout SECONDS] ", command,
+      " ...\n\n", block,
+      "\nThe server defaults to $FIELDSPACE_SERVER; FIELD_FILE formats: fieldspace --help.\n");
+}
+
+// While alive, Ctrl-C (SIGINT) runs `on_interrupt(basis_id, joined)` on a thread of its own with
+// the build the stream was last told about, then exits with 130. The signal handler only posts a
+// semaphore (async-signal-safe); everything else happens on that thread.
+class InterruptWatch {
+ public:
+  using Callback = std::function<void(const std::string& basis_id, bool joined)>;
+
+  explicit InterruptWatch(Callback on_interrupt) : on_interrupt_(std::move(on_interrupt)) {
+    sem_init(&Semaphore(), 0, 0);
+    struct sigaction action = {};
+    action.sa_handler = [](int) { sem_post(&Semaphore()); };
+    sigemptyset(&action.sa_mask);
+    sigaction(SIGINT, &action, &previous_);
+    thread_ = std::thread([this] {
+      while (sem_wait(&Semaphore()) != 0) {
+      }
+      if (stopping_.load()) return;
+      std::string basis_id;
+      bool joined = false;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        basis_id = basis_id_;
+        joined = joined_;
+      }
+      on_interrupt_(basis_id, joined);
+      std::_Exit(130);
+    });
+  }
+  ~InterruptWatch() {
+    sigaction(SIGINT, &previous_, nullptr);
+    stopping_.store(true);
+    sem_post(&Semaphore());
+    thread_.join();
+    sem_destroy(&Semaphore());
+  }
+  InterruptWatch(const InterruptWatch&) = delete;
+  InterruptWatch& operator=(const InterruptWatch&) = delete;
+
+  // The build the stream is about (from its first message on).
+  void Name(const std::string& basis_id, bool joined) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    basis_id_ = basis_id;
+    joined_ = joined;
+  }
+
+ private:
+  static sem_t& Semaphore() {
+    static sem_t semaphore;
+    return semaphore;
+  }
+
+  Callback on_interrupt_;
+  struct sigaction previous_ = {};
+  std::atomic<bool> stopping_{false};
+  std::mutex mutex_;
+  std::string basis_id_;
+  bool joined_ = false;
+  std::thread thread_;
+};
 
 class UsageError : public std::runtime_error {
  public:
@@ -245,12 +334,9 @@ class Cli {
          << status.message() << "\n";
     return 1;
   }
-  // A local failure (a file): "fieldspace: <CODE>: <message>".
-  int Fail(const absl::Status& status) {
-    err_ << "fieldspace: " << absl::StatusCodeToString(status.code()) << ": " << status.message()
-         << "\n";
-    return 1;
-  }
+  // A local failure (a file, a check before any call): "fieldspace: <command> failed: <CODE>:
+  // <message>".
+  int Fail(const absl::Status& status) { return Fail(status, command_); }
   void Emit(const JsonWriter& j) { out_ << j.str() << "\n" << std::flush; }
 
   int Health(const CommandLine& a);
@@ -289,6 +375,7 @@ class Cli {
 
   std::ostream& out_;
   std::ostream& err_;
+  std::string command_;  // the command being run, for messages
   FieldClientOptions options_;
   std::unique_ptr<FieldClient> client_;
 };
@@ -314,7 +401,6 @@ std::vector<std::string> Cli::ParseGlobal(const std::vector<std::string>& args) 
       options_.timeout = std::chrono::milliseconds(static_cast<int64_t>(*seconds * 1000));
     }
   }
-  if (options_.address.empty()) throw UsageError("--server HOST:PORT is required");
   if (const std::string token_file = GetString(global, "token"); !token_file.empty()) {
     absl::StatusOr<std::string> token = ReadFile(token_file);
     if (!token.ok()) throw UsageError("cannot read --token file " + token_file);
@@ -340,8 +426,9 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"mesh", {{}, 1, &Cli::Mesh}},
         {"delete-mesh", {Flags({}, {"cascade"}), 1, &Cli::DeleteMesh}},
         {"build",
-         {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim"}), 1,
-          &Cli::Build}},
+         {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim"},
+                {"cancel-on-exit"}),
+          1, &Cli::Build}},
         {"bases", {Flags({"mesh"}), 0, &Cli::Bases}},
         {"basis", {{}, 1, &Cli::Basis}},
         {"delete-basis", {{}, 1, &Cli::DeleteBasis}},
@@ -366,16 +453,34 @@ int Cli::Run(const std::vector<std::string>& args) {
     };
     auto it = commands.find(command);
     if (it == commands.end()) throw UsageError("unknown command '" + command + "'");
-    const CommandLine a = OrUsageError(
-        CommandLine::Parse(absl::MakeConstSpan(command_line).subspan(1), it->second.flags));
-    if (a.positional().size() != it->second.positional) {
-      throw UsageError(absl::StrCat(command, " takes ", it->second.positional, " argument(s), got ",
-                                    a.positional().size()));
+    command_ = command;
+    FlagSpec flags = it->second.flags;
+    flags.switches.push_back("help");
+    const absl::Span<const std::string> rest = absl::MakeConstSpan(command_line).subspan(1);
+    if (std::find(rest.begin(), rest.end(), "--help") != rest.end() ||
+        std::find(rest.begin(), rest.end(), "-h") != rest.end()) {
+      out_ << CommandUsage(command);
+      return 0;
     }
-    absl::StatusOr<std::unique_ptr<FieldClient>> client = FieldClient::Create(options_);
-    if (!client.ok()) throw UsageError(std::string(client.status().message()));
-    client_ = *std::move(client);
-    return (this->*(it->second.run))(a);
+    try {
+      const CommandLine a = OrUsageError(CommandLine::Parse(rest, flags));
+      if (a.positional().size() != it->second.positional) {
+        throw UsageError(absl::StrCat(command, " takes ", it->second.positional,
+                                      " argument(s), got ", a.positional().size()));
+      }
+      if (options_.address.empty()) {
+        throw UsageError("--server HOST:PORT (or FIELDSPACE_SERVER) is required");
+      }
+      absl::StatusOr<std::unique_ptr<FieldClient>> client = FieldClient::Create(options_);
+      if (!client.ok()) throw UsageError(std::string(client.status().message()));
+      client_ = *std::move(client);
+      return (this->*(it->second.run))(a);
+    } catch (const UsageError& e) {
+      // A usage error of a known command: the README's error form, then that command's usage.
+      Fail(absl::InvalidArgumentError(e.what()));
+      err_ << "\n" << CommandUsage(command);
+      return 2;
+    }
   } catch (const UsageError& e) {
     if (*e.what() != '\0') err_ << "fieldspace: " << e.what() << "\n\n";
     err_ << kUsage;
@@ -459,6 +564,9 @@ int Cli::Build(const CommandLine& a) {
   } else {
     throw UsageError("--field must be vector, nfield or tensor");
   }
+  if (field != "nfield" && a.Has("n")) {
+    throw UsageError("--n applies only to --field nfield (a " + field + " basis has no n)");
+  }
   if (!a.Has("dim")) throw UsageError("build needs --dim D");
   const int64_t dim = ParseInt(a, "dim", 0);
   if (dim < 1 || dim > INT32_MAX) throw UsageError("--dim must be a positive integer");
@@ -471,15 +579,50 @@ int Cli::Build(const CommandLine& a) {
   request.set_coarse_dimension(static_cast<int32_t>(coarse));
 
   const bool tty = isatty(STDERR_FILENO) != 0 && &err_ == &std::cerr;
+  const bool cancel_on_exit = a.Has("cancel-on-exit");
+  // Ctrl-C: the build belongs to the server and goes on; say so and how to cancel it, or cancel
+  // it with --cancel-on-exit (not a build this stream only joined: another client started it).
+  InterruptWatch interrupt([&](const std::string& basis_id, bool joined) {
+    if (tty) err_ << "\n";
+    if (basis_id.empty()) {
+      err_ << "fieldspace: interrupted before the server named the build; `fieldspace bases` "
+              "lists running builds\n";
+    } else if (cancel_on_exit && !joined) {
+      v1::CancelBuildRequest cancel;
+      cancel.set_basis_id(basis_id);
+      absl::StatusOr<v1::CancelBuildResponse> r = client_->CancelBuild(cancel);
+      if (r.ok()) {
+        err_ << "fieldspace: build " << basis_id << " cancelled on the server\n";
+      } else {
+        Fail(r.status(), "CancelBuild");
+      }
+    } else {
+      err_ << "fieldspace: build " << basis_id << " goes on on the server"
+           << (joined ? " (another client started it)" : "")
+           << "; cancel it with: fieldspace cancel " << basis_id << "\n";
+    }
+    err_ << std::flush;
+  });
+  const Clock::time_point start = Clock::now();
   v1::BuildPhase last_phase = v1::BUILD_PHASE_UNSPECIFIED;
   int last_decile = -1;
   absl::StatusOr<v1::BasisInfo> info =
       client_->BuildBasis(request, [&](const v1::BuildBasisProgress& progress) {
-        const int percent = static_cast<int>(std::lround(100 * progress.fraction()));
+        interrupt.Name(progress.basis_id(), progress.joined());
+        const double overall = progress.overall_fraction();
+        const int percent = static_cast<int>(std::floor(100 * overall));
         if (tty) {
+          // One bar over the whole build, with the time left once there is enough to go on.
+          const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+          std::string eta;
+          if (overall >= 0.02 && overall < 1) {
+            const int64_t left = std::llround(elapsed * (1 - overall) / overall);
+            eta = absl::StrCat(" ETA ", left / 60, ":", left % 60 < 10 ? "0" : "", left % 60);
+          }
           const int filled = percent * 30 / 100;
           err_ << "\r[" << std::string(filled, '#') << std::string(30 - filled, ' ') << "] "
-               << percent << "% " << PhaseName(progress.phase()) << "          " << std::flush;
+               << percent << "% " << PhaseName(progress.phase()) << eta << "          "
+               << std::flush;
         } else if (progress.phase() != last_phase || percent / 10 != last_decile) {
           err_ << "build " << progress.basis_id() << ": " << PhaseName(progress.phase()) << " "
                << percent << "%" << (progress.joined() ? " (joined a running build)" : "") << "\n";

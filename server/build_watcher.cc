@@ -37,6 +37,7 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
       msg_.set_basis_id(started->existing->id);
       msg_.set_phase(v1::BUILD_PHASE_DONE);
       msg_.set_fraction(1.0);
+      msg_.set_overall_fraction(1.0);
       BasisInfoFromRecord(*started->existing, msg_.mutable_basis());
       auto status = service->registry()->GetBasisStatus(started->existing->id);
       if (status.ok()) BasisInfoFromStatus(*status, msg_.mutable_basis());
@@ -135,6 +136,7 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
       msg_.set_basis_id(job_->basis_id());
       msg_.set_phase(phase);
       msg_.set_fraction(progress.fraction);
+      msg_.set_overall_fraction(OverallFraction(progress.stage, progress.fraction));
       msg_.set_joined(joined_);
       sent_any_ = true;
       if (progress.finished) {

@@ -129,6 +129,7 @@ void BasisInfoFromStatus(const BasisStatus& s, v1::BasisInfo* p) {
     p->set_state(v1::BASIS_STATE_BUILDING);
     p->set_phase(PhaseToProto(s.progress.stage));
     p->set_fraction(s.progress.fraction);
+    p->set_overall_fraction(OverallFraction(s.progress.stage, s.progress.fraction));
   }
 }
 

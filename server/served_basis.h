@@ -34,6 +34,11 @@ enum class BuildStage : uint8_t {
   kDone = 8,
 };
 
+// The estimated fraction of a whole build done at `stage` with `fraction` of that stage done:
+// the stages weighted by their typical share of a build's wall time (served_basis.cc says where
+// the weights come from). In [0, 1], non-decreasing in (stage, fraction).
+double OverallFraction(BuildStage stage, double fraction);
+
 // A basis in memory with everything the subspace methods need. Immutable once published; shared
 // by the requests that use it (each holds it only for the request or session).
 struct ServedBasis {

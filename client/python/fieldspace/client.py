@@ -10,7 +10,7 @@ import numpy as np
 from . import fields as fld
 from ._stubs import health_pb2, pb, pb_grpc
 from .errors import FieldspaceError, InvalidArgument, NotFound, from_rpc_error
-from .progress import BuildBar, overall_fraction
+from .progress import BuildBar
 from .types import (BasisInfo, BuildProgress, Curvature, Eigenfields, MeshInfo, Projection,
                     Singularities, Smoothest, Solution, Weights, phase_name)
 
@@ -293,7 +293,7 @@ class Client:
                 update = BuildProgress(
                     basis_id=message.basis_id, phase=phase_name(message.phase),
                     fraction=message.fraction,
-                    overall=overall_fraction(message.phase, message.fraction),
+                    overall=message.overall_fraction,
                     joined=message.joined,
                     basis=BasisInfo.from_proto(message.basis) if done else None)
                 if bar is not None:

@@ -1,0 +1,121 @@
+"""The CLI's manners against a live daemon: per-command --help, errors in the README's form
+(`fieldspace: <what> failed: <CODE>: <message>`), flags that do not apply rejected, one overall
+build progress that only goes up, and Ctrl-C during `build` (the build goes on and the CLI says how
+to cancel it; --cancel-on-exit cancels it)."""
+
+import argparse
+import os
+import re
+import select
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "server"))
+from fs_testlib import Cli, Daemon, check, log, run, torus_obj  # noqa: E402
+
+
+def interrupted_build(client, address, mesh_id, seed, extra=()):
+    """Starts `fieldspace build`, sends SIGINT after its first progress line naming the basis;
+    returns (exit code, stderr, basis id)."""
+    args = [client, "--server", address, "build", mesh_id, "--field", "vector", "--dim", "1500",
+            "--seed", str(seed)] + list(extra)
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    err = ""
+    basis_id = None
+    deadline = time.time() + 60
+    while basis_id is None and time.time() < deadline:
+        ready, _, _ = select.select([proc.stderr], [], [], 1.0)
+        if ready:
+            line = proc.stderr.readline()
+            if not line:
+                break
+            err += line
+            m = re.match(r"build (b-[0-9a-f]{16}): ", line)
+            if m:
+                basis_id = m.group(1)
+    check(basis_id is not None, "no progress line naming the build: %r" % err)
+    proc.send_signal(signal.SIGINT)
+    out, rest = proc.communicate(timeout=60)
+    return proc.returncode, err + rest, basis_id
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--daemon", required=True)
+    parser.add_argument("--client", required=True)
+    args = parser.parse_args()
+
+    # --help per command needs no server.
+    rc, out, err = run([args.client, "build", "--help"], timeout=30)
+    check(rc == 0 and "--cancel-on-exit" in out and "build MESH_ID" in out, "build --help: %r" % out)
+    check("upload MESH" not in out and "design BASIS_ID" not in out,
+          "build --help shows only build: %r" % out)
+    rc, out, _ = run([args.client, "smooth", "-h"], timeout=30)
+    check(rc == 0 and "smooth BASIS_ID FIELD_FILE" in out and "--mu-s" in out, "smooth -h: %r" % out)
+
+    with tempfile.TemporaryDirectory() as work:
+        d = Daemon(args.daemon, os.path.join(work, "store")).start()
+        try:
+            cli = Cli(args.client, d.address)
+            torus = os.path.join(work, "torus.obj")
+            with open(torus, "w") as f:
+                f.write(torus_obj(major=192, minor=96)[0])  # 36,864 faces
+            mesh = cli.json("upload", torus)
+
+            # Usage errors name the command in the README's form, exit 2, then its usage.
+            rc, _, err = cli("build", mesh["id"], "--field", "vector", "--n", "4", "--dim", "10",
+                             expect=2)
+            check(err.startswith("fieldspace: build failed: INVALID_ARGUMENT: --n applies only to "
+                                 "--field nfield"), "--n on a vector build: %r" % err)
+            check("build MESH_ID" in err and "upload MESH" not in err, "build usage after it")
+            # Local failures too: "<command> failed: <CODE>: <message>".
+            rc, _, err = cli("project", "b-0000000000000000", os.path.join(work, "missing.txt"),
+                             expect=1)
+            check(re.match(r"fieldspace: project failed: [A-Z_]+: .*missing\.txt", err),
+                  "local failure form: %r" % err)
+            rc, _, err = cli("mesh", "m-0000000000000000", expect=1)
+            check(err.startswith("fieldspace: GetMesh failed: NOT_FOUND: "), "RPC failure: %r" % err)
+
+            # Non-TTY progress: plain lines whose overall percentage never goes down.
+            rc, out, err = cli("build", mesh["id"], "--field", "vector", "--dim", "300")
+            percents = [int(p) for p in re.findall(r"^build b-[0-9a-f]{16}: \w+ (\d+)%", err,
+                                                   re.MULTILINE)]
+            check(len(percents) >= 3 and percents[-1] == 100, "progress lines: %r" % err[-800:])
+            check(all(a <= b for a, b in zip(percents, percents[1:])),
+                  "overall progress goes down: %s" % percents)
+
+            # Ctrl-C: the build goes on on the server, and the CLI prints how to cancel it.
+            rc, err, basis_id = interrupted_build(args.client, d.address, mesh["id"], seed=11)
+            check(rc == 130, "Ctrl-C exit code %d: %r" % (rc, err[-500:]))
+            check(("goes on on the server; cancel it with: fieldspace cancel %s" % basis_id) in err,
+                  "Ctrl-C message: %r" % err[-500:])
+            info = cli.json("basis", basis_id)
+            check(info["state"] in ("building", "ready"), "the build went on: %s" % info["state"])
+            rc, _, _ = cli("cancel", basis_id, expect=None)
+            log("Ctrl-C left %s %s" % (basis_id, info["state"]))
+
+            # --cancel-on-exit: Ctrl-C cancels the build on the server.
+            rc, err, basis_id = interrupted_build(args.client, d.address, mesh["id"], seed=12,
+                                                  extra=["--cancel-on-exit"])
+            check(rc == 130 and ("build %s cancelled on the server" % basis_id) in err,
+                  "--cancel-on-exit: rc %d %r" % (rc, err[-500:]))
+            gone = False
+            for _ in range(100):
+                rc, out, err = cli("basis", basis_id, expect=None)
+                if rc != 0 and "NOT_FOUND" in err:
+                    gone = True
+                    break
+                time.sleep(0.1)
+            check(gone, "the cancelled build is gone: %r %r" % (out, err))
+            check(basis_id not in [b["id"] for b in cli.json("bases")["bases"]],
+                  "bases no longer lists the cancelled build")
+        finally:
+            d.stop()
+    log("cli manners: ok")
+
+
+if __name__ == "__main__":
+    main()
