@@ -32,11 +32,14 @@ install: build
 
 # Starts the daemon on loopback with the bundled demo mesh (a ~49k-face torus-knot tube made by
 # core/mesh/shapes.h), stored under STORE; its default vector basis builds in the background.
+# LoadMesh reads below DATA_ROOT (the shared meshes next to the checkout) when that folder exists.
 STORE ?= $(HOME)/.local/share/fieldspace
 LISTEN ?= 127.0.0.1:50051
+DATA_ROOT ?= $(abspath ../shared/meshes)
 run: build
 	mkdir -p $(STORE)
-	$(BUILD_DIR)/bin/fieldspaced --listen $(LISTEN) --store $(STORE) --demo
+	$(BUILD_DIR)/bin/fieldspaced --listen $(LISTEN) --store $(STORE) --demo \
+	    $(if $(wildcard $(DATA_ROOT)),--data-root $(DATA_ROOT))
 
 format:
 	clang-format -i $$(git ls-files '*.h' '*.cc')
