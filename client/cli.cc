@@ -40,14 +40,17 @@ constexpr char kUsage[] =
 
 commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   health [--service NAME]             grpc.health.v1 status of the server
-  upload MESH                         upload an .obj/.off/.ply file; prints MeshInfo ("id")
+  upload MESH [--name NAME] [--format obj|off|ply]
+                                      upload a mesh file (format from the extension unless
+                                      --format); prints MeshInfo ("id")
   meshes                              list meshes
   mesh MESH_ID                        one mesh
   delete-mesh MESH_ID [--cascade]     delete a mesh (with --cascade: and its bases)
   build MESH_ID --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--seed S]
-        [--fields-per-region M] [--coarse-dim C] [--cancel-on-exit]
+        [--fields-per-region M] [--coarse-dim C] [--face-weights FILE] [--cancel-on-exit]
                                       build a basis: progress on stderr, BasisInfo ("id") on stdout;
-                                      C > 0 adds a coarse level of C of the D columns; Ctrl-C
+                                      C > 0 adds a coarse level of C of the D columns; FILE: #F
+                                      positive adaptivity weights (smaller regions where high); Ctrl-C
                                       leaves the build running on the server (and says how to
                                       cancel it) unless --cancel-on-exit
   bases [--mesh MESH_ID]              list bases (and running builds)
@@ -58,6 +61,7 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   solve BASIS_ID --constraints FILE [--mu-s X] [--mu-b X] [--mu-c X] [--out FIELD_FILE]
         [--encoding ambient|dof]      the model problem with soft/hard constraints
   lift BASIS_ID COEFFS_FILE (--out FIELD_FILE | --faces F1,F2,...) [--encoding ambient|dof]
+        [--mode K]                    --mode K: eigenfield K of `eigen --coefficients` output
   eigen BASIS_ID --count K [--coefficients]
   curvature MESH_ID --out FIELD_FILE [--encoding ambient|dof] [--estimator jet|normal-differences]
         [--principal FILE]            the per-face shape operator (1/length) into FIELD_FILE;
@@ -73,7 +77,7 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
         [--encoding ambient|dof] [--estimator jet|normal-differences]
                                       a smooth n-field (n-field basis, n = 2 or 4) aligned to
                                       the principal curvature directions (defaults 0.001, 0, 1)
-  singularities BASIS_ID COEFFS_FILE [--zero-tolerance T]
+  singularities BASIS_ID COEFFS_FILE [--zero-tolerance T] [--mode K]
                                       vertex indices (in turns) of the lifted field
   design BASIS_ID --script EDITS.jsonl [--mu-s X] [--mu-b X] [--mu-c X] [--watch F1,F2,...]
         [--no-coefficients]           stream edits; one JSON line per update
@@ -197,10 +201,10 @@ int64_t ParseInt(const CommandLine& args, const std::string& flag, int64_t fallb
 
 // A file of numbers (coefficients, per-face weights): the JSON printed by solve / project /
 // smoothest, a JSON array, or plain numbers. Errors name the file.
-absl::StatusOr<std::vector<double>> ReadNumbersFile(const std::string& path) {
+absl::StatusOr<std::vector<double>> ReadNumbersFile(const std::string& path, int mode = -1) {
   absl::StatusOr<std::string> text = ReadFile(path);
   if (!text.ok()) return text.status();
-  absl::StatusOr<std::vector<double>> numbers = ParseCoefficients(*text);
+  absl::StatusOr<std::vector<double>> numbers = ParseCoefficients(*text, mode);
   if (!numbers.ok()) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": ", numbers.status().message()));
   }
@@ -216,6 +220,14 @@ std::vector<int32_t> ParseFaceList(const std::string& text) {
     faces.push_back(f);
   }
   return faces;
+}
+
+// --mode K (an eigenfield of `eigen --coefficients`), or -1.
+int ParseMode(const CommandLine& a) {
+  if (!a.Has("mode")) return -1;
+  const int64_t mode = ParseInt(a, "mode", -1);
+  if (mode < 0 || mode > INT32_MAX) throw UsageError("--mode must be a non-negative integer");
+  return static_cast<int>(mode);
 }
 
 v1::FieldEncoding ParseEncoding(const CommandLine& args) {
@@ -421,12 +433,13 @@ int Cli::Run(const std::vector<std::string>& args) {
     };
     const std::map<std::string, Command> commands = {
         {"health", {Flags({"service"}), 0, &Cli::Health}},
-        {"upload", {Flags({"name"}), 1, &Cli::Upload}},
+        {"upload", {Flags({"name", "format"}), 1, &Cli::Upload}},
         {"meshes", {{}, 0, &Cli::Meshes}},
         {"mesh", {{}, 1, &Cli::Mesh}},
         {"delete-mesh", {Flags({}, {"cascade"}), 1, &Cli::DeleteMesh}},
         {"build",
-         {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim"},
+         {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim",
+                 "face-weights"},
                 {"cancel-on-exit"}),
           1, &Cli::Build}},
         {"bases", {Flags({"mesh"}), 0, &Cli::Bases}},
@@ -436,14 +449,14 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"project", {{}, 2, &Cli::Project}},
         {"solve",
          {Flags({"constraints", "mu-s", "mu-b", "mu-c", "out", "encoding"}), 1, &Cli::Solve}},
-        {"lift", {Flags({"out", "faces", "encoding"}), 2, &Cli::Lift}},
+        {"lift", {Flags({"out", "faces", "encoding", "mode"}), 2, &Cli::Lift}},
         {"eigen", {Flags({"count"}, {"coefficients"}), 1, &Cli::Eigen}},
         {"design",
          {Flags({"script", "mu-s", "mu-b", "mu-c", "watch"}, {"no-coefficients"}), 1,
           &Cli::Design}},
         {"curvature", {Flags({"out", "encoding", "estimator", "principal"}), 1, &Cli::Curvature}},
         {"smoothest", {Flags({"out", "encoding"}), 1, &Cli::Smoothest}},
-        {"singularities", {Flags({"zero-tolerance"}), 2, &Cli::Singularities}},
+        {"singularities", {Flags({"zero-tolerance", "mode"}), 2, &Cli::Singularities}},
         {"align",
          {Flags({"n", "smooth-mu", "mu-b", "mu-c", "out", "encoding", "estimator"}, {"curvature"}),
           1, &Cli::Align}},
@@ -504,8 +517,20 @@ int Cli::Upload(const CommandLine& a) {
   const std::string& path = a.positional()[0];
   std::ifstream in(path, std::ios::binary);
   if (!in) return Fail(absl::NotFoundError("cannot open " + path));
-  absl::StatusOr<v1::MeshInfo> info =
-      client_->UploadMesh(MeshFileHeader(path, GetString(a, "name")), in);
+  v1::UploadMeshHeader header = MeshFileHeader(path, GetString(a, "name"));
+  if (a.Has("format")) {
+    const std::string format = absl::AsciiStrToLower(GetString(a, "format"));
+    if (format == "obj") {
+      header.set_format(v1::MESH_FORMAT_OBJ);
+    } else if (format == "off") {
+      header.set_format(v1::MESH_FORMAT_OFF);
+    } else if (format == "ply") {
+      header.set_format(v1::MESH_FORMAT_PLY);
+    } else {
+      throw UsageError("--format must be obj, off or ply");
+    }
+  }
+  absl::StatusOr<v1::MeshInfo> info = client_->UploadMesh(header, in);
   if (!info.ok()) return Fail(info.status(), "upload of " + path);
   JsonWriter j;
   WriteMeshInfo(j, *info);
@@ -577,6 +602,12 @@ int Cli::Build(const CommandLine& a) {
   const int64_t coarse = ParseInt(a, "coarse-dim", 0);
   if (coarse < 0 || coarse >= dim) throw UsageError("--coarse-dim must be in [0, --dim)");
   request.set_coarse_dimension(static_cast<int32_t>(coarse));
+  if (a.Has("face-weights")) {
+    // Adaptivity (paper section 4.4, Fig. 9): more, smaller regions where the weights are high.
+    absl::StatusOr<std::vector<double>> weights = ReadNumbersFile(GetString(a, "face-weights"));
+    if (!weights.ok()) return Fail(weights.status());
+    request.mutable_face_weights()->Add(weights->begin(), weights->end());
+  }
 
   const bool tty = isatty(STDERR_FILENO) != 0 && &err_ == &std::cerr;
   const bool cancel_on_exit = a.Has("cancel-on-exit");
@@ -791,7 +822,8 @@ int Cli::Solve(const CommandLine& a) {
 }
 
 int Cli::Lift(const CommandLine& a) {
-  absl::StatusOr<std::vector<double>> coefficients = ReadNumbersFile(a.positional()[1]);
+  absl::StatusOr<std::vector<double>> coefficients =
+      ReadNumbersFile(a.positional()[1], ParseMode(a));
   if (!coefficients.ok()) return Fail(coefficients.status());
   const v1::FieldEncoding encoding = ParseEncoding(a);
   if (a.Has("out") == a.Has("faces")) {
@@ -955,7 +987,8 @@ int Cli::Smoothest(const CommandLine& a) {
 }
 
 int Cli::Singularities(const CommandLine& a) {
-  absl::StatusOr<std::vector<double>> coefficients = ReadNumbersFile(a.positional()[1]);
+  absl::StatusOr<std::vector<double>> coefficients =
+      ReadNumbersFile(a.positional()[1], ParseMode(a));
   if (!coefficients.ok()) return Fail(coefficients.status());
   v1::SingularitiesRequest request;
   request.set_basis_id(a.positional()[0]);

@@ -218,7 +218,7 @@ absl::Status WriteFieldPly(const std::string& path, const std::vector<double>& v
   return WritePly(path, V, F, properties);
 }
 
-absl::StatusOr<std::vector<double>> ParseCoefficients(absl::string_view text) {
+absl::StatusOr<std::vector<double>> ParseCoefficients(absl::string_view text, int mode) {
   absl::string_view stripped = absl::StripAsciiWhitespace(text);
   if (!stripped.empty() && (stripped[0] == '{' || stripped[0] == '[')) {
     ASSIGN_OR_RETURN(Value value, ParseJson(stripped));
@@ -233,6 +233,24 @@ absl::StatusOr<std::vector<double>> ParseCoefficients(absl::string_view text) {
     if (list->kind_case() != Value::kListValue) {
       return absl::InvalidArgumentError("'coefficients' must be an array of numbers");
     }
+    // `eigen --coefficients`: one array per eigenfield; `mode` picks one.
+    const auto& rows = list->list_value().values();
+    const bool nested = !rows.empty() && rows[0].kind_case() == Value::kListValue;
+    if (nested) {
+      if (mode < 0) {
+        return absl::InvalidArgumentError(absl::StrCat("'coefficients' holds ", rows.size(),
+                                                       " eigenfields: pick one with --mode K"));
+      }
+      if (mode >= rows.size()) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("--mode ", mode, " is out of range: ", rows.size(), " eigenfields (0 to ",
+                         rows.size() - 1, ")"));
+      }
+      list = &rows[mode];
+    } else if (mode >= 0) {
+      return absl::InvalidArgumentError(
+          "--mode applies to the eigenfields of `eigen --coefficients`; this file holds one field");
+    }
     std::vector<double> out;
     for (const Value& v : list->list_value().values()) {
       if (v.kind_case() != Value::kNumberValue) {
@@ -241,6 +259,10 @@ absl::StatusOr<std::vector<double>> ParseCoefficients(absl::string_view text) {
       out.push_back(v.number_value());
     }
     return out;
+  }
+  if (mode >= 0) {
+    return absl::InvalidArgumentError(
+        "--mode applies to the eigenfields of `eigen --coefficients`; this file holds one field");
   }
   std::vector<double> out;
   for (absl::string_view token :

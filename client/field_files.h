@@ -44,8 +44,9 @@ absl::Status WriteFieldPly(const std::string& path, const std::vector<double>& v
                            const std::vector<int32_t>& faces, const FieldFile& field);
 
 // Coefficients: a JSON object with a "coefficients" array (what `solve` and `project` print), a
-// JSON array, or whitespace/comma-separated numbers.
-absl::StatusOr<std::vector<double>> ParseCoefficients(absl::string_view text);
+// JSON array, or whitespace/comma-separated numbers. The eigenfields `eigen --coefficients` prints
+// (an array of arrays) need `mode` >= 0 to pick one; a single field needs `mode` < 0.
+absl::StatusOr<std::vector<double>> ParseCoefficients(absl::string_view text, int mode = -1);
 
 // One constraint from a JSON object: {"face": F, "vector": [x, y, z]} (ambient; also for
 // n-fields: one of the n directions), or "tensor": [xx, yy, zz, xy, yz, zx], or "dofs": [...]

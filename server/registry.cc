@@ -347,9 +347,14 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
             absl::StrCat("face_weights[", f, "] = ", w, " must be finite and > 0"));
       }
     }
-    key.weights_hash = Hash64(request.face_weights.data(),
-                              sizeof(double) * request.face_weights.size()) |
-                       1;  // never 0, which means uniform
+    // Salted with the construction's revision for weighted bases (2: eq. 12's radius from the
+    // weighted area), so that bases built by the earlier rule keep their ids and new requests get
+    // new ones. Never 0, which means uniform.
+    constexpr uint64_t kWeightedConstructionRevision = 2;
+    key.weights_hash =
+        (Hash64(request.face_weights.data(), sizeof(double) * request.face_weights.size()) ^
+         (kWeightedConstructionRevision * 0x9E3779B97F4A7C15ull)) |
+        1;
   }
   BasisRecord pending;
   pending.id = BasisIdFor(key);

@@ -198,7 +198,14 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   ticker.SetPhase(BasisPhase::kRegions, 0.0);
   ticker.ReportNow();
   t0 = std::chrono::steady_clock::now();
-  basis.radius = std::sqrt(params.sigma * mesh.total_area() / (d * M_PI));
+  // Eq. 12's area in the metric the regions grow in: with adaptivity weights a face's dual arcs
+  // are w_f times longer, so its area counts w_f^2 times. Scaling all weights by c then scales the
+  // distances and the radius alike and leaves the basis as it is.
+  const double metric_area =
+      params.face_weights.size() == 0
+          ? mesh.total_area()
+          : (mesh.face_areas().array() * params.face_weights.array().square()).sum();
+  basis.radius = std::sqrt(params.sigma * metric_area / (d * M_PI));
   RegionOptions region_options;
   region_options.radius = basis.radius;
   region_options.min_faces = (m + dpf - 1) / dpf;

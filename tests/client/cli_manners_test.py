@@ -4,6 +4,7 @@ build progress that only goes up, and Ctrl-C during `build` (the build goes on a
 to cancel it; --cancel-on-exit cancels it)."""
 
 import argparse
+import json
 import os
 import re
 import select
@@ -78,6 +79,49 @@ def main():
                   "local failure form: %r" % err)
             rc, _, err = cli("mesh", "m-0000000000000000", expect=1)
             check(err.startswith("fieldspace: GetMesh failed: NOT_FOUND: "), "RPC failure: %r" % err)
+
+            # upload --format: a mesh file whose name does not say its format.
+            unnamed = os.path.join(work, "torus.mesh")
+            with open(torus) as src, open(unnamed, "w") as dst:
+                dst.write(src.read())
+            rc, _, err = cli("upload", unnamed, expect=1)
+            check("extension" in err, "upload of an unnamed format: %r" % err)
+            check(cli.json("upload", unnamed, "--format", "obj")["id"] == mesh["id"],
+                  "upload --format obj gives the same mesh")
+            cli("upload", unnamed, "--format", "stl", expect=2)
+
+            # build --face-weights FILE: an adaptive basis (its own id); a wrong count is refused.
+            small = cli.json("build", mesh["id"], "--field", "vector", "--dim", "40")
+            weights_path = os.path.join(work, "weights.txt")
+            with open(weights_path, "w") as f:
+                f.write("\n".join("4" if i % 96 < 24 else "1" for i in range(mesh["num_faces"])))
+            adaptive = cli.json("build", mesh["id"], "--field", "vector", "--dim", "40",
+                                "--face-weights", weights_path)
+            check(adaptive["id"] != small["id"] and adaptive["adaptive"] is True,
+                  "adaptive basis %s" % adaptive)
+            with open(weights_path, "w") as f:
+                f.write("1 2 3")
+            rc, _, err = cli("build", mesh["id"], "--field", "vector", "--dim", "40",
+                             "--face-weights", weights_path, expect=1)
+            check("INVALID_ARGUMENT" in err and "face_weights" in err, "weights count: %r" % err)
+
+            # lift --mode K: one eigenfield of `eigen --coefficients`, the same as its numbers.
+            eigen_path = os.path.join(work, "eigen.json")
+            rc, out, _ = cli("eigen", small["id"], "--count", "3", "--coefficients")
+            with open(eigen_path, "w") as f:
+                f.write(out)
+            mode2 = os.path.join(work, "mode2.json")
+            with open(mode2, "w") as f:
+                json.dump(json.loads(out)["coefficients"][2], f)
+            by_mode = cli.json("lift", small["id"], eigen_path, "--mode", "2", "--faces", "0,7,99")
+            by_numbers = cli.json("lift", small["id"], mode2, "--faces", "0,7,99")
+            check(by_mode == by_numbers and len(by_mode["faces"]) == 3,
+                  "lift --mode 2: %s vs %s" % (by_mode, by_numbers))
+            rc, _, err = cli("lift", small["id"], eigen_path, "--faces", "0", expect=1)
+            check("pick one with --mode" in err, "eigen file without --mode: %r" % err)
+            rc, _, err = cli("lift", small["id"], eigen_path, "--mode", "3", "--faces", "0",
+                             expect=1)
+            check("out of range" in err, "--mode out of range: %r" % err)
 
             # Non-TTY progress: plain lines whose overall percentage never goes down.
             rc, out, err = cli("build", mesh["id"], "--field", "vector", "--dim", "300")

@@ -74,6 +74,21 @@ TEST(CoefficientsTest, AcceptsJsonFromSolveArraysAndPlainNumbers) {
   EXPECT_THAT(ParseCoefficients("{not json"), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
+TEST(CoefficientsTest, ModePicksOneEigenfieldOfEigenOutput) {
+  const std::string eigen =
+      R"({"basis_id": "b-1", "eigenvalues": [0.5, 2], "coefficients": [[1, 0, 2], [0, 3, 4]]})";
+  EXPECT_THAT(*ParseCoefficients(eigen, 0), ElementsAre(1, 0, 2));
+  EXPECT_THAT(*ParseCoefficients(eigen, 1), ElementsAre(0, 3, 4));
+  EXPECT_THAT(ParseCoefficients(eigen), StatusIs(absl::StatusCode::kInvalidArgument,
+                                                 HasSubstr("holds 2 eigenfields: pick one")));
+  EXPECT_THAT(ParseCoefficients(eigen, 2),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("out of range")));
+  EXPECT_THAT(ParseCoefficients("[4, 5]", 0),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("holds one field")));
+  EXPECT_THAT(ParseCoefficients("4 5", 0),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("holds one field")));
+}
+
 TEST(ConstraintsTest, JsonLinesAndArrays) {
   auto lines = ParseConstraints(
       "# soft and hard\n"

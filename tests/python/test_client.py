@@ -199,6 +199,26 @@ class FieldTest(unittest.TestCase):
         self.assertLess(roughness(strong.field), 0.5 * roughness(weak.field))
         self.assertLess(roughness(weak.field), roughness(noisy))
 
+    def test_face_weights_refine_the_basis_where_they_are_high(self):
+        # Paper section 4.4 / Fig. 9: adaptivity weights put more, smaller regions where they are
+        # high, so a field with detail only there is approximated better than by the uniform
+        # basis of the same dimension.
+        centers = SV[SF].mean(axis=1)
+        high = centers[:, 2] > 0.2
+        weights = np.where(high, 4.0, 1.0)
+        adaptive = CLIENT.build(SPHERE.id, "vector", 100, face_weights=weights, progress=False)
+        self.assertNotEqual(adaptive, VECTOR)
+        n = normals_of(SV, SF)
+        bump = np.clip((centers[:, 2] - 0.2) / 0.4, 0, 1)[:, None]
+        wave = bump * np.stack([np.sin(4 * centers[:, 1]), np.cos(4 * centers[:, 0]),
+                                np.sin(4 * centers[:, 0] + 4 * centers[:, 1])], axis=1)
+        target = wave - np.sum(wave * n, axis=1, keepdims=True) * n
+        uniform_error = CLIENT.project(VECTOR, target).relative_error
+        adaptive_error = CLIENT.project(adaptive, target).relative_error
+        self.assertLess(adaptive_error, 0.85 * uniform_error)
+        with self.assertRaises(fs.InvalidArgument):
+            CLIENT.build(SPHERE.id, "vector", 100, face_weights=weights[:-1], progress=False)
+
     def test_eigen_and_smoothest(self):
         e = CLIENT.eigen(VECTOR, 8)
         self.assertEqual(e.eigenvalues.shape, (8,))

@@ -4,12 +4,14 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <random>
 #include <set>
 #include <utility>
 #include <vector>
 
 #include "Eigen/Eigenvalues"
 #include "core/basis/basis_io.h"
+#include "core/mesh/shapes.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
@@ -236,6 +238,34 @@ TEST(BasisTest, DeterministicAndIndependentOfThreadCount) {
   EXPECT_NE(a.sample_faces, other.sample_faces);
 }
 
+// Only ratios of the adaptivity weights matter: all weights c scale every distance and eq. 12's
+// radius (from the weighted area) alike, so the basis is the uniform one.
+TEST(BasisTest, UniformAdaptivityWeightsGiveTheUniformBasis) {
+  // A sphere with jittered vertices: no ties between distances that a scaling could reorder.
+  absl::StatusOr<MeshArrays> arrays = MakeIcosphere(3);
+  ASSERT_TRUE(arrays.ok()) << arrays.status();
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> jitter(0.97, 1.03);
+  for (Eigen::Index i = 0; i < arrays->vertices.size(); ++i)
+    arrays->vertices.data()[i] *= jitter(rng);
+  absl::StatusOr<TriangleMesh> jittered = TriangleMesh::Create(*std::move(arrays));
+  ASSERT_TRUE(jittered.ok()) << jittered.status();
+  const TriangleMesh& mesh = *jittered;
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 60;
+  auto uniform = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(uniform.ok()) << uniform.status();
+  options.params.face_weights = Eigen::VectorXd::Constant(mesh.num_faces(), 3.0);
+  auto scaled = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(scaled.ok()) << scaled.status();
+  EXPECT_NEAR(scaled->radius, 3.0 * uniform->radius, 1e-9 * uniform->radius);
+  EXPECT_EQ(scaled->sample_faces, uniform->sample_faces);
+  const Eigen::SparseMatrix<double> a = ColumnMajor(*uniform), b = ColumnMajor(*scaled);
+  ASSERT_EQ(a.nonZeros(), b.nonZeros());
+  EXPECT_LT((Eigen::MatrixXd(a) - Eigen::MatrixXd(b)).cwiseAbs().maxCoeff(), 1e-6);
+}
+
 TEST(BasisTest, AdaptivityWeightsConcentrateSamples) {
   const TriangleMesh mesh = Icosphere(4);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
@@ -282,7 +312,12 @@ TEST(BasisTest, AdaptivityWeightsConcentrateSamples) {
       }
     }
   }
-  EXPECT_LT(faces.size(), 0.3 * RegionFaces(mesh, *uniform, 0).size());
+  // In the weighted metric the regions of the adaptive basis have radius r_a (from the weighted
+  // area, 4x the area here, so r_a = 2 r_u); a cap region reaches only r_a / 4 = r_u / 2 while in
+  // the cap, so it is smaller than a uniform region of radius r_u.
+  EXPECT_NEAR(adaptive->radius,
+              2.0 * uniform->radius * std::sqrt((16 * cap_fraction + 1 - cap_fraction) / 4), 1e-9);
+  EXPECT_LT(faces.size(), 0.8 * RegionFaces(mesh, *uniform, 0).size());
 }
 
 TEST(BasisTest, MultiComponentMeshSamplesEveryComponentByArea) {
