@@ -1,0 +1,453 @@
+"""Pictures of a mesh and its field with VTK, on machines with no GPU and no display.
+
+:func:`render` draws the surface coloured by the field's magnitude (viridis, optional scalar
+bar) with glyphs (vectors as arrows, n-fields as n-crosses, tensors as principal crosses: the
+maximum direction red, the minimum blue, arm lengths proportional to the principal values) or
+streamlines / hatching strokes (fieldspace.streamlines), from an automatic camera that frames the
+mesh or a given one. VTK is the field's standard library (ParaView, 3D Slicer, PyVista build on
+it) and Debian ships it (python3-vtk9); it renders with Mesa's software OpenGL into an off-screen
+buffer, through a private Xvfb when there is no DISPLAY (fieldspace.display).
+"""
+
+import math
+
+import numpy as np
+
+from . import fields as fl
+from . import streamlines as sl
+from .display import x_display
+
+# Viridis (matplotlib's default colormap, CC0), 17 samples from 0 to 1; interpolated linearly.
+_VIRIDIS = np.array([
+    [0.267004, 0.004874, 0.329415], [0.282623, 0.140926, 0.457517],
+    [0.253935, 0.265254, 0.529983], [0.206756, 0.371758, 0.553117],
+    [0.163625, 0.471133, 0.558148], [0.127568, 0.566949, 0.550556],
+    [0.134692, 0.658636, 0.517649], [0.266941, 0.748751, 0.440573],
+    [0.477504, 0.821444, 0.318195], [0.741388, 0.873449, 0.149561],
+    [0.993248, 0.906157, 0.143936]])
+_GRAY = np.array([[0.15, 0.15, 0.15], [0.95, 0.95, 0.95]])
+
+STYLES = ("glyphs", "streamlines", "surface")
+
+
+def colormap(name_or_table="viridis", samples=256):
+    """``(samples, 3)`` RGB in [0, 1]: ``"viridis"``, ``"gray"`` or an ``(k, 3)`` table of
+    colours from low to high, interpolated linearly."""
+    if isinstance(name_or_table, str):
+        tables = {"viridis": _VIRIDIS, "gray": _GRAY}
+        if name_or_table not in tables:
+            raise ValueError("colormap must be one of %s or a (k, 3) table"
+                             % ", ".join(sorted(tables)))
+        table = tables[name_or_table]
+    else:
+        table = np.asarray(name_or_table, dtype=np.float64)
+        if table.ndim != 2 or table.shape[1] != 3 or len(table) < 2:
+            raise ValueError("a colormap table is (k >= 2, 3)")
+    x = np.linspace(0.0, 1.0, len(table))
+    t = np.linspace(0.0, 1.0, samples)
+    return np.stack([np.interp(t, x, table[:, c]) for c in range(3)], axis=1)
+
+
+def map_colors(values, value_range, table="viridis", samples=256):
+    """The colours (``(len(values), 3)`` in [0, 1]) :func:`render` gives ``values`` for a
+    ``value_range``: the lookup table's entry of each clamped value."""
+    lut = colormap(table, samples)
+    lo, hi = value_range
+    t = (np.asarray(values, dtype=np.float64) - lo) / (hi - lo if hi > lo else 1.0)
+    index = np.clip(np.floor(t * samples), 0, samples - 1).astype(int)
+    return lut[index]
+
+
+def glyph_faces(V, F, count, rng=0, allowed=None):
+    """About ``count`` faces spread evenly over the surface (one per cell of a 3D grid whose
+    spacing is ``sqrt(area / count)``, picked at random in the cell), for glyphs."""
+    V, F = fl.as_mesh(V, F)
+    if allowed is None:
+        allowed = np.ones(len(F), dtype=bool)
+    candidates = np.nonzero(allowed)[0]
+    if len(candidates) <= count:
+        return candidates
+    rng = np.random.default_rng(rng)
+    area = float(fl.face_areas(V, F)[candidates].sum())
+    centers = V[F[candidates]].mean(axis=1)
+    spacing = math.sqrt(area / count)
+    chosen = candidates
+    for _ in range(8):
+        cells = np.floor(centers / spacing).astype(np.int64)
+        order = rng.permutation(len(candidates))
+        _, first = np.unique(cells[order], axis=0, return_index=True)
+        chosen = candidates[order[first]]
+        if len(chosen) <= 1.25 * count:
+            break
+        spacing *= math.sqrt(len(chosen) / count)
+    return np.sort(chosen)
+
+
+def _segments_polydata(starts, ends, colors):
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+
+    k = len(starts)
+    pts = np.empty((2 * k, 3))
+    pts[0::2], pts[1::2] = starts, ends
+    points = vtkPoints()
+    points.SetData(numpy_to_vtk(pts, deep=True))
+    cells = vtkCellArray()
+    conn = np.arange(2 * k, dtype=np.int64)
+    offsets = np.arange(0, 2 * k + 1, 2, dtype=np.int64)
+    cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True),
+                  numpy_to_vtkIdTypeArray(conn, deep=True))
+    poly = vtkPolyData()
+    poly.SetPoints(points)
+    poly.SetLines(cells)
+    rgb = numpy_to_vtk(np.ascontiguousarray((np.clip(colors, 0, 1) * 255).astype(np.uint8)),
+                       deep=True)
+    rgb.SetName("colors")
+    poly.GetCellData().SetScalars(rgb)
+    return poly
+
+
+def _polylines_polydata(lines, offset_normals=None):
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+
+    pts = np.vstack(lines) if lines else np.zeros((0, 3))
+    counts = np.array([len(a) for a in lines], dtype=np.int64)
+    points = vtkPoints()
+    points.SetData(numpy_to_vtk(np.ascontiguousarray(pts), deep=True))
+    cells = vtkCellArray()
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True),
+                  numpy_to_vtkIdTypeArray(np.arange(len(pts), dtype=np.int64), deep=True))
+    poly = vtkPolyData()
+    poly.SetPoints(points)
+    poly.SetLines(cells)
+    return poly
+
+
+def _glyph_segments(V, F, a, kind, faces, arm, normalize):
+    """Segments (starts, ends, colours) of the glyphs at ``faces``; ``arm`` the longest arm."""
+    normals = fl.face_normals(V, F)[faces]
+    centers = V[F[faces]].mean(axis=1)
+    black = np.array([0.05, 0.05, 0.05])
+    starts, ends, colors = [], [], []
+    if kind == fl.VECTOR:
+        v = a[faces]
+        length = np.linalg.norm(v, axis=1)
+        top = length.max() if len(length) and length.max() > 0 else 1.0
+        scale = np.where(length > 0, (length / top if normalize else 1.0) * arm
+                         / np.where(length > 0, length, 1.0), 0.0)
+        d = v * scale[:, None]
+        tail = centers - 0.5 * d
+        tip = centers + 0.5 * d
+        side = np.cross(normals, d)
+        starts += [tail, tip, tip]
+        ends += [tip, tip - 0.3 * d + 0.15 * side, tip - 0.3 * d - 0.15 * side]
+        colors += [np.tile(black, (3 * len(faces), 1))]
+    elif kind == fl.NFIELD:
+        dirs = a[faces]
+        length = np.linalg.norm(dirs[:, 0], axis=1)
+        top = length.max() if len(length) and length.max() > 0 else 1.0
+        scale = np.where(length > 0, (length / top if normalize else 1.0) * 0.5 * arm
+                         / np.where(length > 0, length, 1.0), 0.0)
+        for k in range(dirs.shape[1]):
+            starts.append(centers)
+            ends.append(centers + dirs[:, k] * scale[:, None])
+        colors += [np.tile(black, (dirs.shape[1] * len(faces), 1))]
+    else:
+        values, directions = fl.principal(V, F[faces], a[faces])
+        top = np.abs(values).max() if values.size and np.abs(values).max() > 0 else 1.0
+        palette = (np.array([0.8, 0.1, 0.1]), np.array([0.1, 0.2, 0.85]))
+        for j in range(2):
+            half = (np.abs(values[:, j]) / top if normalize else 1.0) * 0.5 * arm
+            d = directions[:, j] * half[:, None]
+            starts.append(centers - d)
+            ends.append(centers + d)
+            colors.append(np.tile(palette[j], (len(faces), 1)))
+    return np.vstack(starts), np.vstack(ends), np.vstack(colors)
+
+
+def _fit_view(cam, points, aspect, fill=0.9):
+    """Narrows the view angle until ``points`` fill ``fill`` of the view (the automatic camera
+    starts from VTK's bounding-sphere framing, which leaves wide margins)."""
+    position = np.array(cam.GetPosition())
+    forward = np.array(cam.GetFocalPoint()) - position
+    forward /= np.linalg.norm(forward)
+    up = np.array(cam.GetViewUp())
+    up -= np.dot(up, forward) * forward
+    up /= np.linalg.norm(up)
+    right = np.cross(forward, up)
+    rel = points - position
+    depth = rel @ forward
+    if np.any(depth <= 0):
+        return
+    need = max(np.max(np.abs(rel @ up) / depth), np.max(np.abs(rel @ right) / depth) / aspect)
+    angle = 2.0 * math.degrees(math.atan(need / fill))
+    cam.SetViewAngle(min(max(angle, 1.0), 120.0))
+
+
+def _apply_camera(renderer, camera, bounds, fit_points=None, aspect=1.0):
+    """Sets the renderer's camera from ``camera`` (None: automatic) and returns its state."""
+    cam = renderer.GetActiveCamera()
+    camera = dict(camera or {})
+    unknown = set(camera) - {"position", "focal_point", "view_up", "view_angle",
+                             "parallel_scale", "direction", "azimuth", "elevation", "zoom"}
+    if unknown:
+        raise ValueError("unknown camera keys: %s" % ", ".join(sorted(unknown)))
+    lo, hi = np.array(bounds[0::2]), np.array(bounds[1::2])
+    center = 0.5 * (lo + hi)
+    if "view_angle" in camera:
+        cam.SetViewAngle(float(camera["view_angle"]))
+    if "position" in camera:
+        cam.SetFocalPoint(*map(float, camera.get("focal_point", center)))
+        cam.SetPosition(*map(float, camera["position"]))
+        cam.SetViewUp(*map(float, camera.get("view_up", (0.0, 0.0, 1.0))))
+        if "parallel_scale" in camera:
+            cam.ParallelProjectionOn()
+            cam.SetParallelScale(float(camera["parallel_scale"]))
+        else:
+            renderer.ResetCameraClippingRange()
+    else:
+        direction = np.asarray(camera.get("direction", (1.0, -1.6, 0.9)), dtype=np.float64)
+        direction = direction / np.linalg.norm(direction)
+        up = np.asarray(camera.get("view_up", (0.0, 0.0, 1.0)), dtype=np.float64)
+        if abs(np.dot(up, direction)) > 0.99 * np.linalg.norm(up):
+            up = np.array([0.0, 1.0, 0.0])
+        focal = np.asarray(camera.get("focal_point", center), dtype=np.float64)
+        cam.SetFocalPoint(*focal)
+        cam.SetPosition(*(focal + direction))
+        cam.SetViewUp(*up)
+        if "parallel_scale" in camera:
+            cam.ParallelProjectionOn()
+        renderer.ResetCamera(bounds)
+        if "parallel_scale" in camera:
+            cam.SetParallelScale(float(camera["parallel_scale"]))
+        elif fit_points is not None and len(fit_points):
+            _fit_view(cam, fit_points, aspect)
+    if "azimuth" in camera:
+        cam.Azimuth(float(camera["azimuth"]))
+    if "elevation" in camera:
+        cam.Elevation(float(camera["elevation"]))
+        cam.OrthogonalizeViewUp()
+    if "zoom" in camera:
+        cam.Zoom(float(camera["zoom"]))
+    renderer.ResetCameraClippingRange(bounds)
+    state = {"position": tuple(cam.GetPosition()), "focal_point": tuple(cam.GetFocalPoint()),
+             "view_up": tuple(cam.GetViewUp()), "view_angle": cam.GetViewAngle()}
+    if cam.GetParallelProjection():
+        state["parallel_scale"] = cam.GetParallelScale()
+    return state
+
+
+def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800, 600),
+           camera=None, colormap_name="viridis", scalars=None, scalar_range=None,
+           scalar_bar=False, title=None, max_glyphs=3000, glyph_scale=1.0, normalize=True,
+           streamline_count=None, streamline_length=None, lighting=True,
+           background=(1.0, 1.0, 1.0), surface_color=(0.85, 0.85, 0.85), line_width=1.5,
+           line_color=(0.08, 0.08, 0.08), rng=0, use_display=True):
+    """Renders the mesh ``(V, F)`` with ``field`` and writes a PNG to ``out_png`` (if given).
+
+    - ``field``/``kind``: as in fieldspace.fields (vectors ``(F, 3)``, n-fields ``(F, n, 3)``,
+      tensors ``(F, 3, 3)``), or None for the bare surface.
+    - ``style``: ``"glyphs"`` (about ``max_glyphs`` glyphs spread evenly; arms scaled by
+      magnitude unless ``normalize=False``; ``glyph_scale`` scales them), ``"streamlines"``
+      (``streamline_count`` seeds, half length ``streamline_length``; n-fields and tensors draw
+      every line family; default about one seed per 2500 pixels, drawn in ``line_color``) or
+      ``"surface"`` (colour only).
+    - the surface is coloured by ``scalars`` (``(F,)``, default the field's magnitude:
+      fieldspace.fields.magnitude) through the colormap over ``scalar_range`` (default the
+      values' min and max); ``scalar_bar`` adds a legend titled ``title``.
+    - ``camera``: None (look from ``(1, -1.6, 0.9)`` with z up, framing the mesh) or a dict with
+      ``position``, ``focal_point``, ``view_up``, ``view_angle`` (degrees) and
+      ``parallel_scale`` (parallel projection: half the view's height), or ``direction``
+      (automatic framing from that side), plus ``azimuth``, ``elevation``, ``zoom``.
+    - ``lighting=False`` shows the colormap's colours unshaded (flat ambient light).
+    - ``use_display``: use ``DISPLAY`` when it is set; else (or when False) a private Xvfb.
+
+    Returns a dict: ``image`` (``(h, w, 3)`` uint8, top row first), ``camera`` (the camera
+    used, in the dict form above), ``scalar_range``, ``glyphs`` (count), ``lines`` (count).
+    """
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkLookupTable, vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkRenderingCore import (vtkActor, vtkPolyDataMapper, vtkRenderer,
+                                             vtkRenderWindow, vtkWindowToImageFilter)
+    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (registers the OpenGL classes)
+    import vtkmodules.vtkRenderingFreeType  # noqa: F401  (text for the scalar bar)
+
+    if style not in STYLES:
+        raise ValueError("style must be one of %s, got %r" % (", ".join(STYLES), style))
+    width, height = (int(size[0]), int(size[1]))
+    if not (1 <= width <= 8192 and 1 <= height <= 8192):
+        raise ValueError("size must be (width, height) within 1..8192")
+    V, F = fl.as_mesh(V, F)
+    a = None
+    if field is not None:
+        a, kind, n = fl.check_field(V, F, field, kind)
+    if scalars is None and a is not None:
+        scalars = fl.magnitude(a, kind)
+    if scalars is not None:
+        scalars = np.asarray(scalars, dtype=np.float64).reshape(-1)
+        if len(scalars) != len(F):
+            raise ValueError("scalars: %d values for %d faces" % (len(scalars), len(F)))
+        if scalar_range is None:
+            scalar_range = (float(scalars.min()), float(scalars.max())) if len(scalars) \
+                else (0.0, 1.0)
+        if scalar_range[1] <= scalar_range[0]:
+            scalar_range = (scalar_range[0], scalar_range[0] + 1.0)
+
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if len(V) else 1.0
+    total_area = float(fl.face_areas(V, F).sum())
+
+    # The surface.
+    points = vtkPoints()
+    points.SetData(numpy_to_vtk(V, deep=True))
+    tris = vtkCellArray()
+    tris.SetData(numpy_to_vtkIdTypeArray(np.arange(0, 3 * len(F) + 1, 3, dtype=np.int64),
+                                         deep=True),
+                 numpy_to_vtkIdTypeArray(F.reshape(-1).astype(np.int64), deep=True))
+    surface = vtkPolyData()
+    surface.SetPoints(points)
+    surface.SetPolys(tris)
+    mapper = vtkPolyDataMapper()
+    mapper.SetInputData(surface)
+    mapper.SetResolveCoincidentTopologyToPolygonOffset()
+    mapper.SetRelativeCoincidentTopologyPolygonOffsetParameters(1.0, 2.0)
+    actor = vtkActor()
+    actor.SetMapper(mapper)
+    lut = None
+    if scalars is not None:
+        values = numpy_to_vtk(np.ascontiguousarray(scalars), deep=True)
+        values.SetName("magnitude")
+        surface.GetCellData().SetScalars(values)
+        lut = vtkLookupTable()
+        table = colormap(colormap_name)
+        lut.SetNumberOfTableValues(len(table))
+        for i, c in enumerate(table):
+            lut.SetTableValue(i, float(c[0]), float(c[1]), float(c[2]), 1.0)
+        lut.SetRange(*scalar_range)
+        lut.Build()
+        mapper.SetLookupTable(lut)
+        mapper.SetScalarModeToUseCellData()
+        mapper.SetScalarRange(*scalar_range)
+        mapper.ScalarVisibilityOn()
+    else:
+        mapper.ScalarVisibilityOff()
+        actor.GetProperty().SetColor(*surface_color)
+    prop = actor.GetProperty()
+    if lighting:
+        prop.SetAmbient(0.25)
+        prop.SetDiffuse(0.75)
+        prop.SetSpecular(0.1)
+    else:
+        prop.SetAmbient(1.0)
+        prop.SetDiffuse(0.0)
+        prop.SetSpecular(0.0)
+    prop.SetInterpolationToFlat()
+
+    overlays = []
+    n_glyphs, n_lines = 0, 0
+    if a is not None and style == "glyphs":
+        mag = fl.magnitude(a, kind)
+        allowed = mag > 1e-12 * (mag.max() if len(mag) else 0.0)
+        faces = glyph_faces(V, F, max_glyphs, rng=rng, allowed=allowed)
+        arm = 0.8 * glyph_scale * math.sqrt(total_area / max(len(faces), 1))
+        if len(faces):
+            starts, ends, colors = _glyph_segments(V, F, a, kind, faces, arm, normalize)
+            # Lift glyphs off the surface so that the depth test keeps them.
+            lift = 0.002 * diag
+            k = len(starts) // len(faces)
+            normals = np.tile(fl.face_normals(V, F)[faces], (k, 1))
+            overlays.append(_segments_polydata(starts + lift * normals, ends + lift * normals,
+                                               colors))
+            n_glyphs = len(faces)
+    elif a is not None and style == "streamlines":
+        m = 1 if kind == fl.VECTOR else (4 if kind == fl.TENSOR else a.shape[1])
+        families = len(sl.line_families(kind, m))
+        count = streamline_count or max(20, width * height // (2500 * families))
+        length = streamline_length or 0.12 * diag
+        lines = sl.trace_streamlines(V, F, a, kind=kind, count=count, rng=rng,
+                                     max_length=length, max_faces=20000)
+        if len(lines):
+            poly = _polylines_polydata(list(lines))
+            rgb = np.tile((np.clip(line_color, 0, 1) * 255).astype(np.uint8), (len(lines), 1))
+            colors = numpy_to_vtk(rgb, deep=True)
+            colors.SetName("colors")
+            poly.GetCellData().SetScalars(colors)
+            overlays.append(poly)
+            n_lines = len(lines)
+
+    with x_display(width, height, use_existing=use_display):
+        renderer = vtkRenderer()
+        renderer.SetBackground(*background)
+        renderer.AddActor(actor)
+        for poly in overlays:
+            m = vtkPolyDataMapper()
+            m.SetInputData(poly)
+            m.SetScalarModeToUseCellData()
+            m.SetColorModeToDirectScalars()
+            m.SetResolveCoincidentTopologyToPolygonOffset()
+            line_actor = vtkActor()
+            line_actor.SetMapper(m)
+            line_actor.GetProperty().SetLineWidth(line_width)
+            line_actor.GetProperty().LightingOff()
+            renderer.AddActor(line_actor)
+        aspect = width / height
+        if scalar_bar and lut is not None:
+            from vtkmodules.vtkRenderingAnnotation import vtkScalarBarActor
+            split = 0.86
+            renderer.SetViewport(0.0, 0.0, split, 1.0)
+            aspect *= split
+            legend = vtkRenderer()
+            legend.SetViewport(split, 0.0, 1.0, 1.0)
+            legend.SetBackground(*background)
+            bar = vtkScalarBarActor()
+            bar.SetLookupTable(lut)
+            bar.SetTitle(title or "magnitude")
+            bar.SetNumberOfLabels(5)
+            bar.SetPosition(0.3, 0.12)
+            bar.SetWidth(0.4)
+            bar.SetHeight(0.76)
+            bar.UnconstrainedFontSizeOn()
+            for text in (bar.GetTitleTextProperty(), bar.GetLabelTextProperty()):
+                text.SetColor(0.1, 0.1, 0.1)
+                text.SetFontSize(max(10, height // 40))
+                text.ShadowOff()
+                text.ItalicOff()
+            legend.AddActor2D(bar)
+        else:
+            legend = None
+        bounds = surface.GetBounds()
+        state = _apply_camera(renderer, camera, bounds, V, aspect)
+        window = vtkRenderWindow()
+        window.SetOffScreenRendering(1)
+        window.SetMultiSamples(0)
+        window.SetSize(width, height)
+        window.AddRenderer(renderer)
+        if legend is not None:
+            window.AddRenderer(legend)
+        try:
+            window.Render()
+            grab = vtkWindowToImageFilter()
+            grab.SetInput(window)
+            grab.SetInputBufferTypeToRGB()
+            grab.ReadFrontBufferOff()
+            grab.Update()
+            image = grab.GetOutput()
+            w, h, _ = image.GetDimensions()
+            pixels = vtk_to_numpy(image.GetPointData().GetScalars()).reshape(h, w, -1)[::-1]
+            pixels = np.ascontiguousarray(pixels[:, :, :3])
+            if out_png is not None:
+                from vtkmodules.vtkIOImage import vtkPNGWriter
+                writer = vtkPNGWriter()
+                writer.SetFileName(str(out_png))
+                writer.SetInputData(image)
+                writer.Write()
+                if writer.GetErrorCode():
+                    raise OSError("could not write %s" % out_png)
+        finally:
+            window.Finalize()
+    return {"image": pixels, "camera": state, "scalar_range": scalar_range,
+            "glyphs": n_glyphs, "lines": n_lines}
