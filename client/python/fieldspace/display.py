@@ -54,7 +54,7 @@ class _Xvfb:
             self.proc = subprocess.Popen(
                 [binary, "-displayfd", str(write_fd), "-screen", "0",
                  "%dx%dx24" % (width, height), "-nolisten", "tcp", "-auth", self.auth,
-                 "-nocursor"],
+                 "-nocursor", "-noreset"],
                 pass_fds=(write_fd,), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                 stderr=subprocess.PIPE, start_new_session=True)
         finally:

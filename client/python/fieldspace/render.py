@@ -9,6 +9,7 @@ it) and Debian ships it (python3-vtk9); it renders with Mesa's software OpenGL i
 buffer, through a private Xvfb when there is no DISPLAY (fieldspace.display).
 """
 
+import importlib
 import math
 
 import numpy as np
@@ -274,8 +275,9 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
     from vtkmodules.vtkRenderingCore import (vtkActor, vtkPolyDataMapper, vtkRenderer,
                                              vtkRenderWindow, vtkWindowToImageFilter)
-    import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (registers the OpenGL classes)
-    import vtkmodules.vtkRenderingFreeType  # noqa: F401  (text for the scalar bar)
+    # Side-effect imports: the OpenGL implementations and the text renderer (scalar bar).
+    importlib.import_module("vtkmodules.vtkRenderingOpenGL2")
+    importlib.import_module("vtkmodules.vtkRenderingFreeType")
 
     if style not in STYLES:
         raise ValueError("style must be one of %s, got %r" % (", ".join(STYLES), style))
