@@ -12,6 +12,7 @@ import numpy as np
 
 from fieldspace import export as ex
 from fieldspace import fields as fl
+from fieldspace import mesh_io
 import shapes
 
 HAVE_VTK = testenv.have_module("vtkmodules.vtkIOXML")
@@ -339,6 +340,77 @@ class PolylineObjTest(ExportTestBase):
             np.testing.assert_allclose(verts[e], want, atol=0)
         with self.assertRaises(ValueError):
             ex.write_polylines_obj(self.path("x.obj"), [np.zeros((1, 3))])
+
+
+class MeshFilesTest(ExportTestBase):
+    QUADS = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nv 2 1 0\nv 3 0.5 0\n"
+
+    def test_obj_fan_triangulation_and_index_forms(self):
+        with open(self.path("q.obj"), "w") as f:
+            f.write(self.QUADS + "# a quad and a pentagon\nf 1/1/1 2/2/2 3 4\n"
+                    "f -6 5 7 6 -5\n")
+        V, F = mesh_io.read_mesh(self.path("q.obj"))
+        self.assertEqual(V.shape, (7, 3))
+        np.testing.assert_array_equal(F, [[0, 1, 2], [0, 2, 3], [1, 4, 6], [1, 6, 5],
+                                          [1, 5, 2]])
+
+    def test_off_and_ply_round_trips(self):
+        V, F = self.V, self.F
+        with open(self.path("m.off"), "w") as f:
+            f.write("OFF\n# comment\n%d %d 0\n" % (len(V), len(F)))
+            f.writelines("%r %r %r\n" % tuple(p) for p in V)
+            f.writelines("3 %d %d %d 255 0 0\n" % tuple(t) for t in F)
+        for path in (self.path("m.off"), self.path("m.ply")):
+            if path.endswith(".ply"):
+                ex.write_ply_ascii(path, V, F, self.fields["tensor"])
+            V2, F2 = mesh_io.read_mesh(path)
+            np.testing.assert_allclose(V2, V, atol=1e-12)
+            np.testing.assert_array_equal(F2, F)
+
+    def test_binary_ply(self):
+        V, F = self.V, self.F
+        for order, name in (("<", "little"), (">", "big")):
+            header = ("ply\nformat binary_%s_endian 1.0\nelement vertex %d\nproperty float x\n"
+                      "property float y\nproperty float z\nproperty uchar red\n"
+                      "element face %d\nproperty list uchar int vertex_indices\n"
+                      "property float q\nend_header\n" % (name, len(V), len(F)))
+            vt = np.dtype([("p", order + "f4", 3), ("r", "u1")])
+            verts = np.zeros(len(V), dtype=vt)
+            verts["p"] = V
+            ft = np.dtype([("k", "u1"), ("i", order + "i4", 3), ("q", order + "f4")])
+            faces = np.zeros(len(F), dtype=ft)
+            faces["k"], faces["i"] = 3, F
+            path = self.path("b_%s.ply" % name)
+            with open(path, "wb") as f:
+                f.write(header.encode() + verts.tobytes() + faces.tobytes())
+            V2, F2 = mesh_io.read_mesh(path)
+            np.testing.assert_allclose(V2, V.astype(np.float32), atol=0)
+            np.testing.assert_array_equal(F2, F)
+
+    def test_command_line(self):
+        mesh = self.path("t.obj")
+        with open(mesh, "w") as f:
+            f.write(shapes.obj_text(self.V, self.F))
+        field = self.path("n.txt")
+        fl.write_field_text(field, self.V, self.F, self.fields["nfield"], encoding="dof")
+        self.assertEqual(ex.main([mesh, field, "--out", self.path("n.rawfield")]), 0)
+        n, values = DirectionalFormatsTest.parse_rawfield(self.path("n.rawfield"))
+        self.assertEqual(n, 4)
+        nfield = fl.field_from_text(self.V, self.F, fl.read_field_text(field))
+        np.testing.assert_allclose(values, nfield, atol=TOL)
+        tensor = self.path("t.txt")
+        fl.write_field_text(tensor, self.V, self.F, self.fields["tensor"])
+        self.assertEqual(ex.main([mesh, tensor, "--out", self.path("t.vtk"), "--name", "T"]),
+                         0)
+        if HAVE_MESHIO:
+            import meshio
+            got = meshio.read(self.path("t.vtk")).cell_data["T"][0]
+            np.testing.assert_allclose(got.reshape(-1, 3, 3), self.fields["tensor"], atol=TOL)
+        self.assertEqual(ex.main([mesh, tensor, "--out", self.path("t.rawfield")]), 0)
+        self.assertEqual(DirectionalFormatsTest.parse_rawfield(self.path("t.rawfield"))[0], 4)
+        self.assertEqual(ex.main([mesh, field, "--out", self.path("x.stl")]), 1)
+        self.assertEqual(ex.main([mesh, self.path("missing.txt"), "--out",
+                                  self.path("x.vtu")]), 1)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,14 @@ from fieldspace import fields as fl
 import shapes
 
 
+# A 4 x 3 grid of slightly bent quads and a pentagon on its side (all counter-clockwise).
+POLYGON_OBJ = "".join(
+    "v %r %r %r\n" % (i, j, 0.1 * i * j) for i in range(5) for j in range(4)) + (
+    "v 5 0 0\nv 5.5 0.5 0.2\nv 5 1 0.3\n") + "".join(
+    "f %d %d %d %d\n" % (4 * i + j + 1, 4 * (i + 1) + j + 1, 4 * (i + 1) + j + 2, 4 * i + j + 2)
+    for i in range(4) for j in range(3)) + "f 18 17 21 22 23\n"
+
+
 def assert_same_nfield(test, a, b, atol):
     """Equal n-fields: the same set of directions per face (in the same cyclic order)."""
     test.assertEqual(a.shape, b.shape)
@@ -219,6 +227,15 @@ class CliFilesTest(unittest.TestCase):
                         os.path.join(cls.dir, "%s_%s.txt" % (kind, encoding)))
             cli("curvature", mesh_id, "--out", os.path.join(cls.dir, "curvature.txt"),
                 "--principal", os.path.join(cls.dir, "principal.txt"))
+            # A mesh of quads and a hexagon: the server's fan triangulation and its binary PLY.
+            polygons = os.path.join(cls.dir, "polygons.obj")
+            with open(polygons, "w") as f:
+                f.write(POLYGON_OBJ)
+            polygons_id = json.loads(cli("upload", polygons)[1])["id"]
+            basis = json.loads(cli("build", polygons_id, "--field", "vector", "--dim", "4")[1])
+            np.savetxt(coefficients, rng.normal(size=4))
+            for out in ("polygons_field.ply", "polygons_field.txt"):
+                cli("lift", basis["id"], coefficients, "--out", os.path.join(cls.dir, out))
         finally:
             daemon.stop()
             daemon.proc.stdout.close()
@@ -248,6 +265,18 @@ class CliFilesTest(unittest.TestCase):
             if kind == "tensor":
                 np.testing.assert_allclose(fl.tensor_dofs(self.V, self.F, a), dof.values,
                                            atol=1e-6 * scale)
+
+    def test_polygon_mesh_and_binary_ply(self):
+        from fieldspace import mesh_io
+        V, F = mesh_io.read_mesh(os.path.join(self.dir, "polygons.obj"))
+        Vs, Fs = mesh_io.read_mesh(os.path.join(self.dir, "polygons_field.ply"))
+        np.testing.assert_array_equal(Fs, F)
+        np.testing.assert_allclose(Vs, V, atol=1e-6)
+        text = self.read("polygons_field.txt")
+        field = fl.field_from_text(V, F, text)
+        self.assertEqual(field.shape, (len(F), 3))
+        # The field file's faces are the mesh's triangles, in the same order.
+        self.assertEqual(len(text.values), len(Fs))
 
     def test_principal_curvatures_match(self):
         t = fl.field_from_text(self.V, self.F, self.read("curvature.txt"))

@@ -191,6 +191,26 @@ class RenderTest(unittest.TestCase):
             self.assertLess(seconds, 60.0)
             self.assertGreater(result["glyphs"] + result["lines"], 100)
 
+    def test_command_line(self):
+        V, F = shapes.torus(24, 12)
+        mesh = self.path("torus.obj")
+        with open(mesh, "w") as f:
+            f.write(shapes.obj_text(V, F))
+        field = self.path("cross.txt")
+        v = np.cross([0.0, 0.0, 1.0], fl.face_normals(V, F))
+        fl.write_field_text(field, V, F, fl.nfield_from_representative(V, F, v, 4),
+                            encoding="dof")
+        out = self.path("cli.png")
+        self.assertEqual(rd.main([mesh, field, "--out", out, "--style", "streamlines",
+                                  "--size", "160x120", "--camera", '{"direction": [0, 0, 1]}',
+                                  "--lines", "30"]), 0)
+        image = read_png(out)
+        self.assertEqual(image.shape, (120, 160, 3))
+        self.assertGreater(float(foreground(image).mean()), 0.2)
+        with self.assertRaises(SystemExit):
+            rd.main([mesh, "--out", out, "--size", "12by4"])
+        self.assertEqual(rd.main([mesh, "--out", out, "--camera", '{"fov": 1}']), 1)
+
     def test_errors(self):
         with self.assertRaises(ValueError):
             rd.render(self.V, self.F, None, style="watercolour")

@@ -1,6 +1,7 @@
 """fieldspace.streamlines on fields with known integral curves."""
 
 import math
+import os
 import time
 import unittest
 
@@ -178,6 +179,30 @@ class KnownCurvesTest(unittest.TestCase):
         print("\n%d faces, %d lines, %.2f s" % (len(F), len(lines), seconds))
         self.assertEqual(len(lines), 2000)
         self.assertLess(seconds, 30.0)
+
+
+class CommandLineTest(unittest.TestCase):
+    def test_writes_polylines(self):
+        import shutil
+        import tempfile
+        d = tempfile.mkdtemp()
+        try:
+            V, F = shapes.cylinder(16, 6, height=1.0)
+            mesh = os.path.join(d, "c.obj")
+            with open(mesh, "w") as f:
+                f.write(shapes.obj_text(V, F))
+            field = os.path.join(d, "f.txt")
+            fl.write_field_text(field, V, F, np.tile([0.0, 0.0, 2.0], (len(F), 1)))
+            out = os.path.join(d, "l.obj")
+            self.assertEqual(sl.main([mesh, field, "--out", out, "--count", "7"]), 0)
+            with open(out) as f:
+                elements = [ln for ln in f if ln.startswith("l ")]
+            self.assertEqual(len(elements), 7)
+            self.assertEqual(sl.main([mesh, field, "--out", os.path.join(d, "l.vtk"),
+                                      "--hatching", "--length", "0.1"]), 0)
+            self.assertEqual(sl.main([mesh, "--out", out]), 1)
+        finally:
+            shutil.rmtree(d)
 
 
 if __name__ == "__main__":

@@ -10,7 +10,10 @@ Field arrays follow fieldspace.fields: vectors ``(F, 3)``, n-fields ``(F, n, 3)`
 ``(F, 3, 3)``; :func:`field_arrays` says which per-face arrays each kind becomes.
 """
 
+import argparse
 import base64
+import os
+import sys
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -396,3 +399,44 @@ def write_polylines_obj(path, lines):
         start += len(a)
     with open(path, "w", encoding="ascii") as f:
         f.write("".join(out))
+
+
+def main(argv=None):
+    """python3 -m fieldspace.export MESH [FIELD_FILE] --out OUT: writes the mesh and a field
+    file of the fieldspace CLI as .vtu, .vtk, ASCII .ply or Directional's .rawfield (a tensor
+    field as its principal 4-field), chosen by the output's extension."""
+    from . import mesh_io
+
+    parser = argparse.ArgumentParser(prog="python3 -m fieldspace.export",
+                                     description=main.__doc__)
+    mesh_io.add_field_arguments(parser)
+    parser.add_argument("--out", required=True, help="output file: .vtu .vtk .ply .rawfield")
+    parser.add_argument("--name", default="field", help="array name prefix (.vtu, .vtk)")
+    parser.add_argument("--ascii", action="store_true", help=".vtu: ASCII instead of base64")
+    args = parser.parse_args(argv)
+    try:
+        V, F, field, kind = mesh_io.load_mesh_and_field(args.mesh, args.field, args.kind,
+                                                        args.n)
+        ext = os.path.splitext(args.out)[1].lower()
+        if ext == ".vtu":
+            write_vtu(args.out, V, F, field, kind, args.name, binary=not args.ascii)
+        elif ext == ".vtk":
+            write_vtk(args.out, V, F, field, kind, args.name)
+        elif ext == ".ply":
+            write_ply_ascii(args.out, V, F, field, kind)
+        elif ext == ".rawfield":
+            if field is None:
+                raise ValueError("a .rawfield export needs a field")
+            if kind == fl.TENSOR:
+                field = principal_cross_field(V, F, field)
+            write_rawfield(args.out, field)
+        else:
+            raise ValueError("unknown output extension %r (.vtu .vtk .ply .rawfield)" % ext)
+    except (OSError, ValueError) as e:
+        print("export failed: %s" % e, file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

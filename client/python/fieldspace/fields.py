@@ -355,19 +355,13 @@ def read_field_text(path):
         return parse_field_text(f.read())
 
 
-def field_from_text(V, F, text_field, kind=None, n=None):
-    """The field array of a :class:`FieldText` on mesh ``(V, F)``.
-
-    ``kind`` and ``n`` default to the file's header. Ambient vectors are projected to the faces,
-    an ambient n-field line (one direction) gives all n directions, ambient tensors (6 values)
-    are restricted to the faces; DOF lines are read in the face frames.
-    """
-    V, F = as_mesh(V, F)
+def text_kind(text_field, kind=None, n=None):
+    """``(kind, n)`` of a :class:`FieldText`: the given ones, else the header's, else by the
+    number of values per face (6, or 3 in DOF encoding: tensor; else vector)."""
     kind = kind or text_field.kind
     n = n or text_field.n
-    values = text_field.values
-    k = values.shape[1]
     if kind is None:
+        k = text_field.values.shape[1]
         if k == 6 or (k == 3 and text_field.encoding == "dof"):
             kind = TENSOR
         elif n is not None:
@@ -378,6 +372,20 @@ def field_from_text(V, F, text_field, kind=None, n=None):
         raise ValueError("kind must be one of %s, got %r" % (", ".join(KINDS), kind))
     if kind == NFIELD and n is None:
         raise ValueError("an n-field needs n (the file has no 'nfield<n>' header)")
+    return kind, (n if kind == NFIELD else (3 if kind == TENSOR else 1))
+
+
+def field_from_text(V, F, text_field, kind=None, n=None):
+    """The field array of a :class:`FieldText` on mesh ``(V, F)``.
+
+    ``kind`` and ``n`` default to the file's header. Ambient vectors are projected to the faces,
+    an ambient n-field line (one direction) gives all n directions, ambient tensors (6 values)
+    are restricted to the faces; DOF lines are read in the face frames.
+    """
+    V, F = as_mesh(V, F)
+    kind, n = text_kind(text_field, kind, n)
+    values = text_field.values
+    k = values.shape[1]
     if len(values) != len(F):
         raise ValueError("the file has %d faces, the mesh %d" % (len(values), len(F)))
     expected = {("ambient", VECTOR): 3, ("ambient", NFIELD): 3, ("ambient", TENSOR): 6,

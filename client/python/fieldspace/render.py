@@ -9,8 +9,11 @@ it) and Debian ships it (python3-vtk9); it renders with Mesa's software OpenGL i
 buffer, through a private Xvfb when there is no DISPLAY (fieldspace.display).
 """
 
+import argparse
 import importlib
+import json
 import math
+import sys
 
 import numpy as np
 
@@ -453,3 +456,49 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
             window.Finalize()
     return {"image": pixels, "camera": state, "scalar_range": scalar_range,
             "glyphs": n_glyphs, "lines": n_lines}
+
+
+def _size(text):
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError("size is WIDTHxHEIGHT, e.g. 800x600") from None
+    return w, h
+
+
+def main(argv=None):
+    """python3 -m fieldspace.render MESH [FIELD_FILE] --out PNG: draws the mesh and a field file
+    of the fieldspace CLI (glyphs, streamlines or colour only) into a PNG, without a display."""
+    from . import mesh_io
+
+    parser = argparse.ArgumentParser(prog="python3 -m fieldspace.render",
+                                     description=main.__doc__)
+    mesh_io.add_field_arguments(parser)
+    parser.add_argument("--out", required=True, help="the PNG to write")
+    parser.add_argument("--style", choices=STYLES, default="glyphs")
+    parser.add_argument("--size", type=_size, default=(800, 600), help="WIDTHxHEIGHT")
+    parser.add_argument("--camera", type=json.loads, default=None,
+                        help='JSON, e.g. \'{"direction": [0, -1, 0.3]}\' or position, '
+                        'focal_point, view_up, view_angle, parallel_scale, zoom')
+    parser.add_argument("--scalar-bar", action="store_true", help="add a colour legend")
+    parser.add_argument("--glyphs", type=int, default=3000, help="glyphs at most (about)")
+    parser.add_argument("--lines", type=int, default=None, help="streamline seeds")
+    parser.add_argument("--line-length", type=float, default=None,
+                        help="half length of a streamline (default 12%% of the diagonal)")
+    args = parser.parse_args(argv)
+    try:
+        V, F, field, kind = mesh_io.load_mesh_and_field(args.mesh, args.field, args.kind,
+                                                        args.n)
+        result = render(V, F, field, kind, out_png=args.out, style=args.style, size=args.size,
+                        camera=args.camera, scalar_bar=args.scalar_bar, max_glyphs=args.glyphs,
+                        streamline_count=args.lines, streamline_length=args.line_length)
+    except (OSError, ValueError, RuntimeError) as e:
+        print("render failed: %s" % e, file=sys.stderr)
+        return 1
+    print(json.dumps({"out": args.out, "glyphs": result["glyphs"], "lines": result["lines"],
+                      "camera": result["camera"], "scalar_range": result["scalar_range"]}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -15,6 +15,10 @@ two faces, where the next face's direction points back across the shared edge, a
 back to the face of its seed (a closed loop, closed at the seed point).
 """
 
+import argparse
+import json
+import os
+import sys
 from dataclasses import dataclass, field as dataclass_field
 
 import numpy as np
@@ -306,3 +310,50 @@ class _Tracer:
             active = active[sel]
             f, b, d = gs[cont], nb[cont], new_d[cont]
         return (np.concatenate(ids), np.concatenate(pts)), closed
+
+
+def main(argv=None):
+    """python3 -m fieldspace.streamlines MESH FIELD_FILE --out LINES: traces streamlines (or,
+    with --hatching, short strokes) of a field file of the fieldspace CLI and writes them as
+    legacy VTK polylines (.vtk) or OBJ lines (.obj)."""
+    from . import export, mesh_io
+
+    parser = argparse.ArgumentParser(prog="python3 -m fieldspace.streamlines",
+                                     description=main.__doc__)
+    mesh_io.add_field_arguments(parser)
+    parser.add_argument("--out", required=True, help=".vtk or .obj")
+    parser.add_argument("--count", type=int, default=500, help="seeds (uniform by area)")
+    parser.add_argument("--length", type=float, default=None,
+                        help="streamlines: half length cap; hatching: stroke length")
+    parser.add_argument("--hatching", action="store_true", help="short strokes (Fig. 17)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    args = parser.parse_args(argv)
+    try:
+        V, F, field, kind = mesh_io.load_mesh_and_field(args.mesh, args.field, args.kind,
+                                                        args.n)
+        if field is None:
+            raise ValueError("streamlines need a field file")
+        if args.hatching:
+            lines = hatching(V, F, field, kind, count=args.count, stroke_length=args.length,
+                             rng=args.seed)
+        else:
+            lines = trace_streamlines(V, F, field, kind, count=args.count,
+                                      max_length=args.length, rng=args.seed)
+        ext = os.path.splitext(args.out)[1].lower()
+        if ext == ".vtk":
+            export.write_polylines_vtk(args.out, list(lines),
+                                       line_data={"family": lines.families,
+                                                  "closed": lines.closed.astype(float)})
+        elif ext == ".obj":
+            export.write_polylines_obj(args.out, list(lines))
+        else:
+            raise ValueError("unknown output extension %r (.vtk .obj)" % ext)
+    except (OSError, ValueError) as e:
+        print("streamlines failed: %s" % e, file=sys.stderr)
+        return 1
+    print(json.dumps({"out": args.out, "lines": len(lines)}))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
