@@ -114,6 +114,13 @@ class RenderTest(unittest.TestCase):
         bottom = image[int(size / 2 + 0.95 / scale * size / 2), size // 2]
         self.assertLess(np.abs(top - table[-1]).max(), 25)
         self.assertLess(np.abs(bottom - table[0]).max(), 25)
+        # With lighting the hues stay: yellow above (blue lowest), purple below (green lowest).
+        lit = rd.render(self.V, self.F, field, style="surface", size=(size, size),
+                        camera=camera)["image"].astype(int)
+        top = lit[int(size / 2 - 0.8 / scale * size / 2), size // 2]
+        bottom = lit[int(size / 2 + 0.8 / scale * size / 2), size // 2]
+        self.assertGreater(min(top[0], top[1]) - top[2], 80)
+        self.assertGreater(min(bottom[0], bottom[2]) - bottom[1], 15)
 
     def test_glyphs_for_each_kind(self):
         V, F = shapes.torus(48, 24)

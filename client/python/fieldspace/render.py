@@ -250,7 +250,7 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
            scalar_bar=False, title=None, max_glyphs=3000, glyph_scale=1.0, normalize=True,
            streamline_count=None, streamline_length=None, lighting=True,
            background=(1.0, 1.0, 1.0), surface_color=(0.85, 0.85, 0.85), line_width=1.5,
-           line_color=(0.08, 0.08, 0.08), rng=0, use_display=True):
+           line_color=(0.08, 0.08, 0.08), colorize=True, rng=0, use_display=True):
     """Renders the mesh ``(V, F)`` with ``field`` and writes a PNG to ``out_png`` (if given).
 
     - ``field``/``kind``: as in fieldspace.fields (vectors ``(F, 3)``, n-fields ``(F, n, 3)``,
@@ -262,7 +262,8 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
       ``"surface"`` (colour only).
     - the surface is coloured by ``scalars`` (``(F,)``, default the field's magnitude:
       fieldspace.fields.magnitude) through the colormap over ``scalar_range`` (default the
-      values' min and max); ``scalar_bar`` adds a legend titled ``title``.
+      values' min and max); ``scalar_bar`` adds a legend titled ``title``. ``colorize=False``
+      (and no ``scalars``): a plain ``surface_color`` surface, e.g. for hatching.
     - ``camera``: None (look from ``(1, -1.6, 0.9)`` with z up, framing the mesh) or a dict with
       ``position``, ``focal_point``, ``view_up``, ``view_angle`` (degrees) and
       ``parallel_scale`` (parallel projection: half the view's height), or ``direction``
@@ -291,7 +292,7 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
     a = None
     if field is not None:
         a, kind, n = fl.check_field(V, F, field, kind)
-    if scalars is None and a is not None:
+    if scalars is None and a is not None and colorize:
         scalars = fl.magnitude(a, kind)
     if scalars is not None:
         scalars = np.asarray(scalars, dtype=np.float64).reshape(-1)
@@ -317,7 +318,6 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
     surface.SetPoints(points)
     surface.SetPolys(tris)
     mapper = vtkPolyDataMapper()
-    mapper.SetInputData(surface)
     mapper.SetResolveCoincidentTopologyToPolygonOffset()
     mapper.SetRelativeCoincidentTopologyPolygonOffsetParameters(1.0, 2.0)
     actor = vtkActor()
@@ -341,6 +341,19 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
     else:
         mapper.ScalarVisibilityOff()
         actor.GetProperty().SetColor(*surface_color)
+    if lighting:
+        # Smooth shading from vertex normals; the colours stay per face.
+        from vtkmodules.vtkFiltersCore import vtkPolyDataNormals
+        normals = vtkPolyDataNormals()
+        normals.SetInputData(surface)
+        normals.SplittingOff()
+        normals.ConsistencyOff()
+        normals.AutoOrientNormalsOff()
+        normals.ComputeCellNormalsOff()
+        normals.Update()
+        mapper.SetInputData(normals.GetOutput())
+    else:
+        mapper.SetInputData(surface)
     prop = actor.GetProperty()
     if lighting:
         prop.SetAmbient(0.25)
@@ -350,7 +363,10 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
         prop.SetAmbient(1.0)
         prop.SetDiffuse(0.0)
         prop.SetSpecular(0.0)
-    prop.SetInterpolationToFlat()
+    if lighting:
+        prop.SetInterpolationToGouraud()
+    else:
+        prop.SetInterpolationToFlat()
 
     overlays = []
     n_glyphs, n_lines = 0, 0
