@@ -225,6 +225,8 @@ class CliFilesTest(unittest.TestCase):
                 for encoding in ("ambient", "dof"):
                     cli("lift", basis, coefficients, "--encoding", encoding, "--out",
                         os.path.join(cls.dir, "%s_%s.txt" % (kind, encoding)))
+                if kind == "nfield":
+                    cls.singularities = cli("singularities", basis, coefficients)[1]
             cli("curvature", mesh_id, "--out", os.path.join(cls.dir, "curvature.txt"),
                 "--principal", os.path.join(cls.dir, "principal.txt"))
             # A mesh of quads and a hexagon: the server's fan triangulation and its binary PLY.
@@ -277,6 +279,22 @@ class CliFilesTest(unittest.TestCase):
         self.assertEqual(field.shape, (len(F), 3))
         # The field file's faces are the mesh's triangles, in the same order.
         self.assertEqual(len(text.values), len(Fs))
+
+    def test_singularities_to_directional(self):
+        from fieldspace import export as ex
+        n, pairs = ex.singularities_from_cli(self.singularities)
+        self.assertEqual(n, 4)
+        self.assertGreater(len(pairs), 0)
+        # Poincare-Hopf on the torus: the indices (in 1/n turns) sum to n * chi = 0.
+        self.assertEqual(int(pairs[:, 1].sum()), 0)
+        path = os.path.join(self.dir, "f.sing")
+        ex.write_sing(path, pairs, n)
+        with open(path) as f:
+            tokens = [int(t) for t in f.read().split()]
+        self.assertEqual(tokens[:2], [4, len(pairs)])
+        np.testing.assert_array_equal(np.array(tokens[2:]).reshape(-1, 2), pairs)
+        with self.assertRaisesRegex(ValueError, "singularities_from_cli"):
+            ex.write_sing(path, json.loads(self.singularities)["singularities"], n)
 
     def test_principal_curvatures_match(self):
         t = fl.field_from_text(self.V, self.F, self.read("curvature.txt"))

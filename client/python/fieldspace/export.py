@@ -12,6 +12,7 @@ Field arrays follow fieldspace.fields: vectors ``(F, 3)``, n-fields ``(F, n, 3)`
 
 import argparse
 import base64
+import json
 import os
 import sys
 from xml.sax.saxutils import quoteattr
@@ -299,7 +300,8 @@ def principal_cross_field(V, F, tensors):
 def singularity_pairs(singularities):
     """``(k, 2)`` int array of (vertex, index in 1/n turns) from: such an array or list of pairs;
     a dict vertex -> index; objects or dicts with ``vertex`` and ``index`` (the Singularities
-    RPC's messages)."""
+    RPC's messages). The CLI prints indices in whole turns: use :func:`singularities_from_cli`
+    for its output."""
     if isinstance(singularities, dict):
         pairs = list(singularities.items())
     else:
@@ -313,8 +315,25 @@ def singularity_pairs(singularities):
                 pairs.append(tuple(s))
     a = np.array(pairs, dtype=np.float64).reshape(-1, 2) if pairs else np.zeros((0, 2))
     if not np.all(np.mod(a, 1) == 0):
-        raise ValueError("singular vertices and indices must be integers")
+        raise ValueError("singular vertices and indices (in 1/n turns) must be integers; for "
+                         "the CLI's output (whole turns) use singularities_from_cli")
     return a.astype(np.int64)
+
+
+def singularities_from_cli(output):
+    """``(n, pairs)`` from the JSON that ``fieldspace singularities`` prints (text or parsed):
+    its ``index`` is in whole turns, so each becomes ``round(index * n)`` in 1/n turns."""
+    if isinstance(output, (str, bytes)):
+        output = json.loads(output)
+    n = int(output["n"])
+    pairs = []
+    for s in output.get("singularities", []):
+        units = float(s["index"]) * n
+        if abs(units - round(units)) > 1e-6:
+            raise ValueError("vertex %d: index %r is not a multiple of 1/%d turn"
+                             % (s["vertex"], s["index"], n))
+        pairs.append((int(s["vertex"]), int(round(units))))
+    return n, np.array(pairs, dtype=np.int64).reshape(-1, 2)
 
 
 def write_sing(path, singularities, n):
