@@ -151,6 +151,40 @@ class RenderTest(unittest.TestCase):
                 dark = np.all(image < 40, axis=2)
                 self.assertGreater(int(dark.sum()), 300, kind)
 
+    def test_tensor_ellipses(self):
+        V, F = shapes.torus(48, 24)
+        n = fl.face_normals(V, F)
+        v = np.cross([0.0, 0.0, 1.0], n)
+        et = v / np.linalg.norm(v, axis=1)[:, None]
+        ev = np.cross(n, et)
+        negative = -2.0 * np.einsum("fi,fj->fij", et, et) - np.einsum("fi,fj->fij", ev, ev)
+        images = {}
+        for glyph in ("cross", "ellipse"):
+            images[glyph] = rd.render(V, F, -negative, "tensor", size=(300, 200),
+                                      max_glyphs=200, tensor_glyph=glyph)["image"].astype(int)
+        red = [int(((im[:, :, 0] > 150) & (im[:, :, 1] < 80) & (im[:, :, 2] < 80)).sum())
+               for im in images.values()]
+        self.assertGreater(red[1], 200)
+        self.assertGreater(np.mean(np.any(images["cross"] != images["ellipse"], axis=2)), 0.01)
+        # k1 < 0: blue ellipses.
+        im = rd.render(V, F, negative, "tensor", size=(300, 200), max_glyphs=200,
+                       tensor_glyph="ellipse")["image"].astype(int)
+        blue = (im[:, :, 2] > 150) & (im[:, :, 0] < 80) & (im[:, :, 1] < 120)
+        self.assertGreater(int(blue.sum()), 200)
+        with self.assertRaises(ValueError):
+            rd.render(V, F, negative, "tensor", tensor_glyph="box")
+
+    def test_constant_magnitude_is_the_colormap_middle(self):
+        V, F = shapes.torus(24, 12)
+        n = fl.face_normals(V, F)
+        v = np.cross([0.0, 0.0, 1.0], n)
+        v = 3.0 * v / np.linalg.norm(v, axis=1)[:, None]
+        result = rd.render(V, F, v, style="surface", size=(200, 150), lighting=False)
+        image = result["image"].astype(int)
+        middle = np.round(255 * rd.map_colors([3.0], result["scalar_range"])[0]).astype(int)
+        mask = foreground(result["image"])
+        self.assertLessEqual(int(np.abs(image[mask] - middle).max()), 3)
+
     def test_streamlines_style(self):
         V, F = shapes.cylinder(48, 20, height=2.0)
         field = np.tile([0.0, 0.0, 1.0], (len(F), 1))

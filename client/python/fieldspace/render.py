@@ -131,8 +131,9 @@ def _polylines_polydata(lines, offset_normals=None):
     return poly
 
 
-def _glyph_segments(V, F, a, kind, faces, arm, normalize):
-    """Segments (starts, ends, colours) of the glyphs at ``faces``; ``arm`` the longest arm."""
+def _glyph_segments(V, F, a, kind, faces, arm, normalize, tensor_glyph="cross"):
+    """Segments (starts, ends, colours) of the glyphs at ``faces``, face-major (the segments
+    of each glyph together, in the order of ``faces``); ``arm`` the longest arm."""
     normals = fl.face_normals(V, F)[faces]
     centers = V[F[faces]].mean(axis=1)
     black = np.array([0.05, 0.05, 0.05])
@@ -149,7 +150,7 @@ def _glyph_segments(V, F, a, kind, faces, arm, normalize):
         side = np.cross(normals, d)
         starts += [tail, tip, tip]
         ends += [tip, tip - 0.3 * d + 0.15 * side, tip - 0.3 * d - 0.15 * side]
-        colors += [np.tile(black, (3 * len(faces), 1))]
+        colors += [black] * 3
     elif kind == fl.NFIELD:
         dirs = a[faces]
         length = np.linalg.norm(dirs[:, 0], axis=1)
@@ -159,18 +160,39 @@ def _glyph_segments(V, F, a, kind, faces, arm, normalize):
         for k in range(dirs.shape[1]):
             starts.append(centers)
             ends.append(centers + dirs[:, k] * scale[:, None])
-        colors += [np.tile(black, (dirs.shape[1] * len(faces), 1))]
+            colors.append(black)
     else:
         values, directions = fl.principal(V, F[faces], a[faces])
         top = np.abs(values).max() if values.size and np.abs(values).max() > 0 else 1.0
         palette = (np.array([0.8, 0.1, 0.1]), np.array([0.1, 0.2, 0.85]))
-        for j in range(2):
-            half = (np.abs(values[:, j]) / top if normalize else 1.0) * 0.5 * arm
-            d = directions[:, j] * half[:, None]
-            starts.append(centers - d)
-            ends.append(centers + d)
-            colors.append(np.tile(palette[j], (len(faces), 1)))
-    return np.vstack(starts), np.vstack(ends), np.vstack(colors)
+        halves = [(np.abs(values[:, j]) / top if normalize else 1.0) * 0.5 * arm
+                  for j in range(2)]
+        if tensor_glyph == "ellipse":
+            # Semi-axes |k1| d1 and |k2| d2 (scaled), 24 segments, coloured by the sign of k1.
+            t = np.linspace(0.0, 2.0 * math.pi, 25)
+            ring = (np.cos(t)[None, :, None] * (directions[:, 0] * halves[0][:, None])[:, None]
+                    + np.sin(t)[None, :, None] * (directions[:, 1] * halves[1][:, None])[:, None]
+                    + centers[:, None, :])
+            starts.append(ring[:, :-1].reshape(-1, 3))
+            ends.append(ring[:, 1:].reshape(-1, 3))
+            sign = np.repeat(values[:, 0] >= 0, 24)
+            colors.append(np.where(sign[:, None], palette[0], palette[1]))
+        else:
+            for j in range(2):
+                d = directions[:, j] * halves[j][:, None]
+                starts.append(centers - d)
+                ends.append(centers + d)
+                colors.append(palette[j])
+    if kind == fl.TENSOR and tensor_glyph == "ellipse":
+        return starts[0], ends[0], colors[0]
+    # Blocks of one segment per glyph -> face-major order (all segments of glyph 0 first).
+    count = len(faces)
+
+    def face_major(blocks):
+        stacked = np.stack([np.broadcast_to(b, (count, 3)) for b in blocks], axis=1)
+        return stacked.reshape(-1, 3)
+
+    return face_major(starts), face_major(ends), face_major(colors)
 
 
 def _fit_view(cam, points, aspect, fill=0.9):
@@ -250,13 +272,16 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
            scalar_bar=False, title=None, max_glyphs=3000, glyph_scale=1.0, normalize=True,
            streamline_count=None, streamline_length=None, lighting=True,
            background=(1.0, 1.0, 1.0), surface_color=(0.85, 0.85, 0.85), line_width=1.5,
-           line_color=(0.08, 0.08, 0.08), colorize=True, rng=0, use_display=True):
+           line_color=(0.08, 0.08, 0.08), colorize=True, tensor_glyph="cross", rng=0,
+           use_display=True):
     """Renders the mesh ``(V, F)`` with ``field`` and writes a PNG to ``out_png`` (if given).
 
     - ``field``/``kind``: as in fieldspace.fields (vectors ``(F, 3)``, n-fields ``(F, n, 3)``,
       tensors ``(F, 3, 3)``), or None for the bare surface.
     - ``style``: ``"glyphs"`` (about ``max_glyphs`` glyphs spread evenly; arms scaled by
-      magnitude unless ``normalize=False``; ``glyph_scale`` scales them), ``"streamlines"``
+      magnitude unless ``normalize=False``; ``glyph_scale`` scales them; tensors as principal
+      crosses or, with ``tensor_glyph="ellipse"``, ellipses with semi-axes ``|k1| d1``,
+      ``|k2| d2``, red where ``k1 >= 0``, blue elsewhere), ``"streamlines"``
       (``streamline_count`` seeds, half length ``streamline_length``; n-fields and tensors draw
       every line family; default about one seed per 2500 pixels, drawn in ``line_color``) or
       ``"surface"`` (colour only).
@@ -283,6 +308,8 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
     importlib.import_module("vtkmodules.vtkRenderingOpenGL2")
     importlib.import_module("vtkmodules.vtkRenderingFreeType")
 
+    if tensor_glyph not in ("cross", "ellipse"):
+        raise ValueError("tensor_glyph must be 'cross' or 'ellipse', got %r" % (tensor_glyph,))
     if style not in STYLES:
         raise ValueError("style must be one of %s, got %r" % (", ".join(STYLES), style))
     width, height = (int(size[0]), int(size[1]))
@@ -301,8 +328,13 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
         if scalar_range is None:
             scalar_range = (float(scalars.min()), float(scalars.max())) if len(scalars) \
                 else (0.0, 1.0)
-        if scalar_range[1] <= scalar_range[0]:
-            scalar_range = (scalar_range[0], scalar_range[0] + 1.0)
+        lo, hi = float(scalar_range[0]), float(scalar_range[1])
+        if hi - lo <= 1e-9 * max(abs(lo), abs(hi)) or hi <= lo:
+            # A constant (up to rounding) shows the colormap's middle, not amplified noise.
+            middle = 0.5 * (lo + hi)
+            half = max(0.5 * abs(middle), 0.5)
+            lo, hi = middle - half, middle + half
+        scalar_range = (lo, hi)
 
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if len(V) else 1.0
     total_area = float(fl.face_areas(V, F).sum())
@@ -376,13 +408,14 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
         faces = glyph_faces(V, F, max_glyphs, rng=rng, allowed=allowed)
         arm = 0.8 * glyph_scale * math.sqrt(total_area / max(len(faces), 1))
         if len(faces):
-            starts, ends, colors = _glyph_segments(V, F, a, kind, faces, arm, normalize)
-            # Lift glyphs off the surface so that the depth test keeps them.
-            lift = 0.002 * diag
-            k = len(starts) // len(faces)
-            normals = np.tile(fl.face_normals(V, F)[faces], (k, 1))
-            overlays.append(_segments_polydata(starts + lift * normals, ends + lift * normals,
-                                               colors))
+            starts, ends, colors = _glyph_segments(V, F, a, kind, faces, arm, normalize,
+                                                   tensor_glyph)
+            # Lift glyphs off the surface (along their face's normal) so that the depth test
+            # keeps them where the surface curves away under their flat arms.
+            lift = max(0.002 * diag, 0.1 * arm)
+            per_glyph = len(starts) // len(faces)
+            offset = lift * np.repeat(fl.face_normals(V, F)[faces], per_glyph, axis=0)
+            overlays.append(_segments_polydata(starts + offset, ends + offset, colors))
             n_glyphs = len(faces)
     elif a is not None and style == "streamlines":
         m = 1 if kind == fl.VECTOR else (4 if kind == fl.TENSOR else a.shape[1])
