@@ -108,6 +108,24 @@ class KnownCurvesTest(unittest.TestCase):
         # Which of the n directions is listed first changes nothing but the lines' orientation.
         self.assertEqual(canonical[0], canonical[1])
 
+    def test_a_helix_passing_its_seed_face_is_not_closed(self):
+        V, F = shapes.cylinder(24, 16, height=2.0)
+        n = fl.face_normals(V, F)
+        ez = np.array([0.0, 0.0, 1.0])
+        # Rises 0.005 per unit around: back in the seed face after a turn, 0.03 higher.
+        field = np.cross(n, ez) + 0.005 * ez
+        lines = sl.trace_streamlines(V, F, field, count=20, rng=7, max_length=20.0,
+                                     max_faces=100000)
+        self.assertEqual(len(lines), 20)
+        for line, closed in zip(lines, lines.closed):
+            self.assertFalse(closed)
+            self.assertTrue(np.all(np.diff(line[:, 2]) >= -1e-12))
+            length = np.sum(np.linalg.norm(np.diff(line, axis=0), axis=1))
+            # Up to the boundary at both ends or 20 units each way.
+            at_ends = (line[0, 2] < 1e-9 or length > 19.9) and (line[-1, 2] > 2 - 1e-9 or
+                                                                length > 19.9)
+            self.assertTrue(at_ends, (line[0], line[-1], length))
+
     def test_stops_at_max_length_and_at_stop_faces(self):
         V, F = shapes.cylinder(24, 16, height=2.0)
         field = np.tile([0.0, 0.0, 1.0], (len(F), 1))

@@ -12,7 +12,7 @@ entering a *stop face* (a face whose field is below ``zero_tolerance`` times the
 magnitude, or one listed in ``stop_faces``, e.g. faces around singular vertices:
 :func:`faces_around_vertices`), where the field turns by more than ``max_turn_degrees`` between
 two faces, where the next face's direction points back across the shared edge, and when it comes
-back to the face of its seed (a closed loop, closed at the seed point).
+back to the face of its seed heading for the seed (a closed loop, closed at the seed point).
 """
 
 import argparse
@@ -236,6 +236,7 @@ class _Tracer:
         twice_area = np.where(twice_area > 0, twice_area, 1.0)
         edges = p[:, [2, 0, 1]] - p[:, [1, 2, 0]]
         self.grad = np.cross(normals[:, None, :], edges) / twice_area[:, None, None]
+        self.size = np.sqrt(twice_area)
 
     def _pick(self, faces, incoming, sign):
         """The direction of ``faces`` closest to ``incoming`` (times ``sign``) and its dot."""
@@ -283,13 +284,6 @@ class _Tracer:
             g = self.adj[f, k]
             go = ok & ~capped & (g >= 0)
             go[go] &= ~self.stop[g[go]]
-            # Back at the seed face: close the loop at the seed point.
-            back = go & (g == seed_face[active]) & (step > 0)
-            if back.any():
-                ids.append(active[back])
-                pts.append(seed_points[active[back]])
-                closed[active[back]] = True
-                go &= ~back
             if not go.any():
                 break
             sel = np.nonzero(go)[0]
@@ -306,6 +300,23 @@ class _Tracer:
             new_d, dot = self._pick(gs, d[sel], sign[active[sel]])
             inward = np.einsum("lc,lc->l", self.grad[gs, entry], new_d) > 1e-12
             cont = (dot >= self.cos_turn) & inward
+            # Back in the seed face, heading for the seed along the seed's direction: close the
+            # loop at the seed point (within 5% of the face's size across the line).
+            jobs = active[sel]
+            home = cont & (gs == seed_face[jobs]) & (step > 0)
+            if home.any():
+                h = np.nonzero(home)[0]
+                to_seed = seed_points[jobs[h]] - p[sel[h]]
+                along = np.einsum("lc,lc->l", to_seed, new_d[h])
+                across = np.linalg.norm(to_seed - along[:, None] * new_d[h], axis=1)
+                same = np.einsum("lc,lc->l", new_d[h], direction[jobs[h]]) > 0.99
+                close = same & (along >= -1e-12) & (across <= 0.05 * self.size[gs[h]])
+                h = h[close]
+                if len(h):
+                    ids.append(jobs[h])
+                    pts.append(seed_points[jobs[h]])
+                    closed[jobs[h]] = True
+                    cont[h] = False
             sel = sel[cont]
             active = active[sel]
             f, b, d = gs[cont], nb[cont], new_d[cont]
