@@ -126,6 +126,52 @@ class KnownCurvesTest(unittest.TestCase):
                                                                 length > 19.9)
             self.assertTrue(at_ends, (line[0], line[-1], length))
 
+    def test_space_lines_on_known_lines(self):
+        x = np.linspace(0.0, 10.0, 11)[:, None]
+        # Parallel lines 0.3 apart, the middle one longest; separation 0.5.
+        lines = [np.hstack([x * s, np.full_like(x, 0.3 * i), np.zeros_like(x)])
+                 for i, s in zip(range(5), (0.9, 0.8, 1.0, 0.7, 0.6))]
+        kept, sources = sl.space_lines(lines, 0.5)
+        self.assertEqual(sources.tolist(), [2, 0, 4])
+        # A line crossing the kept ones is cut to its longest free piece.
+        cross = np.stack([np.full(41, 3.0), np.linspace(-3.0, 1.2, 41), np.zeros(41)], axis=1)
+        kept, sources = sl.space_lines([lines[2], cross], 0.5)
+        self.assertEqual(sources.tolist(), [0, 1])
+        piece = kept[1]
+        # lines[2] runs at y = 0.6: the free piece below it ends within 0.5 of it.
+        self.assertAlmostEqual(piece[0, 1], -3.0)
+        self.assertLess(piece[-1, 1], 0.1 + 1e-9)
+        self.assertGreater(piece[-1, 1], 0.1 - 0.25 - 1e-9)
+        with self.assertRaises(ValueError):
+            sl.space_lines(lines, 0.0)
+
+    def test_evenly_spaced_families(self):
+        V, F = shapes.torus(64, 32)
+        n = fl.face_normals(V, F)
+        v = np.cross([0.0, 0.0, 1.0], n)
+        cross = fl.nfield_from_representative(V, F, v + 0.5 * np.cross(n, v), 4)
+        sep = 0.1
+        lines = sl.trace_streamlines(V, F, cross, count=400, rng=2, max_length=1.0,
+                                     separation=sep)
+        self.assertEqual(sorted(set(lines.families.tolist())), [0, 1])
+        for family in (0, 1):
+            members = [a for a, f in zip(lines, lines.families) if f == family]
+            self.assertGreater(len(members), 20)
+            for i, a in enumerate(members):
+                self.assertGreaterEqual(np.sum(np.linalg.norm(np.diff(a, axis=0), axis=1)),
+                                        2 * sep - 1e-9)
+                self.assertLessEqual(np.linalg.norm(np.diff(a, axis=0), axis=1).max(),
+                                     sep / 2 + 1e-9)
+                others = np.vstack(members[:i] + members[i + 1:])
+                d = np.sqrt(((a[:, None, :] - others[None, :, :]) ** 2).sum(axis=2)).min()
+                # Pieces kept later stay away from earlier ones, and the other way round.
+                self.assertGreaterEqual(d, sep - 1e-9)
+        # The two families cross: some points of family 0 are close to family 1.
+        f0 = np.vstack([a for a, f in zip(lines, lines.families) if f == 0])
+        f1 = np.vstack([a for a, f in zip(lines, lines.families) if f == 1])
+        d = np.sqrt(((f0[:400, None, :] - f1[None, :, :]) ** 2).sum(axis=2)).min()
+        self.assertLess(d, sep / 2)
+
     def test_stops_at_max_length_and_at_stop_faces(self):
         V, F = shapes.cylinder(24, 16, height=2.0)
         field = np.tile([0.0, 0.0, 1.0], (len(F), 1))

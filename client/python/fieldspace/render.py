@@ -270,7 +270,8 @@ def _apply_camera(renderer, camera, bounds, fit_points=None, aspect=1.0):
 def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800, 600),
            camera=None, colormap_name="viridis", scalars=None, scalar_range=None,
            scalar_bar=False, title=None, max_glyphs=3000, glyph_scale=1.0, normalize=True,
-           streamline_count=None, streamline_length=None, lighting=True,
+           streamline_count=None, streamline_length=None, streamline_separation=None,
+           lighting=True,
            background=(1.0, 1.0, 1.0), surface_color=(0.85, 0.85, 0.85), line_width=1.5,
            line_color=(0.08, 0.08, 0.08), colorize=True, tensor_glyph="cross", rng=0,
            use_display=True):
@@ -283,7 +284,8 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
       crosses or, with ``tensor_glyph="ellipse"``, ellipses with semi-axes ``|k1| d1``,
       ``|k2| d2``, red where ``k1 >= 0``, blue elsewhere), ``"streamlines"``
       (``streamline_count`` seeds, half length ``streamline_length``; n-fields and tensors draw
-      every line family; default about one seed per 2500 pixels, drawn in ``line_color``) or
+      every line family; default about one seed per 2500 pixels, drawn in ``line_color``;
+      ``streamline_separation``: evenly spaced lines, see streamlines.space_lines) or
       ``"surface"`` (colour only).
     - the surface is coloured by ``scalars`` (``(F,)``, default the field's magnitude:
       fieldspace.fields.magnitude) through the colormap over ``scalar_range`` (default the
@@ -423,7 +425,8 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
         count = streamline_count or max(20, width * height // (2500 * families))
         length = streamline_length or 0.12 * diag
         lines = sl.trace_streamlines(V, F, a, kind=kind, count=count, rng=rng,
-                                     max_length=length, max_faces=20000)
+                                     max_length=length, max_faces=20000,
+                                     separation=streamline_separation)
         if len(lines):
             poly = _polylines_polydata(list(lines))
             rgb = np.tile((np.clip(line_color, 0, 1) * 255).astype(np.uint8), (len(lines), 1))

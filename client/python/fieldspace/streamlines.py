@@ -135,7 +135,7 @@ def line_families(kind, m):
 
 def trace_streamlines(V, F, field, kind=None, count=500, seeds=None, rng=0, families=None,
                       max_length=None, max_faces=2000, zero_tolerance=1e-6, stop_faces=None,
-                      max_turn_degrees=60.0, both_directions=True):
+                      max_turn_degrees=60.0, both_directions=True, separation=None):
     """Traces streamlines of a per-face field; returns :class:`Streamlines`.
 
     - ``field``: vectors ``(F, 3)``, n-fields ``(F, n, 3)`` or tensors ``(F, 3, 3)`` (lines of
@@ -147,6 +147,9 @@ def trace_streamlines(V, F, field, kind=None, count=500, seeds=None, rng=0, fami
     - ``max_length``: length cap of each half line (None: unbounded); ``max_faces``: faces
       crossed per half line.
     - ``both_directions``: trace backwards from each seed too and join the halves.
+    - ``separation``: keep the lines of each family at least this far apart
+      (:func:`space_lines`: longest first, others cut to their longest free piece); None keeps
+      every line whole.
     """
     V, F = fl.as_mesh(V, F)
     dirs, mag, kind = _unit_directions(V, F, field, kind)
@@ -204,8 +207,125 @@ def trace_streamlines(V, F, field, kind=None, count=500, seeds=None, rng=0, fami
                 out_seeds.append(seed_f[s])
                 out_families.append(families[fi])
                 out_closed.append(is_closed)
-    return Streamlines(lines, np.array(out_seeds, dtype=np.int64),
-                       np.array(out_families, dtype=np.int64), np.array(out_closed, dtype=bool))
+    out_seeds = np.array(out_seeds, dtype=np.int64)
+    out_families = np.array(out_families, dtype=np.int64)
+    out_closed = np.array(out_closed, dtype=bool)
+    if separation is not None:
+        # Spaced family by family: the lines of a cross field's two families cross each other.
+        spaced, keep = [], []
+        for family in families:
+            members = np.nonzero(out_families == family)[0]
+            kept, sources = space_lines([lines[i] for i in members], separation)
+            spaced += kept
+            keep.append(members[sources])
+        keep = np.concatenate(keep) if keep else np.zeros(0, dtype=np.int64)
+        lines = spaced
+        out_seeds, out_families = out_seeds[keep], out_families[keep]
+        # A cut loop is no longer closed.
+        out_closed = out_closed[keep] & np.array(
+            [len(a) > 2 and np.allclose(a[0], a[-1]) for a in lines], dtype=bool)
+    return Streamlines(lines, out_seeds, out_families, out_closed)
+
+
+def _densify(line, step):
+    """The polyline with points inserted so that no segment is longer than ``step``."""
+    seg = np.diff(line, axis=0)
+    pieces = np.maximum(np.ceil(np.linalg.norm(seg, axis=1) / step).astype(np.int64), 1)
+    first = np.cumsum(pieces) - pieces
+    start = np.repeat(np.arange(len(seg)), pieces)
+    t = (np.arange(int(pieces.sum())) - first[start]) / pieces[start]
+    return np.vstack([line[start] + t[:, None] * seg[start], line[-1:]])
+
+
+class _PointGrid:
+    """Points hashed by cells of size ``h``; answers "which query points have a stored point
+    closer than h" with sorted cell keys (numpy only)."""
+
+    _OFFSETS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1)
+                         for k in (-1, 0, 1)], dtype=np.int64)
+
+    def __init__(self, h, origin):
+        self.h = h
+        self.origin = origin
+        self.keys = np.zeros(0, dtype=np.int64)
+        self.points = np.zeros((0, 3))
+
+    def _cells(self, pts):
+        return np.floor((pts - self.origin) / self.h).astype(np.int64) + 1
+
+    @staticmethod
+    def _key(cells):
+        # 21 bits per axis: cells are within [0, 2^21) of the origin (checked by the caller).
+        return (cells[..., 0] << 42) | (cells[..., 1] << 21) | cells[..., 2]
+
+    def near(self, pts):
+        """Boolean per query point: a stored point lies closer than ``h``."""
+        out = np.zeros(len(pts), dtype=bool)
+        if len(self.keys) == 0 or len(pts) == 0:
+            return out
+        keys = self._key(self._cells(pts)[:, None, :] + self._OFFSETS[None, :, :]).reshape(-1)
+        lo = np.searchsorted(self.keys, keys, side="left")
+        hi = np.searchsorted(self.keys, keys, side="right")
+        counts = hi - lo
+        total = int(counts.sum())
+        if total == 0:
+            return out
+        query = np.repeat(np.arange(len(keys)) // 27, counts)
+        first = np.cumsum(counts) - counts
+        stored = np.repeat(lo - first, counts) + np.arange(total)
+        d2 = np.sum((pts[query] - self.points[stored]) ** 2, axis=1)
+        out[query[d2 < self.h * self.h]] = True
+        return out
+
+    def add(self, pts):
+        keys = self._key(self._cells(pts))
+        self.keys = np.concatenate([self.keys, keys])
+        self.points = np.vstack([self.points, pts])
+        order = np.argsort(self.keys, kind="stable")
+        self.keys, self.points = self.keys[order], self.points[order]
+
+
+def space_lines(lines, separation, min_length=None):
+    """Evenly spaced lines: keeps the longest lines first and cuts every other line to its
+    longest piece whose points stay at least ``separation`` away from the lines kept before it
+    (Jobard and Lefer's criterion, applied after tracing). Pieces shorter than ``min_length``
+    (default ``2 separation``) are dropped. Returns ``(kept lines, indices of their sources)``;
+    the kept lines have points at most ``separation / 2`` apart."""
+    sep = float(separation)
+    if sep <= 0:
+        raise ValueError("separation must be > 0")
+    min_length = 2.0 * sep if min_length is None else float(min_length)
+    lines = [np.asarray(a, dtype=np.float64) for a in lines]
+    if not lines:
+        return [], np.zeros(0, dtype=np.int64)
+    everything = np.vstack(lines)
+    origin = everything.min(axis=0) - sep
+    if np.any((everything.max(axis=0) - origin) / sep >= 2 ** 21 - 2):
+        raise ValueError("separation is too small for the lines' extent")
+    lengths = np.array([float(np.sum(np.linalg.norm(np.diff(a, axis=0), axis=1)))
+                        for a in lines])
+    grid = _PointGrid(sep, origin)
+    kept, sources = [], []
+    for index in np.argsort(-lengths, kind="stable"):
+        if lengths[index] < min_length:
+            break
+        pts = _densify(lines[index], 0.5 * sep)
+        blocked = grid.near(pts)
+        # The longest run of free points.
+        free = np.concatenate([[False], ~blocked, [False]])
+        runs = np.flatnonzero(free[1:] != free[:-1]).reshape(-1, 2)
+        if len(runs) == 0:
+            continue
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))])
+        run_lengths = arc[runs[:, 1] - 1] - arc[runs[:, 0]]
+        best = int(np.argmax(run_lengths))
+        if run_lengths[best] < min_length:
+            continue
+        piece = pts[runs[best, 0]:runs[best, 1]]
+        kept.append(piece)
+        sources.append(int(index))
+        grid.add(piece)
+    return kept, np.array(sources, dtype=np.int64)
 
 
 def hatching(V, F, field, kind=None, count=2000, stroke_length=None, rng=0, **options):
