@@ -41,7 +41,10 @@ def torus(major=48, minor=24, R=1.0, r=0.4):
     V = np.stack([(R + r * np.cos(vv)) * np.cos(uu), (R + r * np.cos(vv)) * np.sin(uu),
                   r * np.sin(vv)], axis=-1).reshape(-1, 3)
     i, j = np.meshgrid(np.arange(major), np.arange(minor), indexing="ij")
-    idx = lambda a, b: (a % major) * minor + (b % minor)
+
+    def idx(a, b):
+        return (a % major) * minor + (b % minor)
+
     a, b, c, d = idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)
     F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
                         np.stack([a, c, d], -1).reshape(-1, 3)])
@@ -56,7 +59,10 @@ def cylinder(around=32, along=16, radius=1.0, height=2.0):
     uu, zz = np.meshgrid(u, z, indexing="ij")
     V = np.stack([radius * np.cos(uu), radius * np.sin(uu), zz], axis=-1).reshape(-1, 3)
     i, j = np.meshgrid(np.arange(around), np.arange(along), indexing="ij")
-    idx = lambda a, b: (a % around) * (along + 1) + b
+
+    def idx(a, b):
+        return (a % around) * (along + 1) + b
+
     a, b, c, d = idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)
     F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
                         np.stack([a, c, d], -1).reshape(-1, 3)])

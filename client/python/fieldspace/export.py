@@ -89,8 +89,8 @@ def _xml_array(out, name, a, vtk_type, binary, indent):
     attrs = 'type="%s" Name=%s' % (vtk_type, quoteattr(name))
     if a.ndim > 1:
         attrs += ' NumberOfComponents="%d"' % a.shape[1]
-    out.append('%s<DataArray %s format="%s">\n' % (indent, attrs,
-                                                    "binary" if binary else "ascii"))
+    encoding = "binary" if binary else "ascii"
+    out.append('%s<DataArray %s format="%s">\n' % (indent, attrs, encoding))
     if binary:
         little = a.astype(a.dtype.newbyteorder("<"), copy=False)
         data = little.tobytes()
@@ -132,8 +132,8 @@ def write_vtu(path, V, F, field=None, kind=None, name="field", binary=True, cell
                "        ")
     out.append('      </Cells>\n')
     attrs = _active_attributes(arrays)
-    out.append('      <CellData%s>\n' % "".join(' %s=%s' % (k, quoteattr(v))
-                                             for k, v in attrs.items()))
+    active = "".join(" %s=%s" % (k, quoteattr(v)) for k, v in attrs.items())
+    out.append("      <CellData%s>\n" % active)
     for key, a in arrays.items():
         _xml_array(out, key, a, "Float64", binary, "        ")
     out.append('      </CellData>\n    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n')
@@ -372,8 +372,11 @@ def _check_lines(lines):
 
 def polyline_lengths(lines):
     """Length of each polyline ``(len(lines),)``."""
-    return np.array([float(np.sum(np.linalg.norm(np.diff(np.asarray(a, dtype=np.float64),
-                                                          axis=0), axis=1))) for a in lines])
+    out = []
+    for a in lines:
+        a = np.asarray(a, dtype=np.float64)
+        out.append(float(np.sum(np.linalg.norm(np.diff(a, axis=0), axis=1))))
+    return np.array(out)
 
 
 def write_polylines_vtk(path, lines, line_data=None):

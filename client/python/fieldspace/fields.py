@@ -338,8 +338,8 @@ def parse_field_text(text):
         if width is None:
             width = len(row)
         elif len(row) != width:
-            raise ValueError("line %d: %d values; earlier lines have %d" % (number, len(row),
-                                                                              width))
+            raise ValueError("line %d: %d values; earlier lines have %d"
+                             % (number, len(row), width))
         rows.append(row)
     if not rows:
         raise ValueError("the field file has no values")
