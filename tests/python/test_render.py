@@ -201,6 +201,60 @@ class RenderTest(unittest.TestCase):
         columns = dark.sum(axis=0)
         self.assertGreater(int(columns.max()), 100)
 
+    def test_lic_streaks_follow_the_field(self):
+        h, w = 60, 80
+        mask = np.ones((h, w), dtype=bool)
+        horizontal = np.zeros((1, h, w, 2))
+        horizontal[..., 0] = 1.0
+        texture = rd.lic(horizontal, mask, length=10, rng=3)
+        inner = texture[5:-5, 12:-12]
+        along = np.abs(np.diff(inner, axis=1)).mean()
+        across = np.abs(np.diff(inner, axis=0)).mean()
+        self.assertLess(along, 0.3 * across)
+        # Two crossing families: which one a pixel lists first does not matter.
+        rng = np.random.default_rng(4)
+        cross = np.zeros((2, h, w, 2))
+        cross[0, ..., 0] = 1.0
+        cross[1, ..., 1] = 1.0
+        swap = rng.random((h, w)) < 0.5
+        swapped = cross.copy()
+        swapped[0][swap], swapped[1][swap] = cross[1][swap], cross[0][swap]
+        noise = rng.random((h, w))
+        np.testing.assert_allclose(rd.lic(cross, mask, 10, noise=noise),
+                                   rd.lic(swapped, mask, 10, noise=noise), atol=1e-12)
+
+    def test_lic_style(self):
+        V, F = shapes.cylinder(64, 24, height=2.0)
+        size = (240, 240)
+        camera = {"direction": (1.0, 0.0, 0.0)}
+        n = fl.face_normals(V, F)
+        ez = np.tile([0.0, 0.0, 1.0], (len(F), 1))
+        et = np.cross(n, ez)
+        for field, streaks in ((ez, "down"), (et, "right"), (ez + et, "diagonal")):
+            result = rd.render(V, F, field, style="lic", size=size, camera=camera,
+                               lic_length=12)
+            image = result["image"].astype(float)
+            mask = foreground(result["image"])
+            rows = np.nonzero(mask.any(axis=1))[0]
+            cols = np.nonzero(mask.any(axis=0))[0]
+            # The middle of the cylinder's visible side, away from its outline.
+            r0, r1 = rows[0] + 30, rows[-1] - 30
+            c0, c1 = (cols[0] + cols[-1]) // 2 - 30, (cols[0] + cols[-1]) // 2 + 30
+            lum = image[r0:r1, c0:c1].mean(axis=2)
+            down = np.abs(np.diff(lum, axis=0)).mean()
+            right = np.abs(np.diff(lum, axis=1)).mean()
+            if streaks == "down":
+                self.assertLess(down, 0.5 * right)
+            elif streaks == "right":
+                self.assertLess(right, 0.5 * down)
+            else:
+                # Seen from +x with z up, e_theta points left on the screen: ez + et runs up
+                # and left, i.e. along the image's main diagonal (row and column together).
+                main = np.abs(lum[1:, 1:] - lum[:-1, :-1]).mean()
+                anti = np.abs(lum[1:, :-1] - lum[:-1, 1:]).mean()
+                self.assertLess(main, 0.6 * anti)
+        self.assertEqual(result["lines"], 0)
+
     def test_automatic_camera_frames_the_mesh(self):
         V, F = shapes.torus(48, 24)
         V = V * 7.0 + [100.0, -50.0, 3.0]

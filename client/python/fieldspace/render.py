@@ -2,9 +2,9 @@
 
 :func:`render` draws the surface coloured by the field's magnitude (viridis, optional scalar
 bar) with glyphs (vectors as arrows, n-fields as n-crosses, tensors as principal crosses: the
-maximum direction red, the minimum blue, arm lengths proportional to the principal values) or
-streamlines / hatching strokes (fieldspace.streamlines), from an automatic camera that frames the
-mesh or a given one. VTK is the field's standard library (ParaView, 3D Slicer, PyVista build on
+maximum direction red, the minimum blue, arm lengths proportional to the principal values; or
+ellipses), streamlines / hatching strokes (fieldspace.streamlines) or a line integral
+convolution texture, from an automatic camera that frames the mesh or a given one. VTK is the field's standard library (ParaView, 3D Slicer, PyVista build on
 it) and Debian ships it (python3-vtk9); it renders with Mesa's software OpenGL into an off-screen
 buffer, through a private Xvfb when there is no DISPLAY (fieldspace.display).
 """
@@ -31,7 +31,7 @@ _VIRIDIS = np.array([
     [0.993248, 0.906157, 0.143936]])
 _GRAY = np.array([[0.15, 0.15, 0.15], [0.95, 0.95, 0.95]])
 
-STYLES = ("glyphs", "streamlines", "surface")
+STYLES = ("glyphs", "streamlines", "lic", "surface")
 
 
 def colormap(name_or_table="viridis", samples=256):
@@ -267,11 +267,205 @@ def _apply_camera(renderer, camera, bounds, fit_points=None, aspect=1.0):
     return state
 
 
+def _grab(window, vtkWindowToImageFilter, vtk_to_numpy):
+    """Renders ``window`` and returns its pixels ``(h, w, 3)`` uint8, top row first."""
+    window.Render()
+    grab = vtkWindowToImageFilter()
+    grab.SetInput(window)
+    grab.SetInputBufferTypeToRGB()
+    grab.ReadFrontBufferOff()
+    grab.Update()
+    image = grab.GetOutput()
+    w, h, _ = image.GetDimensions()
+    pixels = vtk_to_numpy(image.GetPointData().GetScalars()).reshape(h, w, -1)[::-1]
+    return np.ascontiguousarray(pixels[:, :, :3])
+
+
+def _write_png(path, pixels, numpy_to_vtk):
+    from vtkmodules.vtkCommonDataModel import vtkImageData
+    from vtkmodules.vtkIOImage import vtkPNGWriter
+    h, w, _ = pixels.shape
+    image = vtkImageData()
+    image.SetDimensions(w, h, 1)
+    data = numpy_to_vtk(np.ascontiguousarray(pixels[::-1].reshape(-1, 3)), deep=True)
+    image.GetPointData().SetScalars(data)
+    writer = vtkPNGWriter()
+    writer.SetFileName(str(path))
+    writer.SetInputData(image)
+    writer.Write()
+    if writer.GetErrorCode():
+        raise OSError("could not write %s" % path)
+
+
+def line_families(V, F, a, kind):
+    """Unit line directions per face ``(F, m, 3)``: one per family of lines (vector: the
+    vector; n-field: n / 2 directions for even n, n for odd n; tensor: max and min principal
+    directions)."""
+    if kind == fl.VECTOR:
+        d = a[:, None, :]
+    elif kind == fl.NFIELD:
+        n = a.shape[1]
+        d = a[:, :n // 2] if n % 2 == 0 else a
+    else:
+        d = fl.principal(V, F, a)[1]
+    length = np.linalg.norm(d, axis=2)
+    return d / np.where(length > 0, length, 1.0)[:, :, None]
+
+
+def lic(directions, mask, length=20, rng=0, noise=None):
+    """Line integral convolution in image space.
+
+    ``directions``: ``(m, h, w, 2)`` unit screen directions of m line families (sign
+    irrelevant), ``mask``: ``(h, w)`` pixels that carry a direction. Every pixel of the mask
+    averages white noise along the lines through it, ``length`` pixels each way, for each family
+    it starts on; a step continues along whichever family is closest to the direction it came
+    with (so crossing families need no consistent labelling). Returns ``(h, w)`` in [0, 1].
+    """
+    m, h, w, _ = directions.shape
+    rng = np.random.default_rng(rng)
+    if noise is None:
+        noise = rng.random((h, w))
+    ys, xs = np.nonzero(mask)
+    total = np.zeros(len(ys))
+    count = np.zeros(len(ys))
+    for family in range(m):
+        for sign in (1.0, -1.0):
+            px, py = xs + 0.5, ys + 0.5
+            d = directions[family, ys, xs] * sign
+            alive = np.ones(len(ys), dtype=bool)
+            if sign > 0:
+                total += noise[ys, xs]
+                count += 1.0
+            for _ in range(length):
+                px = px + d[:, 0]
+                py = py - d[:, 1]  # screen y goes up, rows go down
+                ix, iy = np.floor(px).astype(np.int64), np.floor(py).astype(np.int64)
+                inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+                alive &= inside
+                ix, iy = np.clip(ix, 0, w - 1), np.clip(iy, 0, h - 1)
+                alive &= mask[iy, ix]
+                if not alive.any():
+                    break
+                cand = directions[:, iy, ix]  # (m, k, 2)
+                dots = np.einsum("mkc,kc->mk", cand, d)
+                best = np.argmax(np.abs(dots), axis=0)
+                k = np.arange(len(best))
+                new = cand[best, k] * np.sign(dots[best, k])[:, None]
+                d = np.where(alive[:, None], new, d)
+                total += np.where(alive, noise[iy, ix], 0.0)
+                count += alive
+    out = np.zeros((h, w))
+    out[ys, xs] = total / np.maximum(count, 1.0)
+    return out
+
+
+def _screen_directions(renderer, V, F, dirs, width, height):
+    """Per face and family, the unit screen direction (x right, y up) of the 3D direction at
+    the face's centre, by the camera's projection."""
+    cam = renderer.GetActiveCamera()
+    matrix = cam.GetCompositeProjectionTransformMatrix(width / height, -1.0, 1.0)
+    P = np.array([[matrix.GetElement(i, j) for j in range(4)] for i in range(4)])
+    centers = V[F].mean(axis=1)
+    eps = 1e-3 * float(np.linalg.norm(np.ptp(V, axis=0)))
+
+    def project(points):
+        h = np.hstack([points, np.ones((len(points), 1))]) @ P.T
+        return h[:, :2] / h[:, 3:4] * np.array([width / 2.0, height / 2.0])
+
+    base = project(centers)
+    out = np.zeros(dirs.shape[:2] + (2,))
+    for j in range(dirs.shape[1]):
+        s = project(centers + eps * dirs[:, j]) - base
+        norm = np.linalg.norm(s, axis=1)
+        out[:, j] = s / np.where(norm > 0, norm, 1.0)[:, None]
+    return out
+
+
+def _lic_pass(window, renderer, legend, actor, mapper, V, F, a, kind, pixels, width, height,
+              length, rng, numpy_to_vtk, vtkWindowToImageFilter, vtk_to_numpy):
+    """Renders each line family's screen directions into the picture's pixels (doubled angle
+    in red and green, blue marks the surface) and modulates ``pixels`` by their LIC."""
+    dirs = line_families(V, F, a, kind)
+    screen = _screen_directions(renderer, V, F, dirs, width, height)
+    # The mapper draws a copy of the surface (with vertex normals) when lighting is on.
+    cd = mapper.GetInput().GetCellData()
+    saved_scalars = cd.GetScalars()
+    saved = (mapper.GetScalarVisibility(), mapper.GetColorMode(), actor.GetVisibility())
+    prop = actor.GetProperty()
+    lighting = (prop.GetAmbient(), prop.GetDiffuse(), prop.GetSpecular())
+    others = [x for x in _actors(renderer) if x is not actor]
+    visible = [x.GetVisibility() for x in others]
+    for x in others:
+        x.VisibilityOff()
+    if legend is not None:
+        legend_background = legend.GetBackground()
+        legend.SetBackground(0.0, 0.0, 0.0)
+        legend_actors = legend.GetActors2D()
+        legend_actors.InitTraversal()
+        bars = [legend_actors.GetNextActor2D() for _ in range(legend_actors.GetNumberOfItems())]
+        for bar in bars:
+            bar.VisibilityOff()
+    background = renderer.GetBackground()
+    renderer.SetBackground(0.0, 0.0, 0.0)
+    prop.SetAmbient(1.0)
+    prop.SetDiffuse(0.0)
+    prop.SetSpecular(0.0)
+    mapper.ScalarVisibilityOn()
+    mapper.SetColorModeToDirectScalars()
+    mapper.SetScalarModeToUseCellData()
+    images = []
+    try:
+        for j in range(dirs.shape[1]):
+            angle = 2.0 * np.arctan2(screen[:, j, 1], screen[:, j, 0])
+            rgb = np.stack([0.5 + 0.5 * np.cos(angle), 0.5 + 0.5 * np.sin(angle),
+                            np.ones(len(angle))], axis=1)
+            codes = numpy_to_vtk(np.round(rgb * 254 + 1).astype(np.uint8), deep=True)
+            codes.SetName("lic_directions")
+            cd.SetScalars(codes)
+            mapper.GetInput().Modified()
+            images.append(_grab(window, vtkWindowToImageFilter, vtk_to_numpy).astype(float))
+    finally:
+        renderer.SetBackground(*background)
+        cd.SetScalars(saved_scalars)
+        mapper.SetScalarVisibility(saved[0])
+        mapper.SetColorMode(saved[1])
+        prop.SetAmbient(lighting[0])
+        prop.SetDiffuse(lighting[1])
+        prop.SetSpecular(lighting[2])
+        for x, v in zip(others, visible):
+            x.SetVisibility(v)
+        if legend is not None:
+            legend.SetBackground(*legend_background)
+            for bar in bars:
+                bar.VisibilityOn()
+    mask = np.all([im[:, :, 2] > 127 for im in images], axis=0)
+    doubled = np.stack([np.arctan2((im[:, :, 1] - 1) / 254 - 0.5, (im[:, :, 0] - 1) / 254 - 0.5)
+                        for im in images])
+    half = 0.5 * doubled
+    directions = np.stack([np.cos(half), np.sin(half)], axis=-1)
+    texture = lic(directions, mask, length=length, rng=rng)
+    values = texture[mask]
+    if values.size:
+        spread = values.std() if values.std() > 0 else 1.0
+        texture = np.clip(0.5 + 0.18 * (texture - values.mean()) / spread, 0.0, 1.0)
+    shade = np.where(mask, 0.35 + 0.65 * texture, 1.0)
+    return np.clip(pixels * shade[:, :, None], 0, 255).astype(np.uint8)
+
+
+def _actors(renderer):
+    actors = renderer.GetActors()
+    actors.InitTraversal()
+    out = []
+    for _ in range(actors.GetNumberOfItems()):
+        out.append(actors.GetNextActor())
+    return out
+
+
 def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800, 600),
            camera=None, colormap_name="viridis", scalars=None, scalar_range=None,
            scalar_bar=False, title=None, max_glyphs=3000, glyph_scale=1.0, normalize=True,
            streamline_count=None, streamline_length=None, streamline_separation=None,
-           lighting=True,
+           lic_length=None, lighting=True,
            background=(1.0, 1.0, 1.0), surface_color=(0.85, 0.85, 0.85), line_width=1.5,
            line_color=(0.08, 0.08, 0.08), colorize=True, tensor_glyph="cross", rng=0,
            use_display=True):
@@ -285,8 +479,9 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
       ``|k2| d2``, red where ``k1 >= 0``, blue elsewhere), ``"streamlines"``
       (``streamline_count`` seeds, half length ``streamline_length``; n-fields and tensors draw
       every line family; default about one seed per 2500 pixels, drawn in ``line_color``;
-      ``streamline_separation``: evenly spaced lines, see streamlines.space_lines) or
-      ``"surface"`` (colour only).
+      ``streamline_separation``: evenly spaced lines, see streamlines.space_lines), ``"lic"``
+      (line integral convolution in image space, :func:`lic`, ``lic_length`` pixels each way)
+      or ``"surface"`` (colour only).
     - the surface is coloured by ``scalars`` (``(F,)``, default the field's magnitude:
       fieldspace.fields.magnitude) through the colormap over ``scalar_range`` (default the
       values' min and max); ``scalar_bar`` adds a legend titled ``title``. ``colorize=False``
@@ -486,24 +681,14 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
         if legend is not None:
             window.AddRenderer(legend)
         try:
-            window.Render()
-            grab = vtkWindowToImageFilter()
-            grab.SetInput(window)
-            grab.SetInputBufferTypeToRGB()
-            grab.ReadFrontBufferOff()
-            grab.Update()
-            image = grab.GetOutput()
-            w, h, _ = image.GetDimensions()
-            pixels = vtk_to_numpy(image.GetPointData().GetScalars()).reshape(h, w, -1)[::-1]
-            pixels = np.ascontiguousarray(pixels[:, :, :3])
+            pixels = _grab(window, vtkWindowToImageFilter, vtk_to_numpy)
+            if style == "lic" and a is not None:
+                length = lic_length or max(8, min(width, height) // 30)
+                pixels = _lic_pass(window, renderer, legend, actor, mapper, V, F, a, kind,
+                                   pixels, width, height, length, rng, numpy_to_vtk,
+                                   vtkWindowToImageFilter, vtk_to_numpy)
             if out_png is not None:
-                from vtkmodules.vtkIOImage import vtkPNGWriter
-                writer = vtkPNGWriter()
-                writer.SetFileName(str(out_png))
-                writer.SetInputData(image)
-                writer.Write()
-                if writer.GetErrorCode():
-                    raise OSError("could not write %s" % out_png)
+                _write_png(out_png, pixels, numpy_to_vtk)
         finally:
             window.Finalize()
     return {"image": pixels, "camera": state, "scalar_range": scalar_range,
@@ -528,6 +713,8 @@ def main(argv=None):
     mesh_io.add_field_arguments(parser)
     parser.add_argument("--out", required=True, help="the PNG to write")
     parser.add_argument("--style", choices=STYLES, default="glyphs")
+    parser.add_argument("--separation", type=float, default=None,
+                        help="streamlines: keep lines of a family this far apart")
     parser.add_argument("--size", type=_size, default=(800, 600), help="WIDTHxHEIGHT")
     parser.add_argument("--camera", type=json.loads, default=None,
                         help='JSON, e.g. \'{"direction": [0, -1, 0.3]}\' or position, '
@@ -543,7 +730,8 @@ def main(argv=None):
                                                         args.n)
         result = render(V, F, field, kind, out_png=args.out, style=args.style, size=args.size,
                         camera=args.camera, scalar_bar=args.scalar_bar, max_glyphs=args.glyphs,
-                        streamline_count=args.lines, streamline_length=args.line_length)
+                        streamline_count=args.lines, streamline_length=args.line_length,
+                        streamline_separation=args.separation)
     except (OSError, ValueError, RuntimeError) as e:
         print("render failed: %s" % e, file=sys.stderr)
         return 1
