@@ -4,9 +4,11 @@
 bar) with glyphs (vectors as arrows, n-fields as n-crosses, tensors as principal crosses: the
 maximum direction red, the minimum blue, arm lengths proportional to the principal values; or
 ellipses), streamlines / hatching strokes (fieldspace.streamlines) or a line integral
-convolution texture, from an automatic camera that frames the mesh or a given one. VTK is the field's standard library (ParaView, 3D Slicer, PyVista build on
-it) and Debian ships it (python3-vtk9); it renders with Mesa's software OpenGL into an off-screen
-buffer, through a private Xvfb when there is no DISPLAY (fieldspace.display).
+convolution texture, from an automatic camera that frames the mesh or a given one.
+
+VTK is the field's standard library (ParaView, 3D Slicer, PyVista build on it) and Debian ships
+it (python3-vtk9); it renders with Mesa's software OpenGL into an off-screen buffer, through a
+private Xvfb when there is no DISPLAY (fieldspace.display).
 """
 
 import argparse
