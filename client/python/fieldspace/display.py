@@ -11,6 +11,7 @@ exit (or on :func:`stop_private_display`).
 import atexit
 import contextlib
 import os
+import re
 import secrets
 import select
 import shutil
@@ -107,16 +108,28 @@ def stop_private_display():
 atexit.register(stop_private_display)
 
 
+def _usable(display):
+    """False for an unset DISPLAY and for a local one (":N") whose socket does not exist: VTK
+    would abort the process on it. Remote displays are trusted."""
+    if not display:
+        return False
+    match = re.fullmatch(r"(?:unix)?:(\d+)(?:\.\d+)?", display)
+    if match is None:
+        return True
+    return os.path.exists("/tmp/.X11-unix/X%s" % match.group(1))
+
+
 @contextlib.contextmanager
 def x_display(width=1920, height=1080, use_existing=True):
     """Context manager: ``DISPLAY`` (and ``XAUTHORITY``) point at a working X server inside.
 
-    With ``use_existing`` and ``DISPLAY`` set, that display is used as is. Otherwise the private
-    Xvfb (screen at least ``width`` x ``height``) is started or reused; the environment is
-    restored on exit, the server keeps running for the next call until the process exits.
+    With ``use_existing`` and ``DISPLAY`` set (to a local display whose socket exists, or a
+    remote one), that display is used as is. Otherwise the private Xvfb (screen at least
+    ``width`` x ``height``) is started or reused; the environment is restored on exit, the
+    server keeps running for the next call until the process exits.
     """
     global _server
-    if use_existing and os.environ.get("DISPLAY"):
+    if use_existing and _usable(os.environ.get("DISPLAY")):
         yield os.environ["DISPLAY"]
         return
     with _lock:
