@@ -299,7 +299,7 @@ def _write_png(path, pixels, numpy_to_vtk):
         raise OSError("could not write %s" % path)
 
 
-def line_families(V, F, a, kind):
+def family_directions(V, F, a, kind):
     """Unit line directions per face ``(F, m, 3)``: one per family of lines (vector: the
     vector; n-field: n / 2 directions for even n, n for odd n; tensor: max and min principal
     directions)."""
@@ -387,7 +387,7 @@ def _lic_pass(window, renderer, legend, actor, mapper, V, F, a, kind, pixels, wi
               length, rng, numpy_to_vtk, vtkWindowToImageFilter, vtk_to_numpy):
     """Renders each line family's screen directions into the picture's pixels (doubled angle
     in red and green, blue marks the surface) and modulates ``pixels`` by their LIC."""
-    dirs = line_families(V, F, a, kind)
+    dirs = family_directions(V, F, a, kind)
     screen = _screen_directions(renderer, V, F, dirs, width, height)
     # The mapper draws a copy of the surface (with vertex normals) when lighting is on.
     cd = mapper.GetInput().GetCellData()
