@@ -6,8 +6,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cerrno>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -81,6 +84,13 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
                                       vertex indices (in turns) of the lifted field
   design BASIS_ID --script EDITS.jsonl [--mu-s X] [--mu-b X] [--mu-c X] [--watch F1,F2,...]
         [--no-coefficients]           stream edits; one JSON line per update
+
+  export MESH FIELD_FILE --out FILE.vtu|.vtk|.ply|.rawfield
+                                      the field on its mesh for ParaView, meshio, Directional;
+                                      MESH: a mesh id of the server or a mesh file
+  render MESH [FIELD_FILE] --out FILE.png [--style glyphs|streamlines|lic|surface]
+                                      a picture, off screen (VTK); both run the Python package's
+                                      `python3 -m fieldspace.export|render` (--help: all options)
 
 FIELD_FILE: text (one face per line; '# encoding: dof' or ambient, the default) or, for output,
 .ply (the mesh with the field as face properties). Formats: README.md.
@@ -351,6 +361,11 @@ class Cli {
   int Fail(const absl::Status& status) { return Fail(status, command_); }
   void Emit(const JsonWriter& j) { out_ << j.str() << "\n" << std::flush; }
 
+  // `export` and `render`: replaced by `python3 -m fieldspace.<tool> ARGS --server ADDRESS
+  // [--token FILE]` with the Python package on PYTHONPATH (the build tree's or the installed
+  // one, found next to this program). Returns only when that cannot start.
+  int RunPythonTool(const std::string& tool, absl::Span<const std::string> args);
+
   int Health(const CommandLine& a);
   int Upload(const CommandLine& a);
   int Meshes(const CommandLine& a);
@@ -387,7 +402,8 @@ class Cli {
 
   std::ostream& out_;
   std::ostream& err_;
-  std::string command_;  // the command being run, for messages
+  std::string command_;     // the command being run, for messages
+  std::string token_file_;  // --token FILE, passed on to the Python tools
   FieldClientOptions options_;
   std::unique_ptr<FieldClient> client_;
 };
@@ -413,7 +429,8 @@ std::vector<std::string> Cli::ParseGlobal(const std::vector<std::string>& args) 
       options_.timeout = std::chrono::milliseconds(static_cast<int64_t>(*seconds * 1000));
     }
   }
-  if (const std::string token_file = GetString(global, "token"); !token_file.empty()) {
+  token_file_ = GetString(global, "token");
+  if (const std::string token_file = token_file_; !token_file.empty()) {
     absl::StatusOr<std::string> token = ReadFile(token_file);
     if (!token.ok()) throw UsageError("cannot read --token file " + token_file);
     options_.token = std::string(absl::StripAsciiWhitespace(*token));
@@ -464,6 +481,10 @@ int Cli::Run(const std::vector<std::string>& args) {
          {Flags({"mu-s", "mu-b", "mu-c", "face-weights", "out", "encoding"}, {"raw-weights"}), 2,
           &Cli::Smooth}},
     };
+    if (command == "export" || command == "render") {
+      command_ = command;
+      return RunPythonTool(command, absl::MakeConstSpan(command_line).subspan(1));
+    }
     auto it = commands.find(command);
     if (it == commands.end()) throw UsageError("unknown command '" + command + "'");
     command_ = command;
@@ -499,6 +520,43 @@ int Cli::Run(const std::vector<std::string>& args) {
     err_ << kUsage;
     return *e.what() == '\0' ? 0 : 2;
   }
+}
+
+int Cli::RunPythonTool(const std::string& tool, absl::Span<const std::string> args) {
+  // The package next to this program: build/bin/../python in the build tree,
+  // PREFIX/bin/../lib/python3/dist-packages when installed.
+  std::error_code ec;
+  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
+  std::string package_dir;
+  for (const char* relative : {"../python", "../lib/python3/dist-packages"}) {
+    const std::filesystem::path dir = self.parent_path() / relative;
+    if (!ec && std::filesystem::exists(dir / "fieldspace" / "__init__.py")) {
+      package_dir = std::filesystem::weakly_canonical(dir).string();
+      break;
+    }
+  }
+  if (package_dir.empty()) {
+    return Fail(absl::FailedPreconditionError(
+        "the Python package fieldspace is not next to this program (build it, or `make install`)"));
+  }
+  const char* old_path = std::getenv("PYTHONPATH");
+  const std::string python_path = old_path != nullptr && *old_path != '\0'
+                                      ? absl::StrCat(package_dir, ":", old_path)
+                                      : package_dir;
+  setenv("PYTHONPATH", python_path.c_str(), 1);
+  const char* python_env = std::getenv("FIELDSPACE_PYTHON");
+  const std::string python = python_env != nullptr ? python_env : "/usr/bin/python3";
+  std::vector<std::string> argv = {python, "-m", "fieldspace." + tool};
+  argv.insert(argv.end(), args.begin(), args.end());
+  argv.insert(argv.end(), {"--server", options_.address});
+  if (!token_file_.empty()) argv.insert(argv.end(), {"--token", token_file_});
+  std::vector<char*> raw;
+  for (std::string& a : argv) raw.push_back(a.data());
+  raw.push_back(nullptr);
+  out_ << std::flush;
+  err_ << std::flush;
+  execv(python.c_str(), raw.data());
+  return Fail(absl::UnavailableError(absl::StrCat("cannot run ", python, ": ", strerror(errno))));
 }
 
 int Cli::Health(const CommandLine& a) {

@@ -123,6 +123,38 @@ def main():
                              expect=1)
             check("out of range" in err, "--mode out of range: %r" % err)
 
+            # export / render: the Python package's tools, run by the CLI with the server's
+            # geometry for a mesh id. The .vtu is read back by VTK's own reader.
+            lifted = os.path.join(work, "lifted.txt")
+            cli("lift", small["id"], mode2, "--out", lifted)
+            vtu = os.path.join(work, "field.vtu")
+            rc, _, err = cli("export", mesh["id"], lifted, "--out", vtu, expect=None)
+            try:
+                import vtk  # noqa: F401
+                have_vtk = True
+            except ImportError:
+                have_vtk = False
+            if have_vtk:
+                check(rc == 0, "fieldspace export: %r" % err)
+                from vtkmodules.util.numpy_support import vtk_to_numpy
+                reader = vtk.vtkXMLUnstructuredGridReader()
+                reader.SetFileName(vtu)
+                reader.Update()
+                grid = reader.GetOutput()
+                check(grid.GetNumberOfCells() == mesh["num_faces"], "vtu cells")
+                vectors = vtk_to_numpy(grid.GetCellData().GetArray("field"))
+                rows = [[float(x) for x in line.split()] for line in open(lifted)
+                        if line.strip() and not line.startswith("#")]
+                worst = max(abs(a - b) for r, v in zip(rows, vectors) for a, b in zip(r, v))
+                check(worst < 1e-5, "vtu values differ from the lifted field by %g" % worst)
+                png = os.path.join(work, "field.png")
+                rc, out, err = cli("render", mesh["id"], lifted, "--out", png, "--size",
+                                   "160x120", expect=None)
+                check(rc == 0 and os.path.getsize(png) > 1000, "fieldspace render: %r" % err)
+                log("export and render through the CLI: ok")
+            rc, _, err = cli("export", "m-0000000000000000", lifted, "--out", vtu, expect=None)
+            check(rc == 1 and "NOT_FOUND" in err, "export of an unknown mesh: %r" % err)
+
             # Non-TTY progress: plain lines whose overall percentage never goes down.
             rc, out, err = cli("build", mesh["id"], "--field", "vector", "--dim", "300")
             percents = [int(p) for p in re.findall(r"^build b-[0-9a-f]{16}: \w+ (\d+)%", err,

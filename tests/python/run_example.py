@@ -23,7 +23,8 @@ def main():
     work = tempfile.mkdtemp(prefix="fs_example_")
     d = Daemon(args.daemon, os.path.join(work, "store")).start()
     try:
-        p = subprocess.run([sys.executable, args.example, "--server", d.address],
+        # In the work folder: what an example writes stays out of the tree.
+        p = subprocess.run([sys.executable, args.example, "--server", d.address], cwd=work,
                            capture_output=True, text=True, timeout=300)
         log(p.stdout)
         check(p.returncode == 0, "%s exited %d\nstderr:\n%s" % (args.example, p.returncode,

@@ -18,14 +18,14 @@ ambient. Errors are FieldspaceError subclasses named after their gRPC code (NotF
 InvalidArgument, ...), with ``.code`` and the message ``<what> failed: <CODE>: <message>``.
 """
 
-from . import fields
+from . import fields, wire
 from .client import DEFAULT_ADDRESS, Client
 from .design import DesignSession
 from .errors import (Aborted, AlreadyExists, Cancelled, DataLoss, DeadlineExceeded,
                      FailedPrecondition, FieldspaceError, Internal, InvalidArgument, NotFound,
                      OutOfRange, PermissionDenied, ResourceExhausted, Unauthenticated,
                      Unavailable, Unimplemented, Unknown)
-from .fields import FieldType
+from .wire import FieldType
 from .types import (BasisInfo, BuildProgress, Curvature, DesignUpdate, Eigenfields, MeshInfo,
                     Projection, Singularities, Smoothest, Solution, Weights)
 

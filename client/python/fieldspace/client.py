@@ -7,7 +7,8 @@ import threading
 import grpc
 import numpy as np
 
-from . import fields as fld
+from . import fields
+from . import wire as fld
 from ._stubs import health_pb2, pb, pb_grpc
 from .errors import FieldspaceError, InvalidArgument, NotFound, from_rpc_error
 from .progress import BuildBar
@@ -126,7 +127,7 @@ class Client:
             normals = self._geometry_cache.get(mesh_id)
         if normals is None:
             vertices, tris = self.mesh_geometry(mesh_id)
-            normals = fld.face_normals(vertices, tris)
+            normals = fields.face_normals(vertices, tris)
             with self._lock:
                 self._geometry_cache[mesh_id] = normals
         return normals if faces is None else normals[faces]

@@ -6,7 +6,7 @@ import time
 import grpc
 import numpy as np
 
-from . import fields as fld
+from . import wire as fld
 from ._stubs import pb
 from .errors import FailedPrecondition, FieldspaceError, from_rpc_error
 from .types import DesignUpdate, Weights

@@ -7,7 +7,7 @@ from typing import NamedTuple, Optional
 import numpy as np
 
 from ._stubs import pb
-from .fields import FieldType
+from .wire import FieldType
 
 _PHASES = {
     pb.BUILD_PHASE_UNSPECIFIED: "unspecified",
