@@ -26,30 +26,18 @@ import numpy as np
 import fieldspace
 from fieldspace import export, render, streamlines
 
+from design_session import torus  # the same torus as the design session example
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 DEFAULT_MESH = os.path.join(REPO, "..", "shared", "meshes", "fertility_28k.obj")
-
-
-def torus(major=120, minor=40, R=1.0, r=0.45):
-    """(V, F) of a closed torus with 2 * major * minor faces."""
-    u = 2 * np.pi * np.arange(major) / major
-    v = 2 * np.pi * np.arange(minor) / minor
-    U, W = np.meshgrid(u, v, indexing="ij")
-    V = np.stack([(R + r * np.cos(W)) * np.cos(U), (R + r * np.cos(W)) * np.sin(U),
-                  r * np.sin(W)], axis=-1).reshape(-1, 3)
-    i, j = np.meshgrid(np.arange(major), np.arange(minor), indexing="ij")
-    a, b = i * minor + j, ((i + 1) % major) * minor + j
-    c, d = ((i + 1) % major) * minor + (j + 1) % minor, i * minor + (j + 1) % minor
-    F = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
-                        np.stack([a, c, d], -1).reshape(-1, 3)])
-    return V, F.astype(np.int32)
 
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--server", default=fieldspace.DEFAULT_ADDRESS)
-    parser.add_argument("--mesh", default=None, help="a mesh file (default: see above)")
+    parser.add_argument("--mesh", default=None,
+                        help="a mesh file, or 'torus' for one made here (default: see above)")
     parser.add_argument("--dim", type=int, default=400, help="basis dimension")
     parser.add_argument("--out-dir", default="fieldspace-hatching")
     parser.add_argument("--size", default="900x600", help="picture size WxH")
@@ -62,8 +50,9 @@ def main():
     out = lambda name: os.path.join(args.out_dir, name)  # noqa: E731
 
     client = fieldspace.Client(args.server, timeout=600)
-    path = args.mesh or (DEFAULT_MESH if os.path.exists(DEFAULT_MESH) else None)
-    mesh = client.upload(path) if path else client.upload(*torus(), name="torus")
+    path = args.mesh or (DEFAULT_MESH if os.path.exists(DEFAULT_MESH) else "torus")
+    path = None if path == "torus" else path
+    mesh = client.upload(path) if path else client.upload(*torus(120, 40, 1.0, 0.45), name="torus")
     V, F = client.mesh_geometry(mesh.id)
     print("mesh %s: %d faces, genus %d" % (mesh.id, len(F), mesh.genus))
 
