@@ -232,6 +232,14 @@ std::vector<int32_t> ParseFaceList(const std::string& text) {
   return faces;
 }
 
+// The weights given on the command line (mu_s under `mu_s_flag`, --mu-b, --mu-c); the ones left
+// out are left out of the request too, so that the server's defaults for the operation apply.
+void SetWeights(const CommandLine& a, const char* mu_s_flag, v1::Weights* w) {
+  if (a.Has(mu_s_flag)) w->set_mu_s(ParseDouble(a, mu_s_flag, 0));
+  if (a.Has("mu-b")) w->set_mu_b(ParseDouble(a, "mu-b", 0));
+  if (a.Has("mu-c")) w->set_mu_c(ParseDouble(a, "mu-c", 0));
+}
+
 // --mode K (an eigenfield of `eigen --coefficients`), or -1.
 int ParseMode(const CommandLine& a) {
   if (!a.Has("mode")) return -1;
@@ -854,9 +862,7 @@ int Cli::Solve(const CommandLine& a) {
   }
   v1::SolveRequest request;
   request.set_basis_id(a.positional()[0]);
-  request.mutable_weights()->set_mu_s(ParseDouble(a, "mu-s", 1.0));
-  request.mutable_weights()->set_mu_b(ParseDouble(a, "mu-b", 0.0));
-  request.mutable_weights()->set_mu_c(ParseDouble(a, "mu-c", 1.0));
+  SetWeights(a, "mu-s", request.mutable_weights());
   for (v1::Constraint& c : *constraints) *request.add_constraints() = std::move(c);
   absl::StatusOr<v1::SolveResponse> response = client_->Solve(request);
   if (!response.ok()) return Fail(response.status(), "Solve");
@@ -1082,9 +1088,7 @@ int Cli::Smooth(const CommandLine& a) {
   request.set_basis_id(a.positional()[0]);
   request.mutable_field()->set_encoding(field->encoding);
   request.mutable_field()->mutable_values()->Add(field->values.begin(), field->values.end());
-  request.mutable_weights()->set_mu_s(ParseDouble(a, "mu-s", 0.001));
-  request.mutable_weights()->set_mu_b(ParseDouble(a, "mu-b", 0.0));
-  request.mutable_weights()->set_mu_c(ParseDouble(a, "mu-c", 1.0));
+  SetWeights(a, "mu-s", request.mutable_weights());
   request.set_scale_free(!a.Has("raw-weights"));
   if (a.Has("face-weights")) {
     const std::string path = GetString(a, "face-weights");
@@ -1117,9 +1121,7 @@ int Cli::Align(const CommandLine& a) {
   }
   v1::AlignRequest request;
   request.set_basis_id(a.positional()[0]);
-  request.mutable_weights()->set_mu_s(ParseDouble(a, "smooth-mu", 0.001));
-  request.mutable_weights()->set_mu_b(ParseDouble(a, "mu-b", 0.0));
-  request.mutable_weights()->set_mu_c(ParseDouble(a, "mu-c", 1.0));
+  SetWeights(a, "smooth-mu", request.mutable_weights());
   const std::string estimator = GetString(a, "estimator", "jet");
   if (estimator != "jet" && estimator != "normal-differences") {
     throw UsageError("--estimator must be jet or normal-differences");
@@ -1184,9 +1186,7 @@ int Cli::Design(const CommandLine& a) {
   open.set_seq(0);
   v1::OpenDesign* o = open.mutable_open();
   o->set_basis_id(a.positional()[0]);
-  o->mutable_weights()->set_mu_s(ParseDouble(a, "mu-s", 1.0));
-  o->mutable_weights()->set_mu_b(ParseDouble(a, "mu-b", 0.0));
-  o->mutable_weights()->set_mu_c(ParseDouble(a, "mu-c", 1.0));
+  SetWeights(a, "mu-s", o->mutable_weights());
   o->set_watch_encoding(v1::FIELD_ENCODING_AMBIENT);
   for (int32_t f : ParseFaceList(GetString(a, "watch"))) o->add_watch_faces(f);
   edits.insert(edits.begin(), open);

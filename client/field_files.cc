@@ -363,12 +363,24 @@ absl::StatusOr<v1::DesignRequest> ParseEdit(absl::string_view line, absl::string
     request.mutable_remove()->set_id(id);
   } else if (kind == "weights") {
     RETURN_IF_ERROR(CheckKeys(*object, {"mu_s", "mu_b", "mu_c"}, inner_where));
-    ASSIGN_OR_RETURN(double mu_s, GetNumber(*object, "mu_s", inner_where));
-    ASSIGN_OR_RETURN(double mu_b, GetNumber(*object, "mu_b", inner_where));
-    ASSIGN_OR_RETURN(double mu_c, GetNumber(*object, "mu_c", inner_where));
-    request.mutable_set_weights()->set_mu_s(mu_s);
-    request.mutable_set_weights()->set_mu_b(mu_b);
-    request.mutable_set_weights()->set_mu_c(mu_c);
+    // The weights given change; the others keep the session's values.
+    if (object->fields().empty()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(inner_where, ": weights needs at least one of mu_s, mu_b, mu_c"));
+    }
+    v1::Weights* w = request.mutable_set_weights();
+    if (object->fields().contains("mu_s")) {
+      ASSIGN_OR_RETURN(double mu_s, GetNumber(*object, "mu_s", inner_where));
+      w->set_mu_s(mu_s);
+    }
+    if (object->fields().contains("mu_b")) {
+      ASSIGN_OR_RETURN(double mu_b, GetNumber(*object, "mu_b", inner_where));
+      w->set_mu_b(mu_b);
+    }
+    if (object->fields().contains("mu_c")) {
+      ASSIGN_OR_RETURN(double mu_c, GetNumber(*object, "mu_c", inner_where));
+      w->set_mu_c(mu_c);
+    }
   } else if (kind == "watch") {
     RETURN_IF_ERROR(CheckKeys(*object, {"faces", "encoding"}, inner_where));
     ASSIGN_OR_RETURN(std::vector<double> faces, NumberArray(*object, "faces", inner_where));

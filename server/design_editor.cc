@@ -44,7 +44,7 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   if (session_ != nullptr) return absl::FailedPreconditionError("the session is already open");
   ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis, lookup_(open.basis_id()));
   edit_start_ = Clock::now();  // a basis loaded from the store is not part of the edit
-  const EnergyWeights weights = WeightsFromProto(open.weights());
+  const EnergyWeights weights = WeightsFromProto(open.weights(), EnergyWeights{});
   RETURN_IF_ERROR(ValidateWeights(weights));
   basis_ = std::move(basis);
   if (absl::Status st = SetWatch(open.watch_faces(), open.watch_encoding()); !st.ok()) {
@@ -90,7 +90,7 @@ absl::Status DesignEditor::Edit(const v1::DesignRequest& r) {
     case v1::DesignRequest::kRemove:
       return session_->RemoveConstraint(r.remove().id());
     case v1::DesignRequest::kSetWeights: {
-      const EnergyWeights weights = WeightsFromProto(r.set_weights());
+      const EnergyWeights weights = WeightsFromProto(r.set_weights(), session_->weights());
       RETURN_IF_ERROR(ValidateWeights(weights));
       RETURN_IF_ERROR(session_->SetWeights(weights));
       refactorized_ = session_->last_factorized();

@@ -234,7 +234,7 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
                          registry_->GetBasis(request->basis_id()));
         ModelProblem problem;
-        problem.weights = WeightsFromProto(request->weights());
+        problem.weights = WeightsFromProto(request->weights(), EnergyWeights{});
         RETURN_IF_ERROR(ValidateWeights(problem.weights));
         if (request->constraints_size() > kMaxConstraints) {
           return absl::ResourceExhaustedError(
@@ -446,10 +446,10 @@ grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* cont
                     ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
                                      registry_->GetBasis(request->basis_id()));
                     ASSIGN_OR_RETURN(Eigen::VectorXd X0, FieldFromProto(request->field(), *basis));
-                    return SmoothInto(*basis, X0, WeightsFromProto(request->weights()),
-                                      request->face_weights(), request->scale_free(),
-                                      request->return_field(), request->field_encoding(), options_,
-                                      cancel, start, response);
+                    return SmoothInto(
+                        *basis, X0, WeightsFromProto(request->weights(), kDefaultSmoothingWeights),
+                        request->face_weights(), request->scale_free(), request->return_field(),
+                        request->field_encoding(), options_, cancel, start, response);
                   });
 }
 
@@ -486,10 +486,10 @@ grpc::ServerUnaryReactor* FieldService::Align(grpc::CallbackServerContext* conte
               "is no direction to align to");
         }
         const Eigen::VectorXd w = targets.weights / mean;
-        return SmoothInto(*basis, targets.dofs, WeightsFromProto(request->weights()),
-                          absl::MakeConstSpan(w.data(), w.size()), /*scale_free=*/true,
-                          request->return_field(), request->field_encoding(), options_, cancel,
-                          start, response);
+        return SmoothInto(
+            *basis, targets.dofs, WeightsFromProto(request->weights(), kDefaultSmoothingWeights),
+            absl::MakeConstSpan(w.data(), w.size()), /*scale_free=*/true, request->return_field(),
+            request->field_encoding(), options_, cancel, start, response);
       });
 }
 

@@ -154,8 +154,10 @@ absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& 
   return build;
 }
 
-EnergyWeights WeightsFromProto(const v1::Weights& w) {
-  return {.mu_s = w.mu_s(), .mu_b = w.mu_b(), .mu_c = w.mu_c()};
+EnergyWeights WeightsFromProto(const v1::Weights& w, const EnergyWeights& defaults) {
+  return {.mu_s = w.has_mu_s() ? w.mu_s() : defaults.mu_s,
+          .mu_b = w.has_mu_b() ? w.mu_b() : defaults.mu_b,
+          .mu_c = w.has_mu_c() ? w.mu_c() : defaults.mu_c};
 }
 
 absl::Status CheckFaces(absl::Span<const int32_t> faces, int32_t num_faces,

@@ -37,8 +37,9 @@ void BasisInfoFromRecord(const BasisRecord& r, v1::BasisInfo* p);
 // The build a BuildBasisRequest asks for (validated further by Registry::StartBuild).
 absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& p);
 
-// EnergyWeights with the wire's names (unset fields are 0, as proto3 reads them).
-EnergyWeights WeightsFromProto(const v1::Weights& w);
+// The weights of a request; a weight the message leaves out is taken from `defaults` (the
+// operation's defaults, or a Design session's current weights).
+EnergyWeights WeightsFromProto(const v1::Weights& w, const EnergyWeights& defaults);
 
 // InvalidArgument naming `what` unless every face is in [0, num_faces).
 absl::Status CheckFaces(absl::Span<const int32_t> faces, int32_t num_faces, absl::string_view what);

@@ -44,6 +44,11 @@
 
 namespace fieldspace {
 
+// The weights smoothing and curvature alignment use when a caller gives none (with
+// SmoothingOptions::scale_free: features smaller than about sqrt(mu_s / mu_c) sqrt(A) are
+// smoothed away).
+inline constexpr EnergyWeights kDefaultSmoothingWeights{.mu_s = 0.001, .mu_b = 0.0, .mu_c = 1.0};
+
 struct SmoothingOptions {
   // Multiply mu_B by the total area A and mu_C by 1 / A (see above).
   bool scale_free = false;

@@ -7,6 +7,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <random>
 #include <string>
@@ -204,6 +205,100 @@ TEST_F(ApplicationsTest, SingularityIndicesSumToTheEulerCharacteristic) {
     ASSERT_THAT(again.status(), IsOk());
     EXPECT_EQ(again->index_sum(), c.chi);
   }
+}
+
+// Poincare-Hopf for the two fields of issue 12's acceptance on closed surfaces of genus 0 to 11:
+// the smoothest vector field and the curvature-aligned line field (n = 2) of small bases.
+TEST_F(ApplicationsTest, SmoothestAndAlignedFieldsObeyPoincareHopfOnGenusZeroToEleven) {
+  for (int genus = 0; genus <= 11; ++genus) {
+    SCOPED_TRACE(absl::StrCat("genus ", genus));
+    const int chi = 2 - 2 * genus;
+    const std::string mesh_id = Upload(MakeGenusSurface(genus, 4), absl::StrCat("genus", genus));
+    const std::string vector_id = Build(mesh_id, v1::FIELD_KIND_VECTOR, 1, 80);
+    const std::vector<double> smoothest = Smoothest(vector_id);
+    v1::SingularitiesRequest request;
+    request.set_basis_id(vector_id);
+    request.mutable_coefficients()->Add(smoothest.begin(), smoothest.end());
+    auto vector_sing = client_->Singularities(request);
+    ASSERT_THAT(vector_sing.status(), IsOk());
+    EXPECT_EQ(vector_sing->euler_characteristic(), chi);
+    EXPECT_EQ(vector_sing->index_sum(), chi);
+
+    const std::string lines_id = Build(mesh_id, v1::FIELD_KIND_NFIELD, 2, 80);
+    v1::AlignRequest align;
+    align.set_basis_id(lines_id);
+    auto aligned = client_->Align(align);
+    ASSERT_THAT(aligned.status(), IsOk());
+    request.set_basis_id(lines_id);
+    request.mutable_coefficients()->Assign(aligned->coefficients().begin(),
+                                           aligned->coefficients().end());
+    auto line_sing = client_->Singularities(request);
+    ASSERT_THAT(line_sing.status(), IsOk());
+    EXPECT_EQ(line_sing->n(), 2);
+    EXPECT_EQ(line_sing->index_sum(), chi);
+    int64_t halves = 0;
+    for (const v1::Singularity& s : line_sing->singularities()) halves += s.index();
+    EXPECT_EQ(halves, 2 * chi);
+  }
+}
+
+// A weight the request leaves out takes the operation's default (Solve: 1, 0, 1; Smooth: 0.001,
+// 0, 1), so leaving out mu_c no longer makes the soft constraints do nothing; 0 given is 0.
+TEST_F(ApplicationsTest, WeightsLeftOutTakeTheOperationsDefaults) {
+  const std::string basis_id =
+      Build(Upload(MakeIcosphere(3, 1.0), "weights_sphere"), v1::FIELD_KIND_VECTOR, 0, 60);
+  const auto solve = [&](const std::function<void(v1::Weights*)>& set) {
+    v1::SolveRequest request;
+    request.set_basis_id(basis_id);
+    v1::Constraint* c = request.add_constraints();
+    c->set_face(100);
+    c->set_encoding(v1::FIELD_ENCODING_DOF);
+    c->add_value(1.0);
+    c->add_value(0.5);
+    set(request.mutable_weights());
+    auto response = client_->Solve(request);
+    EXPECT_THAT(response.status(), IsOk());
+    return response.ok() ? std::vector<double>(response->coefficients().begin(),
+                                               response->coefficients().end())
+                         : std::vector<double>{};
+  };
+  const std::vector<double> full = solve([](v1::Weights* w) {
+    w->set_mu_s(1);
+    w->set_mu_b(0);
+    w->set_mu_c(1);
+  });
+  EXPECT_EQ(solve([](v1::Weights* w) { w->set_mu_s(1); }), full);
+  EXPECT_EQ(solve([](v1::Weights*) {}), full);
+  double norm = 0;
+  for (double v : full) norm += v * v;
+  EXPECT_GT(norm, 1e-6);  // the soft constraint pulls
+  // mu_c = 0 given explicitly: the soft constraint does nothing, the field is 0.
+  const std::vector<double> none = solve([](v1::Weights* w) { w->set_mu_c(0); });
+  ASSERT_EQ(none.size(), full.size());
+  for (double v : none) EXPECT_EQ(v, 0.0);
+
+  const auto smooth = [&](const std::function<void(v1::Weights*)>& set) {
+    v1::SmoothRequest request;
+    request.set_basis_id(basis_id);
+    request.mutable_field()->set_encoding(v1::FIELD_ENCODING_DOF);
+    for (int f = 0; f < 1280; ++f) {
+      request.mutable_field()->add_values(static_cast<float>(std::sin(0.1 * f)));
+      request.mutable_field()->add_values(static_cast<float>(std::cos(0.07 * f)));
+    }
+    request.set_scale_free(true);
+    set(request.mutable_weights());
+    auto response = client_->Smooth(request);
+    EXPECT_THAT(response.status(), IsOk());
+    return response.ok() ? std::vector<double>(response->coefficients().begin(),
+                                               response->coefficients().end())
+                         : std::vector<double>{};
+  };
+  EXPECT_EQ(smooth([](v1::Weights*) {}), smooth([](v1::Weights* w) {
+              w->set_mu_s(0.001);
+              w->set_mu_b(0);
+              w->set_mu_c(1);
+            }));
+  EXPECT_NE(smooth([](v1::Weights*) {}), smooth([](v1::Weights* w) { w->set_mu_s(0.1); }));
 }
 
 // Smoothing on the wire: scale-free weights mean the same on a mesh scaled by 10 (the smoothed

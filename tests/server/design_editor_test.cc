@@ -142,6 +142,16 @@ TEST_F(DesignEditorTest, EditsMatchFreshSolvesAndWatchedFacesAreLifted) {
   ASSERT_TRUE(editor.Apply(weights, &u).ok());
   EXPECT_FALSE(u.timings().refactorized());
   ExpectFresh(editor, u);
+  // A set_weights that gives only mu_c keeps the session's mu_s and mu_b.
+  v1::DesignRequest only_c;
+  only_c.mutable_set_weights()->set_mu_c(2);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(only_c, &u).ok());
+  EXPECT_FALSE(u.timings().refactorized());
+  EXPECT_EQ(editor.session()->weights().mu_s, 1);
+  EXPECT_EQ(editor.session()->weights().mu_b, 0.1);
+  EXPECT_EQ(editor.session()->weights().mu_c, 2);
+  ExpectFresh(editor, u);
   v1::DesignRequest remove;
   remove.mutable_remove()->set_id(1);
   u.Clear();
