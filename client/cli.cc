@@ -62,7 +62,9 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   cancel BASIS_ID                     cancel a running build
   project BASIS_ID FIELD_FILE         coefficients and relative error of the projection
   solve BASIS_ID --constraints FILE [--mu-s X] [--mu-b X] [--mu-c X] [--out FIELD_FILE]
-        [--encoding ambient|dof]      the model problem with soft/hard constraints
+        [--encoding ambient|dof] [--singularities]
+                                      the model problem with soft/hard constraints;
+                                      --singularities: also the solution's singular vertices
   lift BASIS_ID COEFFS_FILE (--out FIELD_FILE | --faces F1,F2,...) [--encoding ambient|dof]
         [--mode K]                    --mode K: eigenfield K of `eigen --coefficients` output
   eigen BASIS_ID --count K [--coefficients]
@@ -72,18 +74,20 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   smoothest BASIS_ID [--out FIELD_FILE] [--encoding ambient|dof]
                                       the smoothest unit field (lowest eigenfield) of the basis
   smooth BASIS_ID FIELD_FILE [--mu-s X] [--mu-b X] [--mu-c X] [--face-weights FILE] [--raw-weights]
-        [--out FIELD_FILE] [--encoding ambient|dof]
+        [--out FIELD_FILE] [--encoding ambient|dof] [--singularities]
                                       the field closest to FIELD_FILE (M-weighted) with harmonic
                                       and biharmonic fairness; scale-free weights unless
                                       --raw-weights (defaults 0.001, 0, 1)
   align BASIS_ID --curvature [--n 2|4] [--smooth-mu X] [--mu-b X] [--mu-c X] [--out FIELD_FILE]
-        [--encoding ambient|dof] [--estimator jet|normal-differences]
+        [--encoding ambient|dof] [--estimator jet|normal-differences] [--singularities]
                                       a smooth n-field (n-field basis, n = 2 or 4) aligned to
                                       the principal curvature directions (defaults 0.001, 0, 1)
   singularities BASIS_ID COEFFS_FILE [--zero-tolerance T] [--mode K]
                                       vertex indices (in turns) of the lifted field
   design BASIS_ID --script EDITS.jsonl [--mu-s X] [--mu-b X] [--mu-c X] [--watch F1,F2,...]
-        [--no-coefficients]           stream edits; one JSON line per update
+        [--no-coefficients] [--singularities]
+                                      stream edits; one JSON line per update (--singularities:
+                                      how the singular vertices changed, in each)
 
   export MESH FIELD_FILE --out FILE.vtu|.vtk|.ply|.rawfield
                                       the field on its mesh for ParaView, meshio, Directional;
@@ -348,6 +352,27 @@ void WriteNumbers(JsonWriter& j, const T& values) {
   j.EndArray();
 }
 
+// One singular vertex: {"vertex": v, "index": turns, "position": [x, y, z]}.
+void WriteSingularity(JsonWriter& j, const v1::Singularity& s) {
+  j.BeginObject().Key("vertex").Int(s.vertex()).Key("index").Number(s.turns());
+  j.Key("position");
+  WriteNumbers(j, s.position());
+  j.EndObject();
+}
+
+// The fields of the `singularities` command's object (also the object under "singularities" in
+// solve / smooth / align), written into an open object.
+void WriteSingularityFields(JsonWriter& j, const v1::SingularitiesResponse& r) {
+  j.Key("n").Int(r.n());
+  j.Key("singularities").BeginArray();
+  for (const v1::Singularity& s : r.singularities()) WriteSingularity(j, s);
+  j.EndArray();
+  j.Key("index_sum").Number(r.index_sum());
+  j.Key("euler_characteristic").Int(r.euler_characteristic());
+  j.Key("boundary_vertices").Int(r.boundary_size());
+  j.Key("undefined_vertices").Int(r.undefined_vertices_size());
+}
+
 class Cli {
  public:
   Cli(std::ostream& out, std::ostream& err) : out_(out), err_(err) {}
@@ -473,21 +498,24 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"cancel", {{}, 1, &Cli::Cancel}},
         {"project", {{}, 2, &Cli::Project}},
         {"solve",
-         {Flags({"constraints", "mu-s", "mu-b", "mu-c", "out", "encoding"}), 1, &Cli::Solve}},
+         {Flags({"constraints", "mu-s", "mu-b", "mu-c", "out", "encoding"}, {"singularities"}), 1,
+          &Cli::Solve}},
         {"lift", {Flags({"out", "faces", "encoding", "mode"}), 2, &Cli::Lift}},
         {"eigen", {Flags({"count"}, {"coefficients"}), 1, &Cli::Eigen}},
         {"design",
-         {Flags({"script", "mu-s", "mu-b", "mu-c", "watch"}, {"no-coefficients"}), 1,
-          &Cli::Design}},
+         {Flags({"script", "mu-s", "mu-b", "mu-c", "watch"}, {"no-coefficients", "singularities"}),
+          1, &Cli::Design}},
         {"curvature", {Flags({"out", "encoding", "estimator", "principal"}), 1, &Cli::Curvature}},
         {"smoothest", {Flags({"out", "encoding"}), 1, &Cli::Smoothest}},
         {"singularities", {Flags({"zero-tolerance", "mode"}), 2, &Cli::Singularities}},
         {"align",
-         {Flags({"n", "smooth-mu", "mu-b", "mu-c", "out", "encoding", "estimator"}, {"curvature"}),
+         {Flags({"n", "smooth-mu", "mu-b", "mu-c", "out", "encoding", "estimator"},
+                {"curvature", "singularities"}),
           1, &Cli::Align}},
         {"smooth",
-         {Flags({"mu-s", "mu-b", "mu-c", "face-weights", "out", "encoding"}, {"raw-weights"}), 2,
-          &Cli::Smooth}},
+         {Flags({"mu-s", "mu-b", "mu-c", "face-weights", "out", "encoding"},
+                {"raw-weights", "singularities"}),
+          2, &Cli::Smooth}},
     };
     if (command == "export" || command == "render") {
       command_ = command;
@@ -863,6 +891,7 @@ int Cli::Solve(const CommandLine& a) {
   v1::SolveRequest request;
   request.set_basis_id(a.positional()[0]);
   SetWeights(a, "mu-s", request.mutable_weights());
+  request.set_singularities(a.Has("singularities"));
   for (v1::Constraint& c : *constraints) *request.add_constraints() = std::move(c);
   absl::StatusOr<v1::SolveResponse> response = client_->Solve(request);
   if (!response.ok()) return Fail(response.status(), "Solve");
@@ -878,6 +907,11 @@ int Cli::Solve(const CommandLine& a) {
   j.Key("total_ms").Number(response->timings().total_ms());
   j.EndObject();
   if (a.Has("out")) j.Key("out").String(GetString(a, "out"));
+  if (response->has_singularities()) {
+    j.Key("singularities").BeginObject();
+    WriteSingularityFields(j, response->singularities());
+    j.EndObject();
+  }
   j.Key("coefficients");
   WriteNumbers(j, coefficients);
   j.EndObject();
@@ -1063,19 +1097,7 @@ int Cli::Singularities(const CommandLine& a) {
   JsonWriter j;
   j.BeginObject();
   j.Key("basis_id").String(request.basis_id());
-  j.Key("n").Int(response->n());
-  j.Key("singularities").BeginArray();
-  for (const v1::Singularity& s : response->singularities()) {
-    j.BeginObject().Key("vertex").Int(s.vertex()).Key("index").Number(s.turns());
-    j.Key("position");
-    WriteNumbers(j, s.position());
-    j.EndObject();
-  }
-  j.EndArray();
-  j.Key("index_sum").Number(response->index_sum());
-  j.Key("euler_characteristic").Int(response->euler_characteristic());
-  j.Key("boundary_vertices").Int(response->boundary_size());
-  j.Key("undefined_vertices").Int(response->undefined_vertices_size());
+  WriteSingularityFields(j, *response);
   j.EndObject();
   Emit(j);
   return 0;
@@ -1090,6 +1112,7 @@ int Cli::Smooth(const CommandLine& a) {
   request.mutable_field()->mutable_values()->Add(field->values.begin(), field->values.end());
   SetWeights(a, "mu-s", request.mutable_weights());
   request.set_scale_free(!a.Has("raw-weights"));
+  request.set_singularities(a.Has("singularities"));
   if (a.Has("face-weights")) {
     const std::string path = GetString(a, "face-weights");
     absl::StatusOr<std::string> text = ReadFile(path);
@@ -1126,6 +1149,7 @@ int Cli::Align(const CommandLine& a) {
   if (estimator != "jet" && estimator != "normal-differences") {
     throw UsageError("--estimator must be jet or normal-differences");
   }
+  request.set_singularities(a.Has("singularities"));
   request.set_estimator(estimator == "jet" ? v1::CURVATURE_ESTIMATOR_JET
                                            : v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES);
   absl::StatusOr<v1::SmoothResponse> response = client_->Align(request);
@@ -1151,6 +1175,11 @@ int Cli::EmitSmoothed(const CommandLine& a, const std::string& basis_id, bool sc
   j.Key("total_ms").Number(t.total_ms());
   j.EndObject();
   if (a.Has("out")) j.Key("out").String(GetString(a, "out"));
+  if (response.has_singularities()) {
+    j.Key("singularities").BeginObject();
+    WriteSingularityFields(j, response.singularities());
+    j.EndObject();
+  }
   j.Key("coefficients");
   WriteNumbers(j, coefficients);
   j.EndObject();
@@ -1188,6 +1217,7 @@ int Cli::Design(const CommandLine& a) {
   o->set_basis_id(a.positional()[0]);
   SetWeights(a, "mu-s", o->mutable_weights());
   o->set_watch_encoding(v1::FIELD_ENCODING_AMBIENT);
+  o->set_singularities(a.Has("singularities"));
   for (int32_t f : ParseFaceList(GetString(a, "watch"))) o->add_watch_faces(f);
   edits.insert(edits.begin(), open);
   kinds.insert(kinds.begin(), "open");
@@ -1223,6 +1253,19 @@ int Cli::Design(const CommandLine& a) {
       j.EndArray().EndObject();
     }
     j.EndArray();
+    if (update->has_singularities()) {
+      const v1::SingularityChanges& c = update->singularities();
+      j.Key("singularities").BeginObject();
+      j.Key("n").Int(c.n());
+      j.Key("count").Int(c.count());
+      j.Key("index_sum").Number(c.index_sum());
+      j.Key("appeared").BeginArray();
+      for (const v1::Singularity& s : c.appeared()) WriteSingularity(j, s);
+      j.EndArray();
+      j.Key("vanished");
+      WriteNumbers(j, c.vanished());
+      j.EndObject();
+    }
     if (coefficients) {
       j.Key("coefficients");
       WriteNumbers(j, update->coefficients());

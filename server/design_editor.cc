@@ -1,7 +1,10 @@
 #include "server/design_editor.h"
 
+#include <algorithm>
+
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
+#include "core/subspace/projection.h"
 #include "server/proto_convert.h"
 #include "server/rpc_util.h"
 
@@ -37,6 +40,32 @@ absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* u
   update->set_num_constraints(session_->num_constraints());
   update->set_num_hard_constraints(session_->num_hard_constraints());
   update->set_basis_id(basis_->record.id);
+  if (singularities_) RETURN_IF_ERROR(SingularityChanges(x, update->mutable_singularities()));
+  return absl::OkStatus();
+}
+
+absl::Status DesignEditor::SingularityChanges(const Eigen::VectorXd& x,
+                                              v1::SingularityChanges* changes) {
+  ASSIGN_OR_RETURN(Eigen::VectorXd dofs, fieldspace::Lift(*basis_->system, x));
+  v1::SingularitiesResponse now;
+  RETURN_IF_ERROR(SingularitiesToProto(*basis_, dofs, 0, &now));
+  absl::flat_hash_map<int32_t, int32_t> current;
+  current.reserve(now.singularities_size());
+  for (v1::Singularity& s : *now.mutable_singularities()) {
+    current[s.vertex()] = s.index();
+    auto it = last_singularities_.find(s.vertex());
+    if (it == last_singularities_.end() || it->second != s.index()) {
+      *changes->add_appeared() = std::move(s);
+    }
+  }
+  for (const auto& [vertex, index] : last_singularities_) {
+    if (!current.contains(vertex)) changes->add_vanished(vertex);
+  }
+  std::sort(changes->mutable_vanished()->begin(), changes->mutable_vanished()->end());
+  changes->set_n(now.n());
+  changes->set_index_sum(now.index_sum());
+  changes->set_count(static_cast<int32_t>(current.size()));
+  last_singularities_ = std::move(current);
   return absl::OkStatus();
 }
 
@@ -46,6 +75,10 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   edit_start_ = Clock::now();  // a basis loaded from the store is not part of the edit
   const EnergyWeights weights = WeightsFromProto(open.weights(), EnergyWeights{});
   RETURN_IF_ERROR(ValidateWeights(weights));
+  if (open.singularities() && basis->basis->type.kind == FieldKind::kTensor) {
+    return absl::InvalidArgumentError(
+        "singularities are defined for vector and n-field bases, not tensor bases");
+  }
   basis_ = std::move(basis);
   if (absl::Status st = SetWatch(open.watch_faces(), open.watch_encoding()); !st.ok()) {
     basis_.reset();
@@ -63,6 +96,8 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   }
   session_ = std::move(*session);
   refactorized_ = session_->last_factorized();
+  singularities_ = open.singularities();
+  last_singularities_.clear();
   return absl::OkStatus();
 }
 

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/container/flat_hash_map.h"
 #include "absl/status/statusor.h"
 #include "core/operators/conversions.h"
 #include "core/subspace/design_session.h"
@@ -51,6 +52,9 @@ class DesignEditor {
   absl::Status Open(const fieldspace::v1::OpenDesign& open);
   absl::Status Edit(const fieldspace::v1::DesignRequest& request);
   absl::Status SetWatch(absl::Span<const int32_t> faces, int encoding);
+  // The singularities of the field with coefficients `x` compared with the previous update's.
+  absl::Status SingularityChanges(const Eigen::VectorXd& x,
+                                  fieldspace::v1::SingularityChanges* changes);
 
   BasisLookup lookup_;
   DesignEditorOptions options_;
@@ -58,7 +62,9 @@ class DesignEditor {
   std::unique_ptr<DesignSession> session_;
   std::vector<int32_t> watch_;
   FieldEncoding watch_encoding_ = FieldEncoding::kDof;
-  bool refactorized_ = false;  // by the request being applied
+  bool refactorized_ = false;                                 // by the request being applied
+  bool singularities_ = false;                                // updates carry SingularityChanges
+  absl::flat_hash_map<int32_t, int32_t> last_singularities_;  // vertex -> index (1/n turns)
   std::chrono::steady_clock::time_point edit_start_;
 };
 

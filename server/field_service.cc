@@ -272,6 +272,11 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
                                           response->mutable_field()->mutable_values()));
           lift_ms = MsSince(lift_start);
         }
+        if (request->singularities()) {
+          ASSIGN_OR_RETURN(Eigen::VectorXd dofs,
+                           fieldspace::Lift(*basis->system, result.coefficients));
+          RETURN_IF_ERROR(SingularitiesToProto(*basis, dofs, 0, response->mutable_singularities()));
+        }
         v1::SolveTimings* t = response->mutable_timings();
         t->set_solve_ms(solve_ms);
         t->set_lift_ms(lift_ms);
@@ -339,9 +344,7 @@ grpc::ServerUnaryReactor* FieldService::Singularities(grpc::CallbackServerContex
       [this, request, response](const std::atomic<bool>*) -> absl::Status {
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
                          registry_->GetBasis(request->basis_id()));
-        const TriangleMesh& mesh = *basis->mesh;
-        const FieldType& type = basis->basis->type;
-        if (type.kind == FieldKind::kTensor) {
+        if (basis->basis->type.kind == FieldKind::kTensor) {
           return absl::InvalidArgumentError(
               "singularities are defined for vector and n-field bases, not tensor bases");
         }
@@ -358,34 +361,7 @@ grpc::ServerUnaryReactor* FieldService::Singularities(grpc::CallbackServerContex
                            CoefficientsFromProto(request->coefficients(), *basis));
           ASSIGN_OR_RETURN(dofs, fieldspace::Lift(*basis->system, x));
         }
-        SingularityOptions options;
-        options.n = type.kind == FieldKind::kNField ? type.n : 1;
-        options.zero_tolerance = request->zero_tolerance();
-        ASSIGN_OR_RETURN(fieldspace::Singularities found,
-                         ComputeSingularities(mesh, dofs, options));
-        const auto position = [&mesh](int32_t v, v1::Singularity* s) {
-          for (int c = 0; c < 3; ++c) s->add_position(mesh.vertices()(v, c));
-        };
-        response->set_n(found.n);
-        for (const fieldspace::Singularity& s : found.singularities) {
-          v1::Singularity* out = response->add_singularities();
-          out->set_vertex(s.vertex);
-          out->set_index(s.index);
-          out->set_turns(s.turns);
-          position(s.vertex, out);
-        }
-        for (const BoundaryIndex& b : found.boundary) {
-          v1::Singularity* out = response->add_boundary();
-          out->set_vertex(b.vertex);
-          out->set_turns(b.turns);
-          position(b.vertex, out);
-        }
-        response->mutable_undefined_vertices()->Add(found.undefined_vertices.begin(),
-                                                    found.undefined_vertices.end());
-        response->set_index_sum(static_cast<double>(found.index_sum) / found.n);
-        response->set_euler_characteristic(mesh.num_vertices() - mesh.num_edges() +
-                                           mesh.num_faces());
-        return absl::OkStatus();
+        return SingularitiesToProto(*basis, dofs, request->zero_tolerance(), response);
       });
 }
 
@@ -395,7 +371,7 @@ namespace {
 // coefficients, the lifted field on request and the timings. Shared by Smooth and Align.
 absl::Status SmoothInto(const ServedBasis& basis, const Eigen::VectorXd& X0,
                         const EnergyWeights& weights, absl::Span<const double> face_weights,
-                        bool scale_free, bool return_field, int field_encoding,
+                        bool scale_free, bool return_field, int field_encoding, bool singularities,
                         const ServiceOptions& service, const std::atomic<bool>* cancel,
                         Clock::time_point start, v1::SmoothResponse* response) {
   RETURN_IF_ERROR(ValidateWeights(weights));
@@ -424,6 +400,10 @@ absl::Status SmoothInto(const ServedBasis& basis, const Eigen::VectorXd& X0,
                                     response->mutable_field()->mutable_values()));
     lift_ms = MsSince(lift_start);
   }
+  if (singularities) {
+    ASSIGN_OR_RETURN(Eigen::VectorXd dofs, fieldspace::Lift(*basis.system, result.coefficients));
+    RETURN_IF_ERROR(SingularitiesToProto(basis, dofs, 0, response->mutable_singularities()));
+  }
   v1::SmoothTimings* t = response->mutable_timings();
   t->set_rhs_ms(result.timings.rhs_ms);
   t->set_weighted_mass_ms(result.timings.weighted_mass_ms);
@@ -449,7 +429,8 @@ grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* cont
                     return SmoothInto(
                         *basis, X0, WeightsFromProto(request->weights(), kDefaultSmoothingWeights),
                         request->face_weights(), request->scale_free(), request->return_field(),
-                        request->field_encoding(), options_, cancel, start, response);
+                        request->field_encoding(), request->singularities(), options_, cancel,
+                        start, response);
                   });
 }
 
@@ -489,7 +470,7 @@ grpc::ServerUnaryReactor* FieldService::Align(grpc::CallbackServerContext* conte
         return SmoothInto(
             *basis, targets.dofs, WeightsFromProto(request->weights(), kDefaultSmoothingWeights),
             absl::MakeConstSpan(w.data(), w.size()), /*scale_free=*/true, request->return_field(),
-            request->field_encoding(), options_, cancel, start, response);
+            request->field_encoding(), request->singularities(), options_, cancel, start, response);
       });
 }
 

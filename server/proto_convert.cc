@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
+#include "core/operators/singularities.h"
 #include "core/subspace/projection.h"
 #include "oneapi/tbb/blocked_range.h"
 #include "oneapi/tbb/parallel_for.h"
@@ -158,6 +159,42 @@ EnergyWeights WeightsFromProto(const v1::Weights& w, const EnergyWeights& defaul
   return {.mu_s = w.has_mu_s() ? w.mu_s() : defaults.mu_s,
           .mu_b = w.has_mu_b() ? w.mu_b() : defaults.mu_b,
           .mu_c = w.has_mu_c() ? w.mu_c() : defaults.mu_c};
+}
+
+absl::Status SingularitiesToProto(const ServedBasis& basis, const Eigen::VectorXd& dofs,
+                                  double zero_tolerance, v1::SingularitiesResponse* out) {
+  const TriangleMesh& mesh = *basis.mesh;
+  const FieldType& type = basis.basis->type;
+  if (type.kind == FieldKind::kTensor) {
+    return absl::InvalidArgumentError(
+        "singularities are defined for vector and n-field bases, not tensor bases");
+  }
+  SingularityOptions options;
+  options.n = type.kind == FieldKind::kNField ? type.n : 1;
+  options.zero_tolerance = zero_tolerance;
+  ASSIGN_OR_RETURN(Singularities found, ComputeSingularities(mesh, dofs, options));
+  const auto position = [&mesh](int32_t v, v1::Singularity* s) {
+    for (int c = 0; c < 3; ++c) s->add_position(mesh.vertices()(v, c));
+  };
+  out->set_n(found.n);
+  for (const Singularity& s : found.singularities) {
+    v1::Singularity* p = out->add_singularities();
+    p->set_vertex(s.vertex);
+    p->set_index(s.index);
+    p->set_turns(s.turns);
+    position(s.vertex, p);
+  }
+  for (const BoundaryIndex& b : found.boundary) {
+    v1::Singularity* p = out->add_boundary();
+    p->set_vertex(b.vertex);
+    p->set_turns(b.turns);
+    position(b.vertex, p);
+  }
+  out->mutable_undefined_vertices()->Add(found.undefined_vertices.begin(),
+                                         found.undefined_vertices.end());
+  out->set_index_sum(static_cast<double>(found.index_sum) / found.n);
+  out->set_euler_characteristic(mesh.num_vertices() - mesh.num_edges() + mesh.num_faces());
+  return absl::OkStatus();
 }
 
 absl::Status CheckFaces(absl::Span<const int32_t> faces, int32_t num_faces,

@@ -41,6 +41,11 @@ absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& 
 // operation's defaults, or a Design session's current weights).
 EnergyWeights WeightsFromProto(const v1::Weights& w, const EnergyWeights& defaults);
 
+// The singularities of the field `dofs` (all faces) of `basis` (vector or n-field), as the
+// Singularities RPC answers them; InvalidArgument for tensor bases.
+absl::Status SingularitiesToProto(const ServedBasis& basis, const Eigen::VectorXd& dofs,
+                                  double zero_tolerance, v1::SingularitiesResponse* out);
+
 // InvalidArgument naming `what` unless every face is in [0, num_faces).
 absl::Status CheckFaces(absl::Span<const int32_t> faces, int32_t num_faces, absl::string_view what);
 

@@ -242,6 +242,69 @@ TEST_F(ApplicationsTest, SmoothestAndAlignedFieldsObeyPoincareHopfOnGenusZeroToE
   }
 }
 
+// Solve, Smooth and Align return the result's singularities on request: the same as the
+// Singularities RPC on the returned coefficients; a tensor basis refuses them.
+TEST_F(ApplicationsTest, SolveSmoothAndAlignReturnSingularitiesOnRequest) {
+  const std::string mesh_id = Upload(MakeGenusSurface(2, 4), "genus2_singularities");
+  const std::string vector_id = Build(mesh_id, v1::FIELD_KIND_VECTOR, 1, 60);
+  const auto same_as_rpc = [&](const std::string& basis_id,
+                               const google::protobuf::RepeatedField<double>& x,
+                               const v1::SingularitiesResponse& got) {
+    v1::SingularitiesRequest request;
+    request.set_basis_id(basis_id);
+    *request.mutable_coefficients() = x;
+    auto expected = client_->Singularities(request);
+    ASSERT_THAT(expected.status(), IsOk());
+    EXPECT_EQ(got.SerializeAsString(), expected->SerializeAsString());
+    EXPECT_EQ(got.index_sum(), -2);
+  };
+  v1::SolveRequest solve;
+  solve.set_basis_id(vector_id);
+  v1::Constraint* c = solve.add_constraints();
+  c->set_face(7);
+  c->set_encoding(v1::FIELD_ENCODING_DOF);
+  c->add_value(1);
+  c->add_value(0);
+  solve.set_singularities(true);
+  auto solved = client_->Solve(solve);
+  ASSERT_THAT(solved.status(), IsOk());
+  ASSERT_TRUE(solved->has_singularities());
+  same_as_rpc(vector_id, solved->coefficients(), solved->singularities());
+  solve.set_singularities(false);
+  auto plain = client_->Solve(solve);
+  ASSERT_THAT(plain.status(), IsOk());
+  EXPECT_FALSE(plain->has_singularities());
+
+  v1::SmoothRequest smooth;
+  smooth.set_basis_id(vector_id);
+  smooth.mutable_field()->set_encoding(v1::FIELD_ENCODING_DOF);
+  const int faces = static_cast<int>(MakeGenusSurface(2, 4)->faces.rows());
+  for (int f = 0; f < faces; ++f) {
+    smooth.mutable_field()->add_values(static_cast<float>(std::sin(0.3 * f)));
+    smooth.mutable_field()->add_values(1.0f);
+  }
+  smooth.set_scale_free(true);
+  smooth.set_singularities(true);
+  auto smoothed = client_->Smooth(smooth);
+  ASSERT_THAT(smoothed.status(), IsOk());
+  same_as_rpc(vector_id, smoothed->coefficients(), smoothed->singularities());
+
+  const std::string lines_id = Build(mesh_id, v1::FIELD_KIND_NFIELD, 2, 60);
+  v1::AlignRequest align;
+  align.set_basis_id(lines_id);
+  align.set_singularities(true);
+  auto aligned = client_->Align(align);
+  ASSERT_THAT(aligned.status(), IsOk());
+  EXPECT_EQ(aligned->singularities().n(), 2);
+  same_as_rpc(lines_id, aligned->coefficients(), aligned->singularities());
+
+  const std::string tensor_id = Build(mesh_id, v1::FIELD_KIND_TENSOR, 0, 60);
+  solve.set_basis_id(tensor_id);
+  solve.clear_constraints();
+  solve.set_singularities(true);
+  EXPECT_THAT(client_->Solve(solve).status(), StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
 // A weight the request leaves out takes the operation's default (Solve: 1, 0, 1; Smooth: 0.001,
 // 0, 1), so leaving out mu_c no longer makes the soft constraints do nothing; 0 given is 0.
 TEST_F(ApplicationsTest, WeightsLeftOutTakeTheOperationsDefaults) {

@@ -4,14 +4,17 @@
 
 #include "server/design_editor.h"
 
+#include <map>
 #include <memory>
 #include <string>
 
 #include "absl/strings/str_cat.h"
 #include "core/mesh/shapes.h"
 #include "core/subspace/model_problem.h"
+#include "core/subspace/projection.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "server/proto_convert.h"
 
 namespace fieldspace::server {
 namespace {
@@ -200,6 +203,54 @@ TEST_F(DesignEditorTest, ErrorsHaveExactCodesAndLeaveTheSessionAsItWas) {
   const Eigen::VectorXd& x = editor.session()->coefficients();
   ASSERT_EQ(static_cast<size_t>(x.size()), before.size());
   for (size_t i = 0; i < before.size(); ++i) EXPECT_EQ(x[i], before[i]) << i;
+}
+
+// Sessions opened with singularities: every update's changes, applied to the previous state, give
+// the singularities of its own coefficients (computed afresh), and the indices sum to the sphere's
+// Euler characteristic 2 after every edit that leaves a nonzero field.
+TEST_F(DesignEditorTest, SingularityChangesTrackTheField) {
+  DesignEditor editor = NewEditor();
+  v1::DesignRequest open = Open(1, 0, 1);
+  open.mutable_open()->set_singularities(true);
+  std::map<int32_t, int32_t> state;  // vertex -> index, from the changes alone
+  const auto check = [&](const v1::DesignUpdate& u) {
+    ASSERT_TRUE(u.has_singularities());
+    const v1::SingularityChanges& c = u.singularities();
+    for (int32_t v : c.vanished()) {
+      EXPECT_EQ(state.erase(v), 1u) << "vertex " << v << " vanished but was not singular";
+    }
+    for (const v1::Singularity& s : c.appeared()) state[s.vertex()] = s.index();
+    EXPECT_EQ(c.count(), static_cast<int32_t>(state.size()));
+    Eigen::VectorXd x(u.coefficients_size());
+    for (int i = 0; i < x.size(); ++i) x[i] = u.coefficients(i);
+    auto dofs = fieldspace::Lift(*(*basis_)->system, x);
+    ASSERT_TRUE(dofs.ok());
+    v1::SingularitiesResponse fresh;
+    ASSERT_TRUE(SingularitiesToProto(**basis_, *dofs, 0, &fresh).ok());
+    std::map<int32_t, int32_t> expected;
+    for (const v1::Singularity& s : fresh.singularities()) expected[s.vertex()] = s.index();
+    EXPECT_EQ(state, expected);
+    // Poincare-Hopf once the field is not zero (with no constraint it is, and every vertex is
+    // undefined).
+    if (x.norm() > 0) EXPECT_EQ(c.index_sum(), 2.0);
+  };
+  v1::DesignUpdate u;
+  ASSERT_TRUE(editor.Apply(open, &u).ok());
+  EXPECT_EQ(u.singularities().vanished_size(), 0);
+  check(u);
+  int changes_seen = 0;
+  for (int step = 0; step < 6; ++step) {
+    u.Clear();
+    ASSERT_TRUE(editor.Apply(Add(step + 1, 97 * step + 5, 1.0, 0.3 * step - 0.5, false), &u).ok());
+    check(u);
+    changes_seen += u.singularities().appeared_size() + u.singularities().vanished_size();
+  }
+  EXPECT_GT(changes_seen, 0);  // constraints in new places move the singularities
+  // Without the option, updates carry none.
+  DesignEditor plain = NewEditor();
+  u.Clear();
+  ASSERT_TRUE(plain.Apply(Open(1, 0, 1), &u).ok());
+  EXPECT_FALSE(u.has_singularities());
 }
 
 }  // namespace
