@@ -1,12 +1,46 @@
 #include "server/data_root.h"
 
+#include <fcntl.h>
+#include <linux/openat2.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/status_macros.h"
 
 namespace fieldspace::server {
+namespace {
 
-absl::StatusOr<std::string> ResolveDataPath(const std::string& root, const std::string& path) {
+// openat2(2) (glibc 2.36 has no wrapper); -1 with errno.
+int OpenAt2(int dir, const char* path, uint64_t flags, uint64_t resolve) {
+  struct open_how how = {};
+  how.flags = flags;
+  how.resolve = resolve;
+  return static_cast<int>(::syscall(SYS_openat2, dir, path, &how, sizeof(how)));
+}
+
+// Without openat2: each component opened relative to its parent with O_NOFOLLOW, so no symlink
+// is followed anywhere below the root.
+int OpenWithoutSymlinks(int root, const std::vector<std::string>& parts) {
+  ScopedFd dir(::fcntl(root, F_DUPFD_CLOEXEC, 0));
+  if (!dir.is_open()) return -1;
+  for (size_t i = 0; i + 1 < parts.size(); ++i) {
+    ScopedFd next(
+        ::openat(dir.get(), parts[i].c_str(), O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC));
+    if (!next.is_open()) return -1;
+    dir = std::move(next);
+  }
+  return ::openat(dir.get(), parts.back().c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
+}
+
+}  // namespace
+
+absl::StatusOr<ReadableFile> OpenDataFile(const std::string& root, const std::string& path) {
   namespace fs = std::filesystem;
   if (root.empty()) {
     return absl::FailedPreconditionError(
@@ -21,31 +55,48 @@ absl::StatusOr<std::string> ResolveDataPath(const std::string& root, const std::
     return absl::InvalidArgumentError(
         absl::StrCat("path '", path, "' must be relative to the data root"));
   }
+  std::vector<std::string> parts;
   for (const auto& part : rel) {
     if (part == "..") {
       return absl::InvalidArgumentError(
           absl::StrCat("path '", path, "' must not contain '..' components"));
     }
+    if (part != "." && !part.empty()) parts.push_back(part.string());
   }
-  std::error_code ec;
-  const fs::path canonical_root = fs::canonical(root, ec);
-  if (ec)
-    return absl::FailedPreconditionError(absl::StrCat("data root ", root, ": ", ec.message()));
-  const fs::path full = fs::canonical(canonical_root / rel, ec);
-  if (ec) return absl::NotFoundError(absl::StrCat("no file '", path, "' under the data root"));
-  // Symlinks may still point outside: compare resolved paths component by component.
-  auto r = canonical_root.begin();
-  auto f = full.begin();
-  for (; r != canonical_root.end(); ++r, ++f) {
-    if (f == full.end() || *r != *f) {
-      return absl::PermissionDeniedError(
-          absl::StrCat("path '", path, "' resolves outside the data root"));
+  if (parts.empty()) return absl::InvalidArgumentError(absl::StrCat("'", path, "' is not a file"));
+  ScopedFd dir(::open(root.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC));
+  if (!dir.is_open()) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("the data root cannot be opened: ", std::strerror(errno)));
+  }
+  int fd = OpenAt2(dir.get(), path.c_str(), O_RDONLY | O_CLOEXEC,
+                   RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS);
+  int err = fd < 0 ? errno : 0;
+  bool strict_walk = false;
+  if (fd < 0 && (err == ENOSYS || err == EPERM)) {  // no openat2 (old kernel, seccomp filter)
+    fd = OpenWithoutSymlinks(dir.get(), parts);
+    err = fd < 0 ? errno : 0;
+    strict_walk = true;
+  }
+  if (fd < 0) {
+    if (err == ENOENT || err == ENOTDIR) {
+      return absl::NotFoundError(absl::StrCat("no file '", path, "' under the data root"));
     }
+    if (err == EXDEV || (strict_walk && err == ELOOP)) {
+      return absl::PermissionDeniedError(absl::StrCat(
+          "path '", path, "' leads outside the data root",
+          strict_walk ? " (or through a symlink, which this kernel cannot check)" : ""));
+    }
+    if (err == EISDIR) {
+      return absl::InvalidArgumentError(absl::StrCat("'", path, "' is not a regular file"));
+    }
+    return absl::ErrnoToStatus(err, absl::StrCat("opening '", path, "' under the data root"));
   }
-  if (!fs::is_regular_file(full, ec)) {
+  ASSIGN_OR_RETURN(ReadableFile file, DescribeOpenFile(ScopedFd(fd), path));
+  if (!file.is_regular) {
     return absl::InvalidArgumentError(absl::StrCat("'", path, "' is not a regular file"));
   }
-  return full.string();
+  return file;
 }
 
 }  // namespace fieldspace::server

@@ -108,8 +108,11 @@ grpc::ServerUnaryReactor* FieldService::LoadMesh(grpc::CallbackServerContext* co
                                                  const v1::LoadMeshRequest* request,
                                                  v1::MeshInfo* response) {
   return RunUnary(this, context, Where::kPool, [this, request, response](const std::atomic<bool>*) {
-    ASSIGN_OR_RETURN(std::string path, ResolveDataPath(options_.data_root, request->path()));
-    ASSIGN_OR_RETURN(MeshReadResult parsed, ReadMeshFile(path));
+    ASSIGN_OR_RETURN(ReadableFile file, OpenDataFile(options_.data_root, request->path()));
+    // The same size limit as an upload.
+    MeshReadOptions read;
+    read.max_file_bytes = options_.max_upload_bytes;
+    ASSIGN_OR_RETURN(MeshReadResult parsed, ReadMeshFile(std::move(file), request->path(), read));
     const std::string name = request->name().empty() ? request->path() : request->name();
     ASSIGN_OR_RETURN(MeshRecord record,
                      registry_->AddMesh(std::move(parsed.arrays), name,

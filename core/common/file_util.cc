@@ -53,12 +53,18 @@ int ScopedFd::Close() {
 }
 
 absl::StatusOr<ReadableFile> OpenForReading(const std::string& path, ErrnoStatusFn errno_status) {
-  ReadableFile file;
-  file.fd.reset(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
-  if (!file.fd.is_open()) {
+  ScopedFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  if (!fd.is_open()) {
     const int err = errno;  // before building the message, which may allocate
     return errno_status(err, absl::StrCat("opening '", path, "'"));
   }
+  return DescribeOpenFile(std::move(fd), path, errno_status);
+}
+
+absl::StatusOr<ReadableFile> DescribeOpenFile(ScopedFd fd, const std::string& path,
+                                              ErrnoStatusFn errno_status) {
+  ReadableFile file;
+  file.fd = std::move(fd);
   struct stat st;
   if (::fstat(file.fd.get(), &st) != 0) {
     const int err = errno;
@@ -98,6 +104,11 @@ absl::Status WriteAll(int fd, std::string_view data, std::string_view path,
 
 absl::StatusOr<std::string> ReadFileToString(const std::string& path, int64_t max_bytes) {
   ASSIGN_OR_RETURN(ReadableFile file, OpenForReading(path));
+  return ReadFileToString(std::move(file), path, max_bytes);
+}
+
+absl::StatusOr<std::string> ReadFileToString(ReadableFile file, const std::string& path,
+                                             int64_t max_bytes) {
   if (file.is_directory) {
     return absl::InvalidArgumentError(absl::StrCat("'", path, "' is a directory"));
   }

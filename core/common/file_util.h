@@ -88,6 +88,14 @@ absl::Status WriteAll(int fd, std::string_view data, std::string_view path,
 // path and the limit; a larger file is never read), otherwise the errno's status.
 absl::StatusOr<std::string> ReadFileToString(const std::string& path,
                                              int64_t max_bytes = int64_t{1} << 33);
+// The same for a file already opened (OpenForReading, or an openat2 below a directory); `path`
+// names it in messages.
+absl::StatusOr<std::string> ReadFileToString(ReadableFile file, const std::string& path,
+                                             int64_t max_bytes);
+
+// Stats an opened file into a ReadableFile ("stat of '<path>'" on failure).
+absl::StatusOr<ReadableFile> DescribeOpenFile(ScopedFd fd, const std::string& path,
+                                              ErrnoStatusFn errno_status = ErrnoStatus);
 
 // fsync(2) of a directory, so that a rename or unlink in it survives a crash.
 absl::Status FsyncDirectory(const std::string& dir, ErrnoStatusFn errno_status = ErrnoStatus);

@@ -1175,8 +1175,16 @@ absl::StatusOr<MeshReadResult> ReadMesh(std::string_view data, MeshFormat format
 
 absl::StatusOr<MeshReadResult> ReadMeshFile(const std::string& path,
                                             const MeshReadOptions& options) {
+  RETURN_IF_ERROR(MeshFormatFromPath(path).status());  // an unknown extension before opening
+  ASSIGN_OR_RETURN(ReadableFile file, OpenForReading(path));
+  return ReadMeshFile(std::move(file), path, options);
+}
+
+absl::StatusOr<MeshReadResult> ReadMeshFile(ReadableFile file, const std::string& path,
+                                            const MeshReadOptions& options) {
   ASSIGN_OR_RETURN(const MeshFormat format, MeshFormatFromPath(path));
-  ASSIGN_OR_RETURN(const std::string data, ReadFileToString(path, options.max_file_bytes));
+  ASSIGN_OR_RETURN(const std::string data,
+                   ReadFileToString(std::move(file), path, options.max_file_bytes));
   const size_t slash = path.find_last_of('/');
   const absl::string_view name = slash == std::string::npos
                                      ? absl::string_view(path)

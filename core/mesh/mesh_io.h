@@ -61,6 +61,9 @@ absl::StatusOr<MeshReadResult> ReadMesh(std::string_view data, MeshFormat format
 // file's base name instead of the format name. NotFound if it does not exist.
 absl::StatusOr<MeshReadResult> ReadMeshFile(const std::string& path,
                                             const MeshReadOptions& options = {});
+// The same for a file already opened (format and messages from `path`).
+absl::StatusOr<MeshReadResult> ReadMeshFile(ReadableFile file, const std::string& path,
+                                            const MeshReadOptions& options = {});
 
 // A per-face scalar stored with the mesh by WritePly (e.g. a field's magnitude for a viewer).
 struct FaceProperty {

@@ -488,8 +488,22 @@ TEST_F(ServiceTest, LoadMeshStaysInsideTheDataRoot) {
   std::ofstream(data / "sub" / "ico.obj") << ObjText(Icosphere(2));
   std::ofstream(h_->root / "outside.obj") << ObjText(Icosphere(2));
   fs::create_symlink(h_->root / "outside.obj", data / "escape.obj");
+  // A relative symlink that stays inside is fine; an absolute one is refused even when it points
+  // inside (the kernel resolves below the root only); a directory symlink that leads out is too.
+  fs::create_symlink("sub/ico.obj", data / "inner.obj");
+  fs::create_symlink(data / "sub" / "ico.obj", data / "absolute.obj");
+  fs::create_directories(h_->root / "elsewhere");
+  std::ofstream(h_->root / "elsewhere" / "ico.obj") << ObjText(Icosphere(2));
+  fs::create_symlink(h_->root / "elsewhere", data / "door");
+  // Larger than --max-upload-mb 1: LoadMesh has the upload's size limit.
+  {
+    std::ofstream big(data / "big.obj");
+    big << ObjText(Icosphere(2));
+    big << std::string(1 << 20, '#') << "\n";
+  }
   FieldServerOptions options;
   options.data_root = data.string();
+  options.max_upload_mb = 1;
   auto h = Harness::Start("dataroot", options);
   ASSERT_NE(h, nullptr);
   auto load = [&](const std::string& path, v1::MeshInfo* info) {
@@ -506,6 +520,11 @@ TEST_F(ServiceTest, LoadMeshStaysInsideTheDataRoot) {
   EXPECT_EQ(load("sub/../../outside.obj", &info), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(load((h_->root / "outside.obj").string(), &info), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(load("escape.obj", &info), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(load("door/ico.obj", &info), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(load("inner.obj", &info), grpc::StatusCode::OK);
+  EXPECT_EQ(load("absolute.obj", &info), grpc::StatusCode::PERMISSION_DENIED);
+  EXPECT_EQ(load("./sub/ico.obj", &info), grpc::StatusCode::OK);
+  EXPECT_EQ(load("big.obj", &info), grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_EQ(load("sub/missing.obj", &info), grpc::StatusCode::NOT_FOUND);
   EXPECT_EQ(load("sub", &info), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(load("", &info), grpc::StatusCode::INVALID_ARGUMENT);
