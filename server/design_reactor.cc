@@ -34,6 +34,15 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
       FinishWith(this, (admit));
       return;
     }
+    if (!service->AcquireDesignSession()) {
+      finish_sent_ = true;
+      FinishWith(this, absl::ResourceExhaustedError(absl::StrCat(
+                           "the server has its maximum of ", service->options().max_design_sessions,
+                           " open design sessions (--max-design-sessions); close one or retry "
+                           "later")));
+      return;
+    }
+    holds_session_ = true;
     service_->RegisterStream(this);
     registered_ = true;
     reading_ = true;
@@ -118,6 +127,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
   void OnCancel() override { cancelled_.store(true); }
 
   void OnDone() override {
+    if (holds_session_) service_->ReleaseDesignSession();
     if (registered_) service_->UnregisterStream(this);
     DropRef();
   }
@@ -173,6 +183,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
   v1::DesignRequest request_;
   v1::DesignUpdate update_;
   DesignEditor editor_;
+  bool holds_session_ = false;  // one of the service's max_design_sessions places
 };
 
 }  // namespace

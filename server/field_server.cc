@@ -96,10 +96,11 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   if (options.store_dir.empty()) return absl::InvalidArgumentError("--store DIR is required");
   if (options.threads < 0 || options.memory_budget_mb < 0 || options.max_message_mb < 1 ||
       options.max_message_mb > 2047 || options.max_upload_mb < 1 || options.max_dimension < 1 ||
-      options.design_verify_interval < 1) {
+      options.design_verify_interval < 1 || options.max_design_sessions < 1) {
     return absl::InvalidArgumentError(
         "bad limits: --threads >= 0, --memory-budget-mb >= 0, 1 <= --max-message-mb <= 2047, "
-        "--max-upload-mb >= 1, --max-dimension >= 1, --design-verify-every >= 1");
+        "--max-upload-mb >= 1, --max-dimension >= 1, --design-verify-every >= 1, "
+        "--max-design-sessions >= 1");
   }
 
   std::unique_ptr<FieldServer> s(new FieldServer());
@@ -134,6 +135,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   service_options.max_upload_bytes = options.max_upload_mb << 20;
   service_options.max_message_bytes = options.max_message_mb << 20;
   service_options.design_verify_interval = options.design_verify_interval;
+  service_options.max_design_sessions = options.max_design_sessions;
   s->service_ = std::make_unique<FieldService>(s->registry_.get(), s->pool_.get(), service_options);
 
   // Link the health proto's descriptors into the generated pool so that reflection can describe

@@ -32,6 +32,7 @@ struct FieldServerOptions {
   int64_t max_upload_mb = 2048;
   int32_t max_dimension = 8192;
   int32_t design_verify_interval = 16;  // see DesignSessionOptions::verify_interval
+  int32_t max_design_sessions = 256;    // open Design streams at once; more: RESOURCE_EXHAUSTED
   std::string auth_token;               // required from clients when not empty
   // Listening on a non-loopback address needs an auth token, or this explicit opt-out.
   bool insecure = false;

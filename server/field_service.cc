@@ -87,6 +87,16 @@ void FieldService::BeginDrain() {
   }
 }
 
+bool FieldService::AcquireDesignSession() {
+  int32_t n = design_sessions_.load();
+  do {
+    if (n >= options_.max_design_sessions) return false;
+  } while (!design_sessions_.compare_exchange_weak(n, n + 1));
+  return true;
+}
+
+void FieldService::ReleaseDesignSession() { design_sessions_.fetch_sub(1); }
+
 void FieldService::RegisterStream(DrainableStream* stream) {
   std::lock_guard<std::mutex> lock(streams_mu_);
   streams_.insert(stream);

@@ -25,6 +25,7 @@ struct ServiceOptions {
   // Design sessions check every k-th edit's solution against the true system (and the risky
   // ones always): DesignSessionOptions::verify_interval.
   int32_t design_verify_interval = 16;
+  int32_t max_design_sessions = 256;
 
   // Bytes of payload (numbers) one response message may carry: the message limit less room for
   // the rest of the message (ids, timings, framing): 1/8 of the limit, at most 1 MiB.
@@ -68,6 +69,10 @@ class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
   void BeginDrain();
 
   // For DrainableStream implementations.
+  // One of the max_design_sessions places for a Design stream; false when all are taken.
+  bool AcquireDesignSession();
+  void ReleaseDesignSession();
+
   void RegisterStream(DrainableStream* stream);
   void UnregisterStream(DrainableStream* stream);
 
@@ -146,6 +151,7 @@ class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
   std::atomic<bool> draining_{false};
   std::mutex streams_mu_;
   std::set<DrainableStream*> streams_;
+  std::atomic<int32_t> design_sessions_{0};
 };
 
 }  // namespace fieldspace::server

@@ -32,7 +32,7 @@ namespace {
 constexpr char kUsage[] =
     "usage: fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]\n"
     "                   [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]\n"
-    "                   [--max-dimension N] [--design-verify-every K]\n"
+    "                   [--max-dimension N] [--design-verify-every K] [--max-design-sessions N]\n"
     "                   [--auth-token-file FILE] [--insecure]\n"
     "                   [--drain-seconds S] [--demo]\n"
     "\n"
@@ -47,6 +47,7 @@ constexpr char kUsage[] =
     "  --max-dimension N       largest basis dimension d (8192)\n"
     "  --design-verify-every K check every K-th design edit's solution against the true\n"
     "                          system, and risky ones always (16; 1: every edit)\n"
+    "  --max-design-sessions N open Design streams at once (256)\n"
     "  --auth-token-file FILE  clients must send 'authorization: Bearer <token>'\n"
     "  --insecure              allow a non-loopback address without a token\n"
     "  --drain-seconds S       how long shutdown waits for in-flight RPCs (10)\n"
@@ -78,6 +79,7 @@ int main(int argc, char** argv) {
       {"threads", &options.threads},
       {"max-dimension", &options.max_dimension},
       {"design-verify-every", &options.design_verify_interval},
+      {"max-design-sessions", &options.max_design_sessions},
       {"debug-save-pause-ms", &options.debug_save_pause_ms}};
   fieldspace::FlagSpec spec;
   spec.switches = {"help", "demo", "insecure"};

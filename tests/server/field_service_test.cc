@@ -1090,6 +1090,42 @@ TEST_F(ServiceTest, EigenfieldsApproximateTheSphereSpectrumFromAbove) {
   EXPECT_EQ(stub()->Eigenfields(&c, r, &resp).error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
+TEST_F(ServiceTest, DesignSessionsBeyondTheCapAreResourceExhausted) {
+  FieldServerOptions options;
+  options.max_design_sessions = 2;
+  auto h = Harness::Start("session_cap", options);
+  ASSERT_NE(h, nullptr);
+  MeshArrays m = Icosphere(2);
+  Uploaded up = Upload(h->stub.get(), Chunked(RawBytes(m), RawHeader(m), 1 << 20));
+  ASSERT_TRUE(up.status.ok());
+  Built b = Build(h->stub.get(), BuildRequest(up.info.id(), v1::FIELD_KIND_VECTOR, 20));
+  ASSERT_TRUE(b.status.ok()) << b.status.error_message();
+  grpc::ClientContext c1, c2;
+  auto s1 = h->stub->Design(&c1);
+  auto s2 = h->stub->Design(&c2);
+  v1::DesignUpdate u;
+  ASSERT_TRUE(s1->Write(Open(b.basis().id(), 1, 0, 1)) && s1->Read(&u));
+  ASSERT_TRUE(s2->Write(Open(b.basis().id(), 1, 0, 1)) && s2->Read(&u));
+  // A third is refused with a message that names the flag.
+  Session third = RunSession(h->stub.get(), {Open(b.basis().id(), 1, 0, 1)});
+  EXPECT_EQ(third.status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_THAT(third.status.error_message(), ::testing::HasSubstr("--max-design-sessions"));
+  EXPECT_TRUE(third.updates.empty());
+  // Closing one frees its place (once the server has finished the call: poll briefly).
+  s1->WritesDone();
+  EXPECT_TRUE(s1->Finish().ok());
+  Session fourth;
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    fourth = RunSession(h->stub.get(), {Open(b.basis().id(), 1, 0, 1)});
+    if (fourth.status.error_code() != grpc::StatusCode::RESOURCE_EXHAUSTED) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_TRUE(fourth.status.ok()) << fourth.status.error_message();
+  EXPECT_EQ(fourth.updates.size(), 1u);
+  s2->WritesDone();
+  EXPECT_TRUE(s2->Finish().ok());
+}
+
 TEST_F(ServiceTest, ConcurrentSessionsWithEqualWeightsShareOneFactorization) {
   // Two open sessions on one basis with the same (mu_s, mu_b): the second open finds the first
   // one's factorization (no refactorization), and equal edits give equal answers.
