@@ -233,6 +233,18 @@ class FieldTest(unittest.TestCase):
                                      axis=1)
         self.assertAlmostEqual(float(np.sum(areas * np.sum(s.field ** 2, axis=1))), 1.0, places=4)
 
+    def test_singularities_come_with_solve_smooth_and_align_on_request(self):
+        s = CLIENT.solve(VECTOR, [5], [[1.0, 0.0, 0.0]], singularities=True)
+        self.assertIsNotNone(s.singularities)
+        alone = CLIENT.singularities(VECTOR, coefficients=s.coefficients)
+        np.testing.assert_array_equal(s.singularities.vertices, alone.vertices)
+        np.testing.assert_array_equal(s.singularities.index, alone.index)
+        self.assertEqual(s.singularities.index_sum, 2)
+        self.assertIsNone(CLIENT.solve(VECTOR, [5], [[1.0, 0.0, 0.0]]).singularities)
+        field = CLIENT.lift(VECTOR, s.coefficients)
+        smoothed = CLIENT.smooth(VECTOR, field, singularities=True)
+        self.assertEqual(smoothed.singularities.index_sum, 2)
+
     def test_singularities_sum_to_the_euler_characteristic(self):
         s = CLIENT.smoothest(VECTOR)
         sing = CLIENT.singularities(VECTOR, coefficients=s.coefficients)

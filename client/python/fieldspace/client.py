@@ -375,7 +375,7 @@ class Client:
 
     def solve(self, basis, faces=(), values=None, *, weights=None, constraint_weights=None,
               hard=False, encoding=None, return_field=False, field_encoding=fld.AMBIENT,
-              timeout=_DEFAULT):
+              singularities=False, timeout=_DEFAULT):
         """The reduced model problem with constraints given as arrays.
 
         Args:
@@ -386,14 +386,15 @@ class Client:
             constraint_weights: (k,) soft weights (default 1 each).
             hard: a bool, or (k,) bools: interpolate exactly instead of penalizing.
             return_field: also return the lifted field (all faces) in ``field_encoding``.
+            singularities: also return the solution's singularities (vector and n-fields).
         Returns:
-            Solution(coefficients, field, timings).
+            Solution(coefficients, field, timings, singularities=...).
         """
         what = "Solve"
         field_type, mesh_id = self._basis(basis)
         request = pb.SolveRequest(basis_id=_id(basis),
                                   weights=Weights.of(weights, _SOLVE_WEIGHTS).proto(),
-                                  return_field=return_field,
+                                  return_field=return_field, singularities=singularities,
                                   field_encoding=fld.encoding_proto(field_encoding, what))
         request.constraints.extend(self._constraints(what, field_type, faces, values,
                                                      constraint_weights, hard, encoding))
@@ -402,7 +403,9 @@ class Client:
         if return_field:
             field = self._decode(fld.flat_floats([r.field.values], len(r.field.values)),
                                  field_type, mesh_id, field_encoding)
-        return Solution(np.array(r.coefficients), field, _timings(r.timings))
+        return Solution(np.array(r.coefficients), field, _timings(r.timings),
+                        singularities=(Singularities.from_proto(r.singularities)
+                                       if r.HasField("singularities") else None))
 
     @staticmethod
     def _constraints(what, field_type, faces, values, constraint_weights, hard, encoding):
@@ -515,20 +518,11 @@ class Client:
         else:
             request.field.CopyFrom(self._field_values(what, basis, field, encoding))
         r = self._unary(what, self._stub.Singularities, request, timeout)
-        s = r.singularities
-        return Singularities(
-            n=r.n,
-            vertices=np.array([x.vertex for x in s], dtype=np.int64),
-            index=np.array([x.index for x in s], dtype=np.int64),
-            turns=np.array([x.turns for x in s], dtype=np.float64),
-            positions=np.array([list(x.position) for x in s], dtype=np.float64).reshape(-1, 3),
-            index_sum=r.index_sum, euler_characteristic=r.euler_characteristic,
-            boundary_vertices=np.array([x.vertex for x in r.boundary], dtype=np.int64),
-            boundary_turns=np.array([x.turns for x in r.boundary], dtype=np.float64),
-            undefined_vertices=np.array(r.undefined_vertices, dtype=np.int64))
+        return Singularities.from_proto(r)
 
     def smooth(self, basis, field, weights=None, face_weights=None, scale_free=True,
-               return_field=False, field_encoding=fld.AMBIENT, encoding=None, timeout=_DEFAULT):
+               return_field=False, field_encoding=fld.AMBIENT, encoding=None, singularities=False,
+               timeout=_DEFAULT):
         """The field of the basis closest to ``field`` (all faces) with harmonic and biharmonic
         fairness: Solution(coefficients, field, timings, backward_error).
 
@@ -542,6 +536,7 @@ class Client:
                                    field=self._field_values(what, basis, field, encoding),
                                    weights=Weights.of(weights, _SMOOTH_WEIGHTS).proto(),
                                    scale_free=scale_free, return_field=return_field,
+                                   singularities=singularities,
                                    field_encoding=fld.encoding_proto(field_encoding, what))
         if face_weights is not None:
             request.face_weights.extend(np.asarray(face_weights, dtype=np.float64).ravel())
@@ -549,7 +544,7 @@ class Client:
         return self._smoothed(r, return_field, field_type, mesh_id, field_encoding)
 
     def align(self, basis, weights=None, estimator="jet", return_field=False,
-              field_encoding=fld.AMBIENT, timeout=_DEFAULT):
+              field_encoding=fld.AMBIENT, singularities=False, timeout=_DEFAULT):
         """A smooth n-field (n-field basis, n = 2 or 4) aligned to the principal curvature
         directions; ``weights`` (mu_s, mu_b: fairness, mu_c: alignment), default (0.001, 0, 1).
         Returns Solution(coefficients, field, timings, backward_error)."""
@@ -561,6 +556,7 @@ class Client:
         request = pb.AlignRequest(basis_id=_id(basis),
                                   weights=Weights.of(weights, _SMOOTH_WEIGHTS).proto(),
                                   estimator=_ESTIMATORS[estimator], return_field=return_field,
+                                  singularities=singularities,
                                   field_encoding=fld.encoding_proto(field_encoding, what))
         r = self._unary(what, self._stub.Align, request, timeout)
         return self._smoothed(r, return_field, field_type, mesh_id, field_encoding)
@@ -570,7 +566,9 @@ class Client:
         if return_field:
             field = self._decode(fld.flat_floats([r.field.values], len(r.field.values)),
                                  field_type, mesh_id, field_encoding)
-        return Solution(np.array(r.coefficients), field, _timings(r.timings), r.backward_error)
+        return Solution(np.array(r.coefficients), field, _timings(r.timings), r.backward_error,
+                        singularities=(Singularities.from_proto(r.singularities)
+                                       if r.HasField("singularities") else None))
 
     # -- design sessions -----------------------------------------------------------------------
 

@@ -136,12 +136,14 @@ class Projection:
 @dataclass(frozen=True)
 class Solution:
     """The answer of solve, smooth and align: d coefficients, the lifted field when asked for
-    (``return_field=True``), the server's timings in ms, and (smooth, align) the backward error."""
+    (``return_field=True``), the server's timings in ms, (smooth, align) the backward error, and
+    the result's singularities when asked for (``singularities=True``)."""
 
     coefficients: np.ndarray
     field: Optional[np.ndarray] = None
     timings: dict = _field(default_factory=dict)
     backward_error: Optional[float] = None
+    singularities: Optional["Singularities"] = None  # with ``singularities=True``
 
 
 @dataclass(frozen=True)
@@ -189,6 +191,20 @@ class Singularities:
     boundary_vertices: np.ndarray
     boundary_turns: np.ndarray
     undefined_vertices: np.ndarray
+
+    @classmethod
+    def from_proto(cls, r):
+        s = r.singularities
+        return cls(
+            n=r.n,
+            vertices=np.array([x.vertex for x in s], dtype=np.int64),
+            index=np.array([x.index for x in s], dtype=np.int64),
+            turns=np.array([x.turns for x in s], dtype=np.float64),
+            positions=np.array([list(x.position) for x in s], dtype=np.float64).reshape(-1, 3),
+            index_sum=r.index_sum, euler_characteristic=r.euler_characteristic,
+            boundary_vertices=np.array([x.vertex for x in r.boundary], dtype=np.int64),
+            boundary_turns=np.array([x.turns for x in r.boundary], dtype=np.float64),
+            undefined_vertices=np.array(r.undefined_vertices, dtype=np.int64))
 
 
 @dataclass(frozen=True)
