@@ -39,9 +39,11 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   mesh MESH_ID                        one mesh
   delete-mesh MESH_ID [--cascade]     delete a mesh (with --cascade: and its bases)
   build MESH_ID --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--seed S]
-        [--fields-per-region M] [--coarse-dim C]
+        [--fields-per-region M] [--coarse-dim C] [--no-kernel-columns]
                                       build a basis: progress on stderr, BasisInfo ("id") on stdout;
-                                      C > 0 adds a coarse level of C of the D columns
+                                      C > 0 adds a coarse level of C of the D columns;
+                                      --no-kernel-columns: the paper's basis exactly, without
+                                      the kernel (harmonic) columns appended by default
   bases [--mesh MESH_ID]              list bases (and running builds)
   basis BASIS_ID                      one basis
   delete-basis BASIS_ID               delete a basis
@@ -203,6 +205,7 @@ void WriteBasisInfo(JsonWriter& j, const v1::BasisInfo& b) {
   j.Key("fields_per_region").Int(b.fields_per_region());
   j.Key("seed").Int(static_cast<int64_t>(b.seed()));
   j.Key("coarse_dimension").Int(b.coarse_dimension());
+  j.Key("kernel_columns").Bool(b.kernel_columns());
   j.Key("adaptive").Bool(b.adaptive());
   j.Key("state").String(b.state() == v1::BASIS_STATE_READY ? "ready" : "building");
   j.Key("dofs").Int(b.dofs());
@@ -340,8 +343,9 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"mesh", {{}, 1, &Cli::Mesh}},
         {"delete-mesh", {Flags({}, {"cascade"}), 1, &Cli::DeleteMesh}},
         {"build",
-         {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim"}), 1,
-          &Cli::Build}},
+         {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim"},
+                {"no-kernel-columns"}),
+          1, &Cli::Build}},
         {"bases", {Flags({"mesh"}), 0, &Cli::Bases}},
         {"basis", {{}, 1, &Cli::Basis}},
         {"delete-basis", {{}, 1, &Cli::DeleteBasis}},
@@ -469,6 +473,7 @@ int Cli::Build(const CommandLine& a) {
   const int64_t coarse = ParseInt(a, "coarse-dim", 0);
   if (coarse < 0 || coarse >= dim) throw UsageError("--coarse-dim must be in [0, --dim)");
   request.set_coarse_dimension(static_cast<int32_t>(coarse));
+  request.set_kernel_columns(!a.Has("no-kernel-columns"));
 
   const bool tty = isatty(STDERR_FILENO) != 0 && &err_ == &std::cerr;
   v1::BuildPhase last_phase = v1::BUILD_PHASE_UNSPECIFIED;
