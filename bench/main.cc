@@ -39,6 +39,7 @@ constexpr Command kCommands[] = {
      "[--max-constraints C] [--no-full] [--full-biharmonic] [--no-kernel-columns]"},
     {"curvature", fieldspace::bench::RunCurvature,
      "curvature MESH [--estimator jet|normal-differences]"},
+    {"kernel", fieldspace::bench::RunKernel, "kernel MESH --field vector|nfield|tensor [--n N]"},
     {"smooth", fieldspace::bench::RunSmooth,
      "smooth MESH --field tensor|vector|nfield [--n N] --dim D [--sigma S] [--seed N] "
      "[--coarse-dim C] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] [--scale-free] "

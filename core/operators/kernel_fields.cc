@@ -12,9 +12,14 @@
 #include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
 #include "core/linalg/sparse_cholesky.h"
+#include "tbb/blocked_range.h"
+#include "tbb/parallel_for.h"
+#include "tbb/parallel_reduce.h"
 
 namespace fieldspace {
 namespace {
+
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
 absl::Status Cancelled() { return absl::CancelledError("kernel field computation cancelled"); }
 
@@ -56,8 +61,9 @@ double EdgeSign(const TriangleMesh& mesh, int32_t f, int k) {
 
 // The candidate fields of the vector Hodge Laplacian's kernel (see the header): one harmonic
 // field per tree-cotree generator. Columns of a k x (generators) matrix.
-absl::StatusOr<Eigen::MatrixXd> HarmonicCandidates(const TriangleMesh& mesh,
-                                                   const CancelFlag* cancel) {
+absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, const CancelFlag* cancel,
+                                             KernelFieldStats* stats) {
+  const auto t0 = std::chrono::steady_clock::now();
   const int32_t nv = mesh.num_vertices();
   const int32_t ne = mesh.num_edges();
   const int32_t nf = mesh.num_faces();
@@ -169,44 +175,60 @@ absl::StatusOr<Eigen::MatrixXd> HarmonicCandidates(const TriangleMesh& mesh,
                         generators.size(), expected));
   }
   const int32_t ng = static_cast<int32_t>(generators.size());
-  Eigen::MatrixXd X = Eigen::MatrixXd::Zero(2 * static_cast<Eigen::Index>(nf), ng);
+  RowMatrix X = RowMatrix::Zero(2 * static_cast<Eigen::Index>(nf), ng);
   if (ng == 0) return X;
 
-  // 2. One cocycle per generator, solved face by face from the leaves of the dual tree up, read
-  // as a piecewise constant field: with u = 0 at corner 0, u1 = omega(corner 0 -> 1) and
-  // u2 = u1 + omega(corner 1 -> 2), X_f = u1 grad phi_1 + u2 grad phi_2.
+  // 2. One cocycle per generator (all at once, edge-major), solved face by face from the leaves
+  // of the dual tree up, read as a piecewise constant field: with u = 0 at corner 0,
+  // u1 = omega(corner 0 -> 1) and u2 = u1 + omega(corner 1 -> 2),
+  // X_f = u1 grad phi_1 + u2 grad phi_2.
   std::vector<Eigen::Matrix<double, 2, 3>> grads(nf);
   for (int32_t f = 0; f < nf; ++f) grads[f] = HatGradients(mesh, f);
-  std::vector<double> omega(ne, 0.0);
-  for (int32_t j = 0; j < ng; ++j) {
-    std::fill(omega.begin(), omega.end(), 0.0);
-    omega[generators[j]] = 1.0;
+  {
+    RowMatrix omega = RowMatrix::Zero(ne, ng);
+    for (int32_t j = 0; j < ng; ++j) omega(generators[j], j) = 1.0;
     for (int32_t i = nf - 1; i >= 0; --i) {
       const int32_t f = order[i];
       const int32_t p = parent_edge[f];
       if (p < 0) continue;  // a closed component's root: its equation holds by the others
-      double sum = 0.0, sign_p = 0.0;
+      double sign_p = 0.0;
+      auto row_p = omega.row(p);
+      row_p.setZero();
       for (int k = 0; k < 3; ++k) {
         const int32_t e = FE(f, k);
         if (e == p) {
           sign_p = EdgeSign(mesh, f, k);
         } else {
-          sum += EdgeSign(mesh, f, k) * omega[e];
+          row_p += EdgeSign(mesh, f, k) * omega.row(e);
         }
       }
-      omega[p] = -sum / sign_p;
-    }
-    for (int32_t f = 0; f < nf; ++f) {
-      const double u1 = EdgeSign(mesh, f, 2) * omega[FE(f, 2)];
-      const double u2 = u1 + EdgeSign(mesh, f, 0) * omega[FE(f, 0)];
-      X.block<2, 1>(2 * f, j) = u1 * grads[f].col(1) + u2 * grads[f].col(2);
+      row_p *= -1.0 / sign_p;
     }
     if (IsCancelled(cancel)) return Cancelled();
+    for (int32_t f = 0; f < nf; ++f) {
+      // Plain loops here and below: Eigen's dynamic-size row products allocate temporaries.
+      const double s2 = EdgeSign(mesh, f, 2), s0 = EdgeSign(mesh, f, 0);
+      const double* o2 = omega.data() + static_cast<Eigen::Index>(FE(f, 2)) * ng;
+      const double* o0 = omega.data() + static_cast<Eigen::Index>(FE(f, 0)) * ng;
+      double* x0 = X.data() + 2 * static_cast<Eigen::Index>(f) * ng;
+      double* x1 = x0 + ng;
+      const Eigen::Matrix<double, 2, 3>& g = grads[f];
+      for (int32_t j = 0; j < ng; ++j) {
+        const double u1 = s2 * o2[j];
+        const double u2 = u1 + s0 * o0[j];
+        x0[j] = g(0, 1) * u1 + g(0, 2) * u2;
+        x1[j] = g(1, 1) * u1 + g(1, 2) * u2;
+      }
+    }
   }
-  std::vector<double>().swap(omega);
+  if (IsCancelled(cancel)) return Cancelled();
+  const auto t1 = std::chrono::steady_clock::now();
+  stats->candidate_seconds = std::chrono::duration<double>(t1 - t0).count();
 
   // 3. Remove the exact part: L u = G_V^T M X with L = G_V^T M G_V (cotan Laplacian, #V x #V,
   // symmetric PSD, constants per component in its kernel), one vertex per component pinned.
+  // Assembled per edge (off-diagonal) and vertex (diagonal), upper triangle only (all CHOLMOD
+  // reads).
   const FaceMatrix& F = mesh.faces();
   std::vector<int32_t> pinned_of(nc, -1);
   for (int32_t f = 0; f < nf; ++f) {
@@ -217,38 +239,87 @@ absl::StatusOr<Eigen::MatrixXd> HarmonicCandidates(const TriangleMesh& mesh,
   for (int32_t c = 0; c < nc; ++c) index[pinned_of[c]] = -1;
   int32_t n = 0;
   for (int32_t v = 0; v < nv; ++v) index[v] = index[v] < 0 ? -1 : n++;
-  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(n, ng);
-  std::vector<Eigen::Triplet<double>> triplets;
-  triplets.reserve(static_cast<size_t>(9) * nf);
+  std::vector<double> edge_value(ne, 0.0), vertex_value(nv, 0.0);
+  RowMatrix rhs = RowMatrix::Zero(n, ng);
   for (int32_t f = 0; f < nf; ++f) {
     const double a = mesh.face_areas()[f];
-    for (int r = 0; r < 3; ++r) {
-      const int32_t i = index[F(f, r)];
+    const Eigen::Matrix<double, 2, 3>& g = grads[f];
+    for (int k = 0; k < 3; ++k) {
+      vertex_value[F(f, k)] += a * g.col(k).squaredNorm();
+      edge_value[FE(f, k)] += a * g.col((k + 1) % 3).dot(g.col((k + 2) % 3));
+      const int32_t i = index[F(f, k)];
       if (i < 0) continue;
-      rhs.row(i) += a * grads[f].col(r).transpose() * X.middleRows<2>(2 * f);
-      for (int c = 0; c < 3; ++c) {
-        const int32_t j = index[F(f, c)];
-        if (j >= 0) triplets.emplace_back(i, j, a * grads[f].col(r).dot(grads[f].col(c)));
-      }
+      const double* x0 = X.data() + 2 * static_cast<Eigen::Index>(f) * ng;
+      const double* x1 = x0 + ng;
+      double* b = rhs.data() + static_cast<Eigen::Index>(i) * ng;
+      const double c0 = a * g(0, k), c1 = a * g(1, k);
+      for (int32_t j = 0; j < ng; ++j) b[j] += c0 * x0[j] + c1 * x1[j];
     }
   }
   if (n > 0) {
     Eigen::SparseMatrix<double> L(n, n);
-    L.setFromTriplets(triplets.begin(), triplets.end());
-    std::vector<Eigen::Triplet<double>>().swap(triplets);
+    {
+      // Column index[v]: rows index[w] for the neighbours w < v (same order as v), then v.
+      int64_t nnz = 0;
+      for (int32_t v = 0; v < nv; ++v) {
+        if (index[v] < 0) continue;
+        ++nnz;
+        for (int64_t q = offset[v]; q < offset[v + 1]; ++q) {
+          const int32_t e = incident[q];
+          const int32_t w = E(e, 0) == v ? E(e, 1) : E(e, 0);
+          nnz += (w < v && index[w] >= 0) ? 1 : 0;
+        }
+      }
+      L.resizeNonZeros(static_cast<Eigen::Index>(nnz));
+      int32_t* outer = L.outerIndexPtr();
+      int32_t* inner = L.innerIndexPtr();
+      double* value = L.valuePtr();
+      int64_t pos = 0;
+      std::vector<std::pair<int32_t, double>> column;
+      for (int32_t v = 0; v < nv; ++v) {
+        const int32_t iv = index[v];
+        if (iv < 0) continue;
+        outer[iv] = static_cast<int32_t>(pos);
+        column.clear();
+        for (int64_t q = offset[v]; q < offset[v + 1]; ++q) {
+          const int32_t e = incident[q];
+          const int32_t w = E(e, 0) == v ? E(e, 1) : E(e, 0);
+          if (w < v && index[w] >= 0) column.emplace_back(index[w], edge_value[e]);
+        }
+        std::sort(column.begin(), column.end());
+        for (const auto& [row, x] : column) {
+          inner[pos] = row;
+          value[pos++] = x;
+        }
+        inner[pos] = iv;
+        value[pos++] = vertex_value[v];
+      }
+      outer[n] = static_cast<int32_t>(pos);
+    }
     if (IsCancelled(cancel)) return Cancelled();
     CholeskyOptions cholesky;
-    cholesky.check_input = false;  // symmetric by construction (summed in the same order)
+    cholesky.check_input = false;  // symmetric by construction (upper triangle only)
     ASSIGN_OR_RETURN(SparseCholesky factor, SparseCholesky::Factorize(L, cholesky));
     if (IsCancelled(cancel)) return Cancelled();
-    ASSIGN_OR_RETURN(Eigen::MatrixXd u, factor.SolveMatrix(rhs));
+    ASSIGN_OR_RETURN(Eigen::MatrixXd u_cols, factor.SolveMatrix(Eigen::MatrixXd(rhs)));
+    const RowMatrix u = u_cols;
     for (int32_t f = 0; f < nf; ++f) {
       for (int r = 0; r < 3; ++r) {
         const int32_t i = index[F(f, r)];
-        if (i >= 0) X.middleRows<2>(2 * f) -= grads[f].col(r) * u.row(i);
+        if (i < 0) continue;
+        const double* ui = u.data() + static_cast<Eigen::Index>(i) * ng;
+        double* x0 = X.data() + 2 * static_cast<Eigen::Index>(f) * ng;
+        double* x1 = x0 + ng;
+        const double g0 = grads[f](0, r), g1 = grads[f](1, r);
+        for (int32_t j = 0; j < ng; ++j) {
+          x0[j] -= g0 * ui[j];
+          x1[j] -= g1 * ui[j];
+        }
       }
     }
   }
+  stats->poisson_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
   return X;
 }
 
@@ -256,9 +327,8 @@ absl::StatusOr<Eigen::MatrixXd> HarmonicCandidates(const TriangleMesh& mesh,
 // p fields transported from its first face along a spanning tree of the dual graph. The
 // transport P from face f to face g is read off S: S_gf = -w_e P with P orthogonal, so
 // w_e = ||S_gf||_F / sqrt(p).
-absl::StatusOr<Eigen::MatrixXd> ParallelCandidates(const TriangleMesh& mesh,
-                                                   const FieldOperator& op,
-                                                   const CancelFlag* cancel) {
+absl::StatusOr<RowMatrix> ParallelCandidates(const TriangleMesh& mesh, const FieldOperator& op,
+                                             const CancelFlag* cancel) {
   const int32_t p = op.type.dofs_per_face();
   const int32_t nf = mesh.num_faces();
   const FaceMatrix& FN = mesh.face_neighbors();
@@ -278,8 +348,8 @@ absl::StatusOr<Eigen::MatrixXd> ParallelCandidates(const TriangleMesh& mesh,
     }
   }
   const int32_t nc = mesh.num_components();
-  Eigen::MatrixXd X =
-      Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(p) * nf, static_cast<Eigen::Index>(p) * nc);
+  RowMatrix X =
+      RowMatrix::Zero(static_cast<Eigen::Index>(p) * nf, static_cast<Eigen::Index>(p) * nc);
   std::vector<uint8_t> seen(nf, 0), done(nc, 0);
   std::vector<int32_t> queue;
   queue.reserve(nf);
@@ -312,6 +382,105 @@ absl::StatusOr<Eigen::MatrixXd> ParallelCandidates(const TriangleMesh& mesh,
   return X;
 }
 
+// X^T M X (q x q, symmetric) for a k x q row-major X and the diagonal mass (k), in parallel.
+Eigen::MatrixXd MassGram(const Eigen::VectorXd& mass, const RowMatrix& X) {
+  const Eigen::Index q = X.cols();
+  Eigen::MatrixXd gram = tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<Eigen::Index>(0, X.rows(), 1 << 14), Eigen::MatrixXd::Zero(q, q).eval(),
+      [&](const tbb::blocked_range<Eigen::Index>& r, Eigen::MatrixXd acc) {
+        // Plain loops: Eigen's dynamic-size outer product would allocate a temporary per row.
+        for (Eigen::Index i = r.begin(); i != r.end(); ++i) {
+          const double* x = X.data() + i * q;
+          for (Eigen::Index b = 0; b < q; ++b) {
+            const double mx = mass[i] * x[b];
+            for (Eigen::Index a = 0; a < q; ++a) acc(a, b) += mx * x[a];
+          }
+        }
+        return acc;
+      },
+      [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) -> Eigen::MatrixXd { return a + b; });
+  return 0.5 * (gram + gram.transpose());
+}
+
+// X A (k x q') for a row-major k x q X and a small q x q' A, in parallel over rows.
+RowMatrix RowTimes(const RowMatrix& X, const Eigen::MatrixXd& A) {
+  const Eigen::Index q = X.cols(), q2 = A.cols();
+  RowMatrix out(X.rows(), q2);
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, X.rows(), 1 << 14),
+                    [&](const tbb::blocked_range<Eigen::Index>& r) {
+                      for (Eigen::Index i = r.begin(); i != r.end(); ++i) {
+                        const double* x = X.data() + i * q;
+                        double* o = out.data() + i * q2;
+                        for (Eigen::Index b = 0; b < q2; ++b) {
+                          double v = 0;
+                          for (Eigen::Index a = 0; a < q; ++a) v += x[a] * A(a, b);
+                          o[b] = v;
+                        }
+                      }
+                    });
+  return out;
+}
+
+// Z^T S Z (q x q, symmetric) for S symmetric (both triangles stored, column-major) and a k x q
+// row-major Z, in parallel: column i of S is row i, so (S Z)_i = sum_j S_ji Z_j.
+Eigen::MatrixXd StiffnessGram(const Eigen::SparseMatrix<double>& S, const RowMatrix& Z) {
+  const Eigen::Index q = Z.cols();
+  Eigen::MatrixXd gram = tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<Eigen::Index>(0, S.outerSize(), 1 << 12),
+      Eigen::MatrixXd::Zero(q, q).eval(),
+      [&](const tbb::blocked_range<Eigen::Index>& r, Eigen::MatrixXd acc) {
+        std::vector<double> sz(q);
+        for (Eigen::Index i = r.begin(); i != r.end(); ++i) {
+          std::fill(sz.begin(), sz.end(), 0.0);
+          for (Eigen::SparseMatrix<double>::InnerIterator it(S, i); it; ++it) {
+            const double* zj = Z.data() + it.row() * q;
+            for (Eigen::Index a = 0; a < q; ++a) sz[a] += it.value() * zj[a];
+          }
+          const double* zi = Z.data() + i * q;
+          for (Eigen::Index b = 0; b < q; ++b) {
+            for (Eigen::Index a = 0; a < q; ++a) acc(a, b) += zi[a] * sz[b];
+          }
+        }
+        return acc;
+      },
+      [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) -> Eigen::MatrixXd { return a + b; });
+  return 0.5 * (gram + gram.transpose());
+}
+
+// Z^T S Z for the vector Hodge Laplacian through its factored form (docs/conventions.md, Vector
+// Hodge Laplacian): x^T S x = sum_v (1 / Mv_v) (sum_{f at v} area_f grad phi_v . x_f)^2
+// + sum_e (1 / Me_e) (sum_{f at e} t_{f,e} . x_f)^2, O(#F q^2) instead of a pass over S's nonzeros
+// with random reads of Z.
+Eigen::MatrixXd HodgeGram(const TriangleMesh& mesh, const RowMatrix& Z) {
+  const Eigen::Index q = Z.cols();
+  const int32_t nf = mesh.num_faces();
+  const FaceMatrix& F = mesh.faces();
+  const FaceMatrix& FE = mesh.face_edges();
+  RowMatrix div = RowMatrix::Zero(mesh.num_vertices(), q);
+  RowMatrix curl = RowMatrix::Zero(mesh.num_edges(), q);
+  Eigen::VectorXd vertex_mass = Eigen::VectorXd::Zero(mesh.num_vertices());
+  Eigen::VectorXd edge_mass = Eigen::VectorXd::Zero(mesh.num_edges());
+  for (int32_t f = 0; f < nf; ++f) {
+    const Eigen::Matrix<double, 2, 3> t = FrameEdges(mesh, f);
+    const double third = mesh.face_areas()[f] / 3.0;
+    const double* z0 = Z.data() + 2 * static_cast<Eigen::Index>(f) * q;
+    const double* z1 = z0 + q;
+    for (int k = 0; k < 3; ++k) {
+      // area_f grad phi_k = J t_k / 2.
+      const double ag0 = -0.5 * t(1, k), ag1 = 0.5 * t(0, k);
+      double* dv = div.data() + static_cast<Eigen::Index>(F(f, k)) * q;
+      double* ce = curl.data() + static_cast<Eigen::Index>(FE(f, k)) * q;
+      for (Eigen::Index j = 0; j < q; ++j) {
+        dv[j] += ag0 * z0[j] + ag1 * z1[j];
+        ce[j] += t(0, k) * z0[j] + t(1, k) * z1[j];
+      }
+      vertex_mass[F(f, k)] += third;
+      edge_mass[FE(f, k)] += third;
+    }
+  }
+  return MassGram(vertex_mass.cwiseInverse(), div) + MassGram(edge_mass.cwiseInverse(), curl);
+}
+
 }  // namespace
 
 absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
@@ -332,25 +501,26 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   KernelFieldStats& st = stats != nullptr ? *stats : local_stats;
   st = KernelFieldStats();
   const bool vector = op.type.kind == FieldKind::kVector;
-  Eigen::MatrixXd H;
+  RowMatrix H;
   if (vector) {
-    ASSIGN_OR_RETURN(H, HarmonicCandidates(mesh, options.cancel));
+    ASSIGN_OR_RETURN(H, HarmonicCandidates(mesh, options.cancel, &st));
     for (const MeshComponent& c : mesh.components()) {
       if (c.num_boundary_loops == 0) st.expected_harmonic += 2 - c.euler_characteristic;
     }
   } else {
     ASSIGN_OR_RETURN(H, ParallelCandidates(mesh, op, options.cancel));
+    st.candidate_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
+  const auto t_ritz = std::chrono::steady_clock::now();
   st.candidates = static_cast<int32_t>(H.cols());
   st.lambda_ref = op.stiffness.diagonal().sum() / op.mass.sum();
   if (H.cols() == 0) {
     st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    return H;
+    return Eigen::MatrixXd(H.rows(), 0);
   }
   // 4. Rank-revealing M-orthonormalization, then Rayleigh-Ritz with S.
-  const Eigen::MatrixXd MH = op.mass.asDiagonal() * H;
-  Eigen::MatrixXd gram = H.transpose() * MH;
-  gram = 0.5 * (gram + gram.transpose()).eval();
+  Eigen::MatrixXd gram = MassGram(op.mass, H);
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> ge(gram);
   const double dmax = ge.eigenvalues().maxCoeff();
   std::vector<int> keep;
@@ -361,12 +531,10 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   for (size_t i = 0; i < keep.size(); ++i) {
     W.col(i) = ge.eigenvectors().col(keep[i]) / std::sqrt(ge.eigenvalues()[keep[i]]);
   }
-  Eigen::MatrixXd Z = H * W;
+  RowMatrix Z = RowTimes(H, W);
   H.resize(0, 0);
   if (IsCancelled(options.cancel)) return Cancelled();
-  const Eigen::MatrixXd SZ = op.stiffness * Z;
-  Eigen::MatrixXd Q = Z.transpose() * SZ;
-  Q = 0.5 * (Q + Q.transpose()).eval();
+  Eigen::MatrixXd Q = vector ? HodgeGram(mesh, Z) : StiffnessGram(op.stiffness, Z);
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> qe(Q);
   std::vector<int> accepted;
   for (int i = 0; i < Q.rows(); ++i) {
@@ -386,17 +554,26 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   }
   Eigen::MatrixXd R(Q.rows(), static_cast<Eigen::Index>(accepted.size()));
   for (size_t i = 0; i < accepted.size(); ++i) R.col(i) = qe.eigenvectors().col(accepted[i]);
-  Eigen::MatrixXd result = Z * R;
-  // One more M-orthonormalization against the rounding of the two small eigensolves.
-  if (result.cols() > 0) {
-    Eigen::MatrixXd g2 = result.transpose() * (op.mass.asDiagonal() * result);
-    g2 = 0.5 * (g2 + g2.transpose()).eval();
-    Eigen::LLT<Eigen::MatrixXd> llt(g2);
+  // One more M-orthonormalization against the rounding of the two small eigensolves:
+  // result = Z R L^-T with L L^T = (Z R)^T M (Z R).
+  Eigen::MatrixXd result;
+  if (!accepted.empty()) {
+    RowMatrix ZR = RowTimes(Z, R);
+    Z.resize(0, 0);
+    Eigen::LLT<Eigen::MatrixXd> llt(MassGram(op.mass, ZR));
     if (llt.info() == Eigen::Success) {
-      result = llt.matrixL().solve(result.transpose()).transpose();
+      const Eigen::MatrixXd Linv_t =
+          llt.matrixL().solve(Eigen::MatrixXd::Identity(R.cols(), R.cols())).transpose();
+      result = RowTimes(ZR, Linv_t);
+    } else {
+      result = ZR;
     }
+  } else {
+    result.resize(Z.rows(), 0);
   }
-  st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const auto t_end = std::chrono::steady_clock::now();
+  st.ritz_seconds = std::chrono::duration<double>(t_end - t_ritz).count();
+  st.seconds = std::chrono::duration<double>(t_end - t0).count();
   return result;
 }
 

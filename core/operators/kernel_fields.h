@@ -29,6 +29,12 @@ struct KernelFieldStats {
   double lambda_ref = 0;          // trace(S) / trace(M)
   double max_rayleigh = 0;        // largest x^T S x / lambda_ref of the accepted columns
   double min_rejected = 0;        // smallest x^T S x / lambda_ref of the rejected ones (0: none)
+  // Wall-clock seconds: candidates = trees and cocycles (vector) or transport (others);
+  // poisson = assembling, factorizing and solving the cotan Laplacian (vector); ritz = the
+  // M-orthonormalization and Rayleigh-Ritz step; seconds = the whole call.
+  double candidate_seconds = 0;
+  double poisson_seconds = 0;
+  double ritz_seconds = 0;
   double seconds = 0;
 };
 
@@ -47,7 +53,8 @@ struct KernelFieldStats {
 //  3. its exact part G_V u removed by one P1 vertex Poisson solve (cotan Laplacian
 //     G_V^T M G_V u = G_V^T M X, CHOLMOD, one factorization, all generators at once), which leaves
 //     it divergence free at every vertex;
-//  4. Rayleigh-Ritz with S on the M-orthonormalized candidates (rank-revealed by the M-Gram
+//  4. Rayleigh-Ritz with S (through its factored form, the vertex divergences and edge
+//     circulations) on the M-orthonormalized candidates (rank-revealed by the M-Gram
 //     matrix). On a closed component all 2 g candidates are harmonic (an error otherwise); with a
 //     boundary a field in the kernel must also have no tangential component along boundary
 //     edges, and the Ritz step keeps exactly the combinations that meet that (usually none).
