@@ -72,6 +72,7 @@ absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh&
   options.params.dimension = static_cast<int32_t>(*dim);
   options.params.sigma = *sigma;
   options.params.seed = static_cast<uint64_t>(*seed);
+  options.kernel_columns = !args.Has("no-kernel-columns");
   auto basis = BuildTwoLevelBasis(mesh, op, options, static_cast<int32_t>(*coarse_dim));
   if (!basis.ok()) return basis.status();
   return std::shared_ptr<const Basis>(std::make_shared<Basis>(*std::move(basis)));
@@ -94,10 +95,11 @@ absl::StatusOr<BenchSubspace> LoadBenchSubspace(const Args& args, const FieldTyp
 }
 
 int RunApprox(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {});
+  auto args = Args::Parse(argc, argv, {"no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "tests", "seed", "basis",
-                                  "min-constraints", "max-constraints", "coarse-dim"});
+                                  "min-constraints", "max-constraints", "coarse-dim",
+                                  "no-kernel-columns"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -105,7 +107,7 @@ int RunApprox(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench approx MESH --field vector|nfield|tensor [--n N] --dim D "
         "[--sigma S] --tests K --seed N [--basis local|eigen] [--min-constraints A] "
-        "[--max-constraints B] [--coarse-dim C]"));
+        "[--max-constraints B] [--coarse-dim C] [--no-kernel-columns]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());

@@ -1,9 +1,11 @@
 // `fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S]
 //   [--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats]
-//   [--tolerance T]`:
+//   [--tolerance T] [--no-kernel-columns]`:
 // builds the locally supported basis (paper section 4) and prints one JSON object
-//   {"dim","regions","dofs","nnz_u","nnz_per_row",
-//    "seconds":{"sampling","regions","eigensolve","total"},"peak_rss_mb"}.
+//   {"dim","regions","kernel_columns","dofs","nnz_u","nnz_per_row",
+//    "seconds":{"sampling","regions","eigensolve","kernel","total"},"peak_rss_mb"}.
+// "dim" counts all columns of U: the d local ones and the kernel columns (BasisOptions::
+// kernel_columns; --no-kernel-columns builds the paper's basis without them).
 // --weights FILE: one positive adaptivity weight per face, one per line.
 // --save FILE: the basis file (core/basis/basis_io.h), mesh id "crc32c:<hex of the mesh file>".
 // --export-mtx DIR: DIR/U.mtx (k x d), DIR/S.mtx, DIR/M.mtx (MatrixMarket coordinate real
@@ -39,7 +41,7 @@ namespace {
 constexpr char kUsage[] =
     "usage: fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] "
     "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] "
-    "[--tolerance T]";
+    "[--tolerance T] [--no-kernel-columns]";
 
 absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -106,10 +108,10 @@ absl::Status ExportMtx(const std::string& dir, const Basis& basis, const FieldOp
 }  // namespace
 
 int RunBasis(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"stats"});
+  auto args = Args::Parse(argc, argv, {"stats", "no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "threads", "weights", "save",
-                                  "export-mtx", "seed", "stats", "tolerance"});
+                                  "export-mtx", "seed", "stats", "tolerance", "no-kernel-columns"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -148,6 +150,7 @@ int RunBasis(int argc, char** argv) {
   options.params.seed = static_cast<uint64_t>(*seed);
   options.threads = static_cast<int32_t>(*threads);
   options.eigen_tolerance = *tolerance;
+  options.kernel_columns = !args->Has("no-kernel-columns");
   if (const auto weights = args->Get("weights"); weights.has_value()) {
     auto w = ReadWeights(*weights, mesh->num_faces());
     if (!w.ok()) return ReportError(w.status());
@@ -172,6 +175,7 @@ int RunBasis(int argc, char** argv) {
   json.BeginObject()
       .Int("dim", basis->dimension())
       .Int("regions", basis->num_regions())
+      .Int("kernel_columns", basis->kernel_columns)
       .Int("dofs", k)
       .Int("nnz_u", basis->U.nonZeros())
       .Double("nnz_per_row", k > 0 ? static_cast<double>(basis->U.nonZeros()) / k : 0.0)
@@ -179,6 +183,7 @@ int RunBasis(int argc, char** argv) {
       .Double("sampling", basis->timings.sampling_seconds)
       .Double("regions", basis->timings.regions_seconds)
       .Double("eigensolve", basis->timings.eigensolve_seconds)
+      .Double("kernel", basis->timings.kernel_seconds)
       .Double("total", basis->timings.total_seconds)
       .EndObject()
       .Double("peak_rss_mb", PeakRssMb());

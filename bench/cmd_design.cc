@@ -59,17 +59,18 @@ Eigen::VectorXd RandomUnit(std::mt19937_64& rng, int32_t p) {
 }  // namespace
 
 int RunDesign(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"no-full", "full-biharmonic"});
+  auto args = Args::Parse(argc, argv, {"no-full", "full-biharmonic", "no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "seed", "edits", "max-constraints",
-                                  "no-full", "full-biharmonic"});
+                                  "no-full", "full-biharmonic", "no-kernel-columns"});
       !st.ok()) {
     return ReportError(st);
   }
   if (args->positional().size() != 1 || !args->Has("dim") || !args->Has("edits")) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench design MESH --field vector|nfield|tensor [--n N] --dim D "
-        "--edits N --seed S [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic]"));
+        "--edits N --seed S [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic] "
+        "[--no-kernel-columns]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());

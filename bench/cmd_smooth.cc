@@ -56,10 +56,10 @@ absl::StatusOr<Eigen::VectorXd> SmoothingInput(const TriangleMesh& mesh, const F
 }  // namespace
 
 int RunSmooth(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"scale-free"});
+  auto args = Args::Parse(argc, argv, {"scale-free", "no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "seed", "coarse-dim", "mu-s",
-                                  "mu-b", "mu-c", "repeat", "scale-free"});
+                                  "mu-b", "mu-c", "repeat", "scale-free", "no-kernel-columns"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -67,7 +67,7 @@ int RunSmooth(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench smooth MESH --field tensor|vector|nfield [--n N] --dim D "
         "[--sigma S] [--seed N] [--coarse-dim C] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] "
-        "[--scale-free]"));
+        "[--scale-free] [--no-kernel-columns]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());

@@ -19,8 +19,8 @@ namespace fieldspace::bench {
 // that errors and weights are comparable across meshes.
 absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path);
 
-// BuildBasis with --dim (required), --sigma (default 40), --seed (default 0) and --coarse-dim
-// (default 0: no coarse level; see StackBases).
+// BuildBasis with --dim (required), --sigma (default 40), --seed (default 0), --coarse-dim
+// (default 0: no coarse level; see StackBases) and kernel columns unless --no-kernel-columns.
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
                                                              const FieldOperator& op,
                                                              const Args& args);

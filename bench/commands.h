@@ -17,6 +17,7 @@ int RunEigen(int argc, char** argv);
 int RunDesign(int argc, char** argv);
 int RunCurvature(int argc, char** argv);
 int RunSmooth(int argc, char** argv);
+int RunKernel(int argc, char** argv);
 
 // Prints `status` as one line on stderr and returns the exit code: 2 for caller errors
 // (InvalidArgument, NotFound, OutOfRange, FailedPrecondition, ResourceExhausted, DataLoss), else 1.

@@ -24,24 +24,26 @@ constexpr Command kCommands[] = {
      "spectrum MESH --field vector|nfield|tensor [--n N] --count K [--timing]"},
     {"basis", fieldspace::bench::RunBasis,
      "basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--threads T] "
-     "[--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N]"},
+     "[--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--no-kernel-columns]"},
     {"serve-load", fieldspace::bench::RunServeLoad,
      "serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] [--sessions S] [--edits E] "
      "[--watch W] [--threads T] [--rate HZ] [--lifts L] [--server HOST:PORT]"},
     {"approx", fieldspace::bench::RunApprox,
      "approx MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] --tests K --seed N "
-     "[--basis local|eigen] [--min-constraints A] [--max-constraints B]"},
+     "[--basis local|eigen] [--min-constraints A] [--max-constraints B] [--no-kernel-columns]"},
     {"eigen", fieldspace::bench::RunEigen,
      "eigen MESH --field vector|nfield|tensor [--n N] --count K --dim D [--sigma S] [--seed N] "
-     "[--method auto|dense|sparse] [--full]"},
+     "[--method auto|dense|sparse] [--full] [--no-kernel-columns]"},
     {"design", fieldspace::bench::RunDesign,
      "design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S [--sigma S] "
-     "[--max-constraints C] [--no-full] [--full-biharmonic]"},
+     "[--max-constraints C] [--no-full] [--full-biharmonic] [--no-kernel-columns]"},
     {"curvature", fieldspace::bench::RunCurvature,
      "curvature MESH [--estimator jet|normal-differences]"},
+    {"kernel", fieldspace::bench::RunKernel, "kernel MESH --field vector|nfield|tensor [--n N]"},
     {"smooth", fieldspace::bench::RunSmooth,
      "smooth MESH --field tensor|vector|nfield [--n N] --dim D [--sigma S] [--seed N] "
-     "[--coarse-dim C] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] [--scale-free]"},
+     "[--coarse-dim C] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] [--scale-free] "
+     "[--no-kernel-columns]"},
 };
 
 void PrintUsage() {

@@ -50,10 +50,13 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   mesh MESH_ID                        one mesh
   delete-mesh MESH_ID [--cascade]     delete a mesh (with --cascade: and its bases)
   build MESH_ID --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--seed S]
-        [--fields-per-region M] [--coarse-dim C] [--face-weights FILE] [--cancel-on-exit]
+        [--fields-per-region M] [--coarse-dim C] [--face-weights FILE] [--no-kernel-columns]
+        [--cancel-on-exit]
                                       build a basis: progress on stderr, BasisInfo ("id") on stdout;
                                       C > 0 adds a coarse level of C of the D columns; FILE: #F
-                                      positive adaptivity weights (smaller regions where high); Ctrl-C
+                                      positive adaptivity weights (smaller regions where high);
+                                      --no-kernel-columns: the paper's basis exactly, without
+                                      the kernel (harmonic) columns appended by default; Ctrl-C
                                       leaves the build running on the server (and says how to
                                       cancel it) unless --cancel-on-exit
   bases [--mesh MESH_ID]              list bases (and running builds)
@@ -326,6 +329,7 @@ void WriteBasisInfo(JsonWriter& j, const v1::BasisInfo& b) {
   j.Key("fields_per_region").Int(b.fields_per_region());
   j.Key("seed").Int(static_cast<int64_t>(b.seed()));
   j.Key("coarse_dimension").Int(b.coarse_dimension());
+  j.Key("kernel_columns").Bool(b.kernel_columns());
   j.Key("adaptive").Bool(b.adaptive());
   j.Key("state").String(b.state() == v1::BASIS_STATE_READY ? "ready" : "building");
   j.Key("dofs").Int(b.dofs());
@@ -490,7 +494,7 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"build",
          {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim",
                  "face-weights"},
-                {"cancel-on-exit"}),
+                {"cancel-on-exit", "no-kernel-columns"}),
           1, &Cli::Build}},
         {"bases", {Flags({"mesh"}), 0, &Cli::Bases}},
         {"basis", {{}, 1, &Cli::Basis}},
@@ -702,6 +706,7 @@ int Cli::Build(const CommandLine& a) {
     if (!weights.ok()) return Fail(weights.status());
     request.mutable_face_weights()->Add(weights->begin(), weights->end());
   }
+  request.set_kernel_columns(!a.Has("no-kernel-columns"));
 
   const bool tty = isatty(STDERR_FILENO) != 0 && &err_ == &std::cerr;
   const bool cancel_on_exit = a.Has("cancel-on-exit");

@@ -112,6 +112,7 @@ void BasisInfoFromStatus(const BasisStatus& s, v1::BasisInfo* p) {
   p->set_fields_per_region(r.key.fields_per_region);
   p->set_seed(r.key.seed);
   p->set_coarse_dimension(r.key.coarse_dimension);
+  p->set_kernel_columns(r.key.kernel_columns);
   p->set_adaptive(r.key.weights_hash != 0);
   p->set_dofs(r.dofs);
   if (s.ready) {
@@ -150,6 +151,7 @@ absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& 
   build.key.fields_per_region = p.fields_per_region();
   build.key.seed = p.seed();
   build.key.coarse_dimension = p.coarse_dimension();
+  build.key.kernel_columns = !p.has_kernel_columns() || p.kernel_columns();
   build.face_weights =
       Eigen::Map<const Eigen::VectorXd>(p.face_weights().data(), p.face_weights().size());
   return build;

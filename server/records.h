@@ -37,6 +37,9 @@ struct BasisKey {
   uint64_t seed = 0;
   uint64_t weights_hash = 0;     // 0 for uniform weights
   int32_t coarse_dimension = 0;  // C of a two-level basis (0: one level)
+  // Append the kernel of S (BasisOptions::kernel_columns). The registry clears it where the kernel
+  // is certainly empty (vector fields on a genus-0 mesh), so that such bases keep their id.
+  bool kernel_columns = false;
 };
 
 // What the server knows about a built basis without loading it.

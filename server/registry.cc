@@ -295,6 +295,8 @@ std::string Registry::BasisIdFor(const BasisKey& key) {
   // Only two-level bases hash C, so the ids of one-level bases stay what they were before C
   // existed.
   if (key.coarse_dimension != 0) hasher.UpdateValue<int32_t>(key.coarse_dimension);
+  // Likewise kernel columns: bases without them (the paper's construction) keep their old ids.
+  if (key.kernel_columns) hasher.UpdateString("kernel-columns");
   return "b-" + Hex64(hasher.Digest());
 }
 
@@ -333,6 +335,9 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
     return absl::InvalidArgumentError(
         absl::StrCat("fields_per_region must be in [1, 64], got ", key.fields_per_region));
   }
+  // A vector field's kernel is the harmonic fields: none on a genus-0 mesh (with or without
+  // boundary), so the option would not change the basis and must not change its id.
+  if (key.field.kind == FieldKind::kVector && mesh.genus == 0) key.kernel_columns = false;
   key.weights_hash = 0;
   if (request.face_weights.size() > 0) {
     if (request.face_weights.size() != mesh.num_faces) {

@@ -66,6 +66,7 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
   options.params.fields_per_region = key.fields_per_region;
   options.params.seed = key.seed;
   options.params.face_weights = face_weights;
+  options.kernel_columns = key.kernel_columns;
   options.threads = context.threads;
   options.cancel = context.cancel;
   if (context.progress) {

@@ -156,8 +156,11 @@ std::string EncodeBasisRecord(const BasisRecord& r) {
   w.Put<int64_t>(r.nnz);
   w.Put<double>(r.build_seconds);
   w.Put<int64_t>(r.created_unix_ms);
-  // Appended field: records written before it end here (C = 0).
-  if (r.key.coarse_dimension != 0) w.Put<int32_t>(r.key.coarse_dimension);
+  // Appended fields: records written before them end here (C = 0, no kernel columns).
+  if (r.key.coarse_dimension != 0 || r.key.kernel_columns) {
+    w.Put<int32_t>(r.key.coarse_dimension);
+  }
+  if (r.key.kernel_columns) w.Put<uint8_t>(1);
   return std::move(w.bytes());
 }
 
@@ -181,7 +184,9 @@ bool DecodeBasisRecord(std::string_view bytes, BasisRecord* r) {
   r->build_seconds = in.Get<double>();
   r->created_unix_ms = in.Get<int64_t>();
   r->key.coarse_dimension = in.Done() ? 0 : in.Get<int32_t>();
-  return in.Done() && kind <= static_cast<uint8_t>(FieldKind::kTensor) &&
+  const uint8_t kernel = in.Done() ? 0 : in.Get<uint8_t>();
+  r->key.kernel_columns = kernel != 0;
+  return in.Done() && kind <= static_cast<uint8_t>(FieldKind::kTensor) && kernel <= 1 &&
          r->key.coarse_dimension >= 0 &&
          (r->key.coarse_dimension == 0 || r->key.coarse_dimension < r->key.dimension);
 }

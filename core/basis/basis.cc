@@ -19,6 +19,7 @@
 #include "core/basis/regions.h"
 #include "core/basis/sampling.h"
 #include "core/common/status_macros.h"
+#include "core/operators/kernel_fields.h"
 #include "tbb/blocked_range.h"
 #include "tbb/enumerable_thread_specific.h"
 #include "tbb/parallel_for.h"
@@ -388,12 +389,77 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   basis.stats.lobpcg_iterations = iterations.load();
   basis.timings.eigensolve_seconds = SecondsSince(t0);
   basis.timings.total_seconds = SecondsSince(t_start);
-  ticker.SetPhase(BasisPhase::kAssembly, 1.0);
-  ticker.ReportNow();
   return basis;
 }
 
+// Computes the kernel of S and appends it to `basis` (BasisOptions::kernel_columns).
+absl::Status AddKernelColumns(const TriangleMesh& mesh, const FieldOperator& op,
+                              const CancelFlag* cancel, Basis* basis) {
+  const auto t0 = std::chrono::steady_clock::now();
+  KernelFieldOptions kernel_options;
+  kernel_options.cancel = cancel;
+  ASSIGN_OR_RETURN(Eigen::MatrixXd K, ComputeKernelFields(mesh, op, kernel_options));
+  RETURN_IF_ERROR(AppendKernelColumns(K, basis));
+  basis->timings.kernel_seconds = SecondsSince(t0);
+  return absl::OkStatus();
+}
+
 }  // namespace
+
+absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
+  const auto& a = basis->U;
+  const int64_t k = a.rows();
+  if (K.rows() != k) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("AppendKernelColumns: %d rows against U's %d", K.rows(), k));
+  }
+  const int32_t q = static_cast<int32_t>(K.cols());
+  if (q == 0) return absl::OkStatus();
+  // Row-major float copy of K without its exact zeros (kernel fields of one component of a
+  // several-component mesh, the zero a12 of c I).
+  Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Kf = K.cast<float>();
+  std::vector<int32_t> extra(k, 0);
+  int64_t nnz = a.nonZeros();
+  for (int64_t row = 0; row < k; ++row) {
+    for (int32_t j = 0; j < q; ++j) extra[row] += Kf(row, j) != 0.0f ? 1 : 0;
+    nnz += extra[row];
+  }
+  if (nnz > std::numeric_limits<int32_t>::max()) {
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "AppendKernelColumns: %d nonzeros exceed the 2^31 - 1 of U's indices", nnz));
+  }
+  if (!a.isCompressed()) basis->U.makeCompressed();
+  const int32_t d1 = static_cast<int32_t>(a.cols());
+  Eigen::SparseMatrix<float, Eigen::RowMajor> U(k, d1 + q);
+  U.resizeNonZeros(static_cast<Eigen::Index>(nnz));
+  int32_t* outer = U.outerIndexPtr();
+  outer[0] = 0;
+  for (int64_t row = 0; row < k; ++row) {
+    outer[row + 1] =
+        outer[row] + (a.outerIndexPtr()[row + 1] - a.outerIndexPtr()[row]) + extra[row];
+  }
+  tbb::parallel_for(
+      tbb::blocked_range<int64_t>(0, k, 4096), [&](const tbb::blocked_range<int64_t>& range) {
+        for (int64_t row = range.begin(); row != range.end(); ++row) {
+          int32_t pos = outer[row];
+          for (int32_t p = a.outerIndexPtr()[row]; p < a.outerIndexPtr()[row + 1]; ++p, ++pos) {
+            U.innerIndexPtr()[pos] = a.innerIndexPtr()[p];
+            U.valuePtr()[pos] = a.valuePtr()[p];
+          }
+          for (int32_t j = 0; j < q; ++j) {
+            if (Kf(row, j) == 0.0f) continue;
+            U.innerIndexPtr()[pos] = d1 + j;
+            U.valuePtr()[pos] = Kf(row, j);
+            ++pos;
+          }
+        }
+      });
+  basis->U.swap(U);
+  basis->params.dimension = static_cast<int32_t>(basis->U.cols());
+  basis->local_eigenvalues.resize(basis->U.cols(), 0.0);
+  basis->kernel_columns += q;
+  return absl::OkStatus();
+}
 
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options) {
@@ -407,8 +473,20 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
       options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
   tbb::task_arena arena(threads);
   absl::StatusOr<Basis> result;
-  arena.execute([&] { result = Build(mesh, op, options, m, ticker); });
-  if (result.ok()) result->timings.total_seconds = SecondsSince(t_start);
+  arena.execute([&] {
+    result = Build(mesh, op, options, m, ticker);
+    if (result.ok() && options.kernel_columns) {
+      ticker.SetPhase(BasisPhase::kAssembly, 0.0);
+      ticker.ReportNow();
+      absl::Status s = AddKernelColumns(mesh, op, options.cancel, &*result);
+      if (!s.ok()) result = s;
+    }
+  });
+  if (ticker.cancelled()) return ProgressTicker::CancelledError();
+  if (!result.ok()) return result;
+  ticker.SetPhase(BasisPhase::kAssembly, 1.0);
+  ticker.ReportNow();
+  result->timings.total_seconds = SecondsSince(t_start);
   return result;
 }
 
@@ -419,6 +497,10 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
   }
   if (!(fine.type == coarse.type)) {
     return absl::InvalidArgumentError("StackBases: the bases are of different field types");
+  }
+  if (fine.kernel_columns != 0 || coarse.kernel_columns != 0) {
+    return absl::InvalidArgumentError(
+        "StackBases: the bases have kernel columns; append them after stacking");
   }
   const int64_t nnz = static_cast<int64_t>(fine.U.nonZeros()) + coarse.U.nonZeros();
   if (nnz > std::numeric_limits<int32_t>::max()) {
@@ -475,6 +557,7 @@ absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOp
   }
   if (coarse_dimension == 0) return BuildBasis(mesh, op, options);
   BasisOptions level = options;
+  level.kernel_columns = false;
   double start = 0;
   double share = static_cast<double>(d - coarse_dimension) / d;
   if (options.progress) {
@@ -488,7 +571,14 @@ absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOp
   share = 1 - start;
   level.params.dimension = coarse_dimension;
   ASSIGN_OR_RETURN(Basis coarse, BuildBasis(mesh, op, level));
-  return StackBases(std::move(fine), coarse);
+  ASSIGN_OR_RETURN(Basis stacked, StackBases(std::move(fine), coarse));
+  if (options.kernel_columns) {
+    if (IsCancelled(options.cancel)) return ProgressTicker::CancelledError();
+    RETURN_IF_ERROR(AddKernelColumns(mesh, op, options.cancel, &stacked));
+    stacked.timings.total_seconds += stacked.timings.kernel_seconds;
+    if (options.progress) options.progress(BasisPhase::kAssembly, 1.0);
+  }
+  return stacked;
 }
 
 int64_t Basis::MemoryBytes() const {

@@ -48,6 +48,12 @@ struct BasisOptions {
   // Vector fields: solve the local problems through the factored form S = B B^T when S matches it
   // (see BasisStats::hodge_factor_used); false forces the generic path (tests, comparisons).
   bool use_factored_vector_operator = true;
+  // Append the kernel of S (ComputeKernelFields, core/operators/kernel_fields.h: the 2 g harmonic
+  // fields of a vector basis on a closed genus-g surface, the isotropic fields c I of a tensor
+  // basis, parallel fields where the connection allows them) as the last columns of U, so that
+  // fields of zero energy are represented exactly. They are global (dense) columns, M-orthonormal
+  // among themselves. false builds the paper's construction exactly (identical U).
+  bool kernel_columns = true;
 };
 
 // Wall-clock seconds per phase. sampling: dual graph + farthest point sampling; regions: growing
@@ -57,6 +63,7 @@ struct BasisTimings {
   double sampling_seconds = 0;
   double regions_seconds = 0;
   double eigensolve_seconds = 0;
+  double kernel_seconds = 0;  // ComputeKernelFields and appending its columns (not stored)
   double total_seconds = 0;
 };
 
@@ -85,7 +92,10 @@ struct Basis {
   // max over faces of the dual-graph distance to the nearest sample (FPS's rho): the regions
   // cover every face when radius >= coverage_radius.
   double coverage_radius = 0;
-  int64_t uncovered_faces = 0;  // faces in no region (rows of U without entries)
+  int64_t uncovered_faces = 0;  // faces in no region (no local column touches their rows)
+  // The last kernel_columns columns of U are the kernel of S (BasisOptions::kernel_columns), not
+  // local fields; their local_eigenvalues are 0.
+  int32_t kernel_columns = 0;
   BasisTimings timings;
   BasisStats stats;
 
@@ -103,7 +113,9 @@ struct Basis {
 // 3. per region the m lowest eigenpairs of S_bar = V^T S V (eqs. 5, 7), columns V phi_i of U.
 // Column j belongs to region j / m, field j % m. When m does not divide d, the last region (the
 // last sample of the last component) contributes only d - m (R - 1) fields, its lowest ones, so
-// that U has exactly d columns. Each column is normalized (unit M-norm) with its largest-magnitude
+// that U has exactly d local columns. With options.kernel_columns (the default) the q columns of
+// ComputeKernelFields follow them: U has d + q columns, params.dimension = d + q,
+// kernel_columns = q. Each column is normalized (unit M-norm) with its largest-magnitude
 // entry positive. The result does not depend on the thread count (regions are independent and
 // each is solved deterministically).
 // Errors: InvalidArgument for bad parameters (d < 1 or > k, sigma <= 0 or non-finite, bad
@@ -121,11 +133,18 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
 // and local eigenvalues are concatenated, so the "column j belongs to region j / m" rule holds only
 // for the fine columns. InvalidArgument when the row counts or field types differ,
 // ResourceExhausted past 2^31 - 1 nonzeros.
+// Neither may have kernel columns (InvalidArgument): append them to the stacked basis.
 absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse);
+
+// Appends the columns of K (k x q, e.g. ComputeKernelFields) to U as kernel columns (stored as
+// float; exact zeros are not stored), with local eigenvalue 0. InvalidArgument when the row
+// counts differ, ResourceExhausted past 2^31 - 1 nonzeros.
+absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis);
 
 // BuildBasis with a coarse second level of `coarse_dimension` = C columns: StackBases of the basis
 // of dimension d - C (d = options.params.dimension) and the basis of dimension C, both with the
-// other options as given; d columns in all. C = 0 is BuildBasis. Progress fractions cover the
+// other options as given; d local columns in all, then the kernel columns when
+// options.kernel_columns. C = 0 is BuildBasis. Progress fractions cover the
 // fine level in the first (d - C) / d of each phase and the coarse level in the rest.
 // InvalidArgument unless 0 <= C < d; otherwise errors as BuildBasis and StackBases.
 absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,

@@ -87,6 +87,7 @@ struct Header {
   int64_t cols = 0;
   int64_t nnz = 0;
   int32_t num_regions = 0;
+  int32_t kernel_columns = 0;  // in a slot that was reserved (0) before kernel columns existed
   int64_t num_weights = 0;
   double timings[4] = {0, 0, 0, 0};
   uint8_t hodge_factor_used = 0;
@@ -114,7 +115,7 @@ std::string EncodeHeader(const Header& h) {
   w.Put<int64_t>(h.cols);
   w.Put<int64_t>(h.nnz);
   w.Put<int32_t>(h.num_regions);
-  w.Put<int32_t>(0);
+  w.Put<int32_t>(h.kernel_columns);
   w.Put<int64_t>(h.num_weights);
   for (double t : h.timings) w.Put<double>(t);
   w.Put<uint8_t>(h.hodge_factor_used);
@@ -147,7 +148,7 @@ absl::StatusOr<Header> DecodeHeader(std::string_view bytes) {
             r.Get(&h.field_n) && r.Get(&h.dimension) && r.Get(&h.fields_per_region) &&
             r.Get(&h.sigma) && r.Get(&h.seed) && r.Get(&h.radius) && r.Get(&h.coverage_radius) &&
             r.Get(&h.uncovered_faces) && r.Get(&h.rows) && r.Get(&h.cols) && r.Get(&h.nnz) &&
-            r.Get(&h.num_regions) && r.Get(&i32) && r.Get(&h.num_weights);
+            r.Get(&h.num_regions) && r.Get(&h.kernel_columns) && r.Get(&h.num_weights);
   for (double& t : h.timings) ok = ok && r.Get(&t);
   ok = ok && r.Get(&h.hodge_factor_used) && r.Get(&u8) && r.Get(&u16) && r.Get(&h.dense_regions) &&
        r.Get(&h.lanczos_fallbacks) && r.Get(&i32) && r.Get(&h.lobpcg_iterations) &&
@@ -166,6 +167,9 @@ absl::StatusOr<Header> DecodeHeader(std::string_view bytes) {
   }
   if (h.nnz < 0 || h.nnz > std::numeric_limits<int32_t>::max()) return DataLoss("invalid nnz");
   if (h.num_regions < 1 || h.num_regions > h.dimension) return DataLoss("invalid region count");
+  if (h.kernel_columns < 0 || h.kernel_columns > h.dimension - h.num_regions) {
+    return DataLoss("invalid kernel column count");
+  }
   if (h.num_weights != 0 && h.num_weights != h.rows / dpf) return DataLoss("invalid weight count");
   if (!(h.sigma > 0) || !std::isfinite(h.sigma)) return DataLoss("invalid sigma");
   if (h.has_fields_per_region > 1 || (h.has_fields_per_region && h.fields_per_region < 1)) {
@@ -292,6 +296,7 @@ absl::Status Encode(const Basis& basis, std::string_view mesh_id, Sink& sink) {
   h.cols = U->cols();
   h.nnz = U->nonZeros();
   h.num_regions = basis.num_regions();
+  h.kernel_columns = basis.kernel_columns;
   h.num_weights = basis.params.face_weights.size();
   h.timings[0] = basis.timings.sampling_seconds;
   h.timings[1] = basis.timings.regions_seconds;
@@ -433,7 +438,11 @@ absl::StatusOr<LoadedBasis> Decode(const Source& src) {
   b.radius = h.radius;
   b.coverage_radius = h.coverage_radius;
   b.uncovered_faces = h.uncovered_faces;
-  b.timings = {h.timings[0], h.timings[1], h.timings[2], h.timings[3]};
+  b.timings.sampling_seconds = h.timings[0];
+  b.timings.regions_seconds = h.timings[1];
+  b.timings.eigensolve_seconds = h.timings[2];
+  b.timings.total_seconds = h.timings[3];
+  b.kernel_columns = h.kernel_columns;
   b.stats.hodge_factor_used = h.hodge_factor_used != 0;
   b.stats.dense_regions = h.dense_regions;
   b.stats.lanczos_fallbacks = h.lanczos_fallbacks;
@@ -535,6 +544,7 @@ absl::StatusOr<BasisFileInfo> ReadBasisFileInfo(const std::string& path) {
   info.rows = h->rows;
   info.nnz = h->nnz;
   info.num_regions = h->num_regions;
+  info.kernel_columns = h->kernel_columns;
   info.file_bytes = static_cast<int64_t>(src->size());
   return info;
 }

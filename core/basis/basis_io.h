@@ -15,8 +15,10 @@ namespace fieldspace {
 // Binary basis file, format version 1 (little-endian):
 //   preamble, 32 bytes: magic "FSBASIS\0", u32 version, u32 byte-order mark 0x01020304,
 //     u64 header size, u32 CRC-32C of the header, u32 CRC-32C of the preamble's first 28 bytes;
-//   header: field type, parameters, radius, sizes (k, d, nnz(U), regions, weights), timings and
-//     stats, the caller's mesh id (e.g. a content hash of the mesh);
+//   header: field type, parameters, radius, sizes (k, d, nnz(U), regions, kernel columns,
+//     weights), timings and stats, the caller's mesh id (e.g. a content hash of the mesh). The
+//     kernel column count (Basis::kernel_columns) sits in a slot that files written before it
+//     existed hold as 0, so they load unchanged, as bases without kernel columns;
 //   sections, in this order, each "u32 tag, u32 0, u64 payload bytes, payload, u32 CRC-32C of the
 //     payload": sample faces (int32 x regions), local eigenvalues (float64 x d), adaptivity
 //     weights (float64 x #weights), U's CSR row pointers (int32 x (k + 1)), column indices
@@ -39,6 +41,7 @@ struct BasisFileInfo {
   int64_t rows = 0;  // k
   int64_t nnz = 0;   // nonzeros of U
   int32_t num_regions = 0;
+  int32_t kernel_columns = 0;
   int64_t file_bytes = 0;
 };
 

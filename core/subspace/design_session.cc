@@ -38,8 +38,9 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
   for (int64_t p = 0; p < A.nonZeros(); ++p) {
     v[p] = weights.mu_s * s[p] + weights.mu_b * b[p];
   }
-  ASSIGN_OR_RETURN(SupernodalFactor f, FactorizeRegularized(system.pattern_symbolic(), A, options,
-                                                            &out->regularization));
+  ASSIGN_OR_RETURN(SupernodalFactor f,
+                   FactorizeRegularized(system.pattern_symbolic(), ShiftKernelColumns(system, A),
+                                        options, &out->regularization));
   out->factor = std::make_unique<SupernodalFactor>(std::move(f));
   ASSIGN_OR_RETURN(SupernodalMatrix panels, SupernodalMatrix::Create(system.pattern_symbolic(), A));
   out->A = std::make_unique<SupernodalMatrix>(std::move(panels));

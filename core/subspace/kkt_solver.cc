@@ -22,6 +22,25 @@ std::vector<SparseRow> BasisRowsOfFace(const ReducedSystem& system, int32_t face
   return rows;
 }
 
+Eigen::SparseMatrix<double> ShiftKernelColumns(const ReducedSystem& system,
+                                               const Eigen::SparseMatrix<double>& A) {
+  Eigen::SparseMatrix<double> shifted = A;
+  const int32_t q = system.basis().kernel_columns;
+  const int64_t d = A.cols();
+  if (q <= 0 || q >= d) return shifted;
+  const Eigen::VectorXd mass = system.mass_matrix().diagonal();
+  const Eigen::VectorXd energy = A.diagonal();
+  double scale = std::numeric_limits<double>::infinity();
+  for (int64_t i = 0; i < d - q; ++i) {
+    if (energy[i] > 0 && mass[i] > 0) scale = std::min(scale, energy[i] / mass[i]);
+  }
+  if (!std::isfinite(scale)) return shifted;
+  for (int64_t j = d - q; j < d; ++j) {
+    shifted.coeffRef(j, j) += kKernelColumnShift * scale * mass[j];
+  }
+  return shifted;
+}
+
 absl::StatusOr<SupernodalFactor> FactorizeRegularized(
     std::shared_ptr<const SupernodalSymbolic> symbolic, const Eigen::SparseMatrix<double>& A,
     const ReducedSolveOptions& options, double* tau) {

@@ -31,6 +31,18 @@ struct SparseRow {
 // Rows dofs_per_face * face + c (c < dofs_per_face) of the basis: the constraint rows U_f.
 std::vector<SparseRow> BasisRowsOfFace(const ReducedSystem& system, int32_t face);
 
+// The matrix to factorize for an energy matrix A (d x d, on the system's pattern) of a basis with
+// kernel columns (Basis::kernel_columns): those columns have zero energy, so A is singular in
+// their directions (to rounding, which can make a pivot negative) and a Schur complement through
+// it would call any hard constraint on a face where a kernel field is nonzero dependent. Their
+// diagonal entries get kKernelColumnShift * min_i (A_ii / (U^T M U)_ii) (i over the local
+// columns) times their (U^T M U)_ii; solves refine against the true A, so well-posed problems
+// get the exact solution, and a kernel direction no constraint controls gets 0. A copy of A
+// unchanged when the basis has no kernel columns.
+inline constexpr double kKernelColumnShift = 1e-6;
+Eigen::SparseMatrix<double> ShiftKernelColumns(const ReducedSystem& system,
+                                               const Eigen::SparseMatrix<double>& A);
+
 // Factorizes `A` (on the system's shared pattern or any pattern with its own analysis) with the
 // regularization policy of ReducedSolveOptions: diagonal scaled by (1 + tau), tau raised 1000x
 // on failure up to max_regularization. Returns the tau used through `tau`.

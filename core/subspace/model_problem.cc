@@ -96,7 +96,8 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   }
   double tau = 0;
   if (IsCancelled(options.cancel)) return cancelled_error;
-  ASSIGN_OR_RETURN(SupernodalFactor factor, FactorizeRegularized(symbolic, A, options, &tau));
+  ASSIGN_OR_RETURN(SupernodalFactor factor,
+                   FactorizeRegularized(symbolic, ShiftKernelColumns(system, A), options, &tau));
   ASSIGN_OR_RETURN(SupernodalMatrix A_panels, SupernodalMatrix::Create(symbolic, A));
 
   KktSolver kkt(d, system.dofs_per_face(), options);

@@ -171,7 +171,8 @@ TEST_F(HostileInputTest, SmallMessageLimitStillServesEverything) {
     grpc::ClientContext context;
     v1::LiftRequest request;
     request.set_basis_id(basis_id);
-    request.mutable_coefficients()->Resize(30, 0.1);
+    // 30 local columns and the kernel column c I of a tensor basis.
+    request.mutable_coefficients()->Resize(31, 0.1);
     request.set_encoding(v1::FIELD_ENCODING_AMBIENT);
     auto reader = stub_->Lift(&context, request);
     v1::FieldChunk chunk;

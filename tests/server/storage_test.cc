@@ -16,6 +16,7 @@
 #include "server/compute_pool.h"
 #include "server/field_server.h"
 #include "server/hash.h"
+#include "server/registry.h"
 #include "server/status_util.h"
 #include "server/store.h"
 #include "tests/testing/matchers.h"
@@ -167,6 +168,33 @@ TEST_F(StoreTest, BasisRoundTripConcatenatesPieces) {
   ASSERT_TRUE(loaded.ok()) << loaded.status();
   EXPECT_EQ(loaded->record.key.coarse_dimension, 5);
   EXPECT_EQ(loaded->record.key.seed, 9u);
+  EXPECT_FALSE(loaded->record.key.kernel_columns);  // records before kernel columns existed
+  // Kernel columns, with and without a coarse level.
+  for (int32_t coarse : {0, 5}) {
+    r.id = coarse == 0 ? "b-00000000000000fd" : "b-00000000000000fc";
+    r.key.coarse_dimension = coarse;
+    r.key.kernel_columns = true;
+    ASSERT_TRUE(store_->SaveBasis(r, {"y"}).ok());
+    loaded = store_->LoadBasis(r.id);
+    ASSERT_TRUE(loaded.ok()) << loaded.status();
+    EXPECT_TRUE(loaded->record.key.kernel_columns);
+    EXPECT_EQ(loaded->record.key.coarse_dimension, coarse);
+    EXPECT_EQ(loaded->record.created_unix_ms, r.created_unix_ms);
+  }
+}
+
+TEST(BasisIdTest, KernelColumnsEnterTheIdOnlyWhenOn) {
+  BasisKey key;
+  key.mesh_id = "m-0123456789abcdef";
+  key.field = FieldType::Vector();
+  key.dimension = 100;
+  key.fields_per_region = 2;
+  const std::string paper = Registry::BasisIdFor(key);
+  // The id of the paper's construction is the one bases had before kernel columns existed: this
+  // value is the BasisIdFor of commit 8a88e5f (before kernel columns) for the same key.
+  EXPECT_EQ(paper, "b-29bde9f6ed4f52da");
+  key.kernel_columns = true;
+  EXPECT_NE(Registry::BasisIdFor(key), paper);
 }
 
 TEST_F(StoreTest, FlippedPayloadByteIsDataLoss) {

@@ -50,17 +50,18 @@ int32_t FieldsPerRegion(const Basis& b) {
   return b.params.fields_per_region.value_or(b.type.default_fields_per_region());
 }
 
-// The invariants every basis satisfies: exact size, support inside the regions (independent
-// Dijkstra), M-orthonormal fields per region, every face covered.
+// The invariants every basis satisfies: exact size (d local columns, then the kernel columns),
+// support inside the regions (independent Dijkstra), M-orthonormal fields per region, every face
+// covered.
 void CheckStructure(const TriangleMesh& mesh, const FieldOperator& op, const Basis& basis,
                     int32_t regions_to_check) {
-  const int32_t d = basis.params.dimension;
+  const int32_t d = basis.dimension() - basis.kernel_columns;
   const int32_t m = FieldsPerRegion(basis);
   const int32_t dpf = op.type.dofs_per_face();
   ASSERT_EQ(basis.U.rows(), op.dofs());
-  ASSERT_EQ(basis.U.cols(), d);
+  ASSERT_EQ(basis.params.dimension, basis.dimension());
   ASSERT_EQ(basis.num_regions(), (d + m - 1) / m);
-  ASSERT_EQ(static_cast<int32_t>(basis.local_eigenvalues.size()), d);
+  ASSERT_EQ(static_cast<int32_t>(basis.local_eigenvalues.size()), basis.dimension());
   const double expected_r = std::sqrt(basis.params.sigma * mesh.total_area() / (d * M_PI));
   EXPECT_NEAR(basis.radius, expected_r, 1e-12 * expected_r);
   // Distinct samples.

@@ -1,0 +1,171 @@
+// ComputeKernelFields: the columns are M-orthonormal and in the kernel of S to 1e-10 relative,
+// their number is 2 g for vector fields on closed surfaces and agrees with the number of zero
+// eigenvalues of S x = lambda M x on every mesh of the catalogue and every field kind.
+
+#include "core/operators/kernel_fields.h"
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "Eigen/Dense"
+#include "core/linalg/eigensolver.h"
+#include "core/mesh/shapes.h"
+#include "core/operators/field_operator.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/matchers.h"
+#include "tests/testing/test_meshes.h"
+
+namespace fieldspace {
+namespace {
+
+using ::fieldspace::testing::MustBuildOperator;
+using ::fieldspace::testing::MustCreate;
+using ::fieldspace::testing::PlanarStrip;
+using ::fieldspace::testing::StatusIs;
+
+double LambdaRef(const FieldOperator& op) { return op.stiffness.diagonal().sum() / op.mass.sum(); }
+
+// max over columns of ||S x||_{M^-1} / (lambda_ref ||x||_M).
+double KernelResidual(const FieldOperator& op, const Eigen::MatrixXd& X) {
+  const Eigen::MatrixXd SX = op.stiffness * X;
+  double worst = 0;
+  for (Eigen::Index j = 0; j < X.cols(); ++j) {
+    const double num = std::sqrt(SX.col(j).cwiseAbs2().cwiseQuotient(op.mass).sum());
+    const double den = LambdaRef(op) * std::sqrt(X.col(j).cwiseAbs2().dot(op.mass));
+    worst = std::max(worst, num / den);
+  }
+  return worst;
+}
+
+double OrthonormalityError(const FieldOperator& op, const Eigen::MatrixXd& X) {
+  const Eigen::MatrixXd G = X.transpose() * op.mass.asDiagonal() * X;
+  return (G - Eigen::MatrixXd::Identity(X.cols(), X.cols())).cwiseAbs().maxCoeff();
+}
+
+// Number of eigenvalues of S x = lambda M x below 1e-9 lambda_ref among the lowest `count`.
+int ZeroEigenvalues(const FieldOperator& op, int count, Eigen::VectorXd* values) {
+  EigenOptions eo;
+  eo.count = count;
+  eo.compute_vectors = false;
+  absl::StatusOr<EigenResult> r = LowestEigenpairs(op.stiffness, op.mass, eo);
+  EXPECT_TRUE(r.ok()) << r.status();
+  if (!r.ok()) return -1;
+  *values = r->values;
+  int zeros = 0;
+  for (Eigen::Index i = 0; i < r->values.size(); ++i) {
+    zeros += r->values[i] < 1e-9 * LambdaRef(op) ? 1 : 0;
+  }
+  return zeros;
+}
+
+struct KindCase {
+  const char* name;
+  FieldType type;
+};
+
+class KernelFieldsTest : public testing::MeshCaseTest {};
+
+TEST_P(KernelFieldsTest, ColumnsSpanTheKernelOfEveryFieldKind) {
+  const testing::MeshCase& c = GetParam();
+  for (const KindCase& kind :
+       {KindCase{"vector", FieldType::Vector()}, KindCase{"tensor", FieldType::Tensor()},
+        KindCase{"nfield4", FieldType::NField(4)}}) {
+    const FieldOperator op = MustBuildOperator(mesh(), kind.type);
+    KernelFieldStats stats;
+    absl::StatusOr<Eigen::MatrixXd> X = ComputeKernelFields(mesh(), op, {}, &stats);
+    ASSERT_TRUE(X.ok()) << c.name << " " << kind.name << ": " << X.status();
+    ASSERT_EQ(X->rows(), op.dofs());
+    const int q = static_cast<int>(X->cols());
+    if (kind.type.kind == FieldKind::kVector && c.closed()) {
+      EXPECT_EQ(q, 2 * c.genus) << c.name;
+      EXPECT_EQ(stats.expected_harmonic, 2 * c.genus) << c.name;
+    }
+    if (kind.type.kind == FieldKind::kTensor) {
+      EXPECT_GE(q, c.components) << c.name << ": the isotropic fields c I";
+    }
+    if (q > 0) {
+      EXPECT_LT(OrthonormalityError(op, *X), 1e-10) << c.name << " " << kind.name;
+      EXPECT_LT(KernelResidual(op, *X), 1e-10) << c.name << " " << kind.name;
+    }
+    // The count is the dimension of the kernel: the (q + 1)-th eigenvalue is not zero.
+    Eigen::VectorXd values;
+    const int zeros = ZeroEigenvalues(op, q + 2, &values);
+    EXPECT_EQ(zeros, q) << c.name << " " << kind.name;
+    std::printf(
+        "%s %s: %d kernel fields (%d candidates, max Rayleigh %.2g, min rejected %.2g, "
+        "%.3f s); lowest eigenvalues / lambda_ref:",
+        c.name.c_str(), kind.name, q, stats.candidates, stats.max_rayleigh, stats.min_rejected,
+        stats.seconds);
+    for (Eigen::Index i = 0; i < values.size(); ++i) {
+      std::printf(" %.3g", values[i] / LambdaRef(op));
+    }
+    std::printf("\n");
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(BuiltIn, KernelFieldsTest,
+                         ::testing::ValuesIn(testing::BuiltInMeshCases()), testing::MeshCaseName);
+INSTANTIATE_TEST_SUITE_P(Shared, KernelFieldsTest, ::testing::ValuesIn(testing::SharedMeshCases()),
+                         testing::MeshCaseName);
+
+TEST(KernelFieldsTest, GenusSurfacesHaveTwiceTheGenusHarmonicFields) {
+  for (int genus = 0; genus <= 3; ++genus) {
+    const TriangleMesh mesh = MustCreate(MakeGenusSurface(genus, 4));
+    absl::StatusOr<Eigen::MatrixXd> X = ComputeKernelFields(mesh, FieldType::Vector());
+    ASSERT_TRUE(X.ok()) << X.status();
+    EXPECT_EQ(X->cols(), 2 * genus) << "genus " << genus;
+  }
+}
+
+TEST(KernelFieldsTest, TensorKernelIsTheIsotropicFieldOnACurvedSurface) {
+  const TriangleMesh mesh = MustCreate(MakeTorus(1.0, 0.4, 32, 16));
+  absl::StatusOr<Eigen::MatrixXd> X = ComputeKernelFields(mesh, FieldType::Tensor());
+  ASSERT_TRUE(X.ok()) << X.status();
+  ASSERT_EQ(X->cols(), 1);
+  // c I: (a11, a22, sqrt2 a12) = (c, c, 0) on every face, c = 1 / sqrt(2 area).
+  const double c = std::abs((*X)(0, 0));
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    EXPECT_NEAR(std::abs((*X)(3 * f, 0)), c, 1e-12);
+    EXPECT_NEAR((*X)(3 * f, 0), (*X)(3 * f + 1, 0), 1e-12);
+    EXPECT_NEAR((*X)(3 * f + 2, 0), 0.0, 1e-12);
+  }
+  EXPECT_NEAR(c, 1.0 / std::sqrt(2.0 * mesh.total_area()), 1e-12);
+}
+
+TEST(KernelFieldsTest, FlatStripHasParallelFieldsButNoHarmonicOnes) {
+  const TriangleMesh mesh = MustCreate(PlanarStrip(20, 6));
+  absl::StatusOr<Eigen::MatrixXd> vector = ComputeKernelFields(mesh, FieldType::Vector());
+  ASSERT_TRUE(vector.ok()) << vector.status();
+  EXPECT_EQ(vector->cols(), 0);
+  absl::StatusOr<Eigen::MatrixXd> tensor = ComputeKernelFields(mesh, FieldType::Tensor());
+  ASSERT_TRUE(tensor.ok()) << tensor.status();
+  EXPECT_EQ(tensor->cols(), 3);
+  for (int n : {1, 2, 3, 6}) {
+    absl::StatusOr<Eigen::MatrixXd> nfield = ComputeKernelFields(mesh, FieldType::NField(n));
+    ASSERT_TRUE(nfield.ok()) << nfield.status();
+    EXPECT_EQ(nfield->cols(), 2) << "n = " << n;
+  }
+}
+
+TEST(KernelFieldsTest, RejectsAnOperatorOfAnotherMesh) {
+  const TriangleMesh a = MustCreate(MakeIcosphere(1));
+  const TriangleMesh b = MustCreate(MakeIcosphere(2));
+  const FieldOperator op = MustBuildOperator(a, FieldType::Vector());
+  EXPECT_THAT(ComputeKernelFields(b, op), StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
+TEST(KernelFieldsTest, Cancels) {
+  const TriangleMesh mesh = MustCreate(MakeTorus(1.0, 0.4, 32, 16));
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  CancelFlag cancel{true};
+  KernelFieldOptions options;
+  options.cancel = &cancel;
+  EXPECT_THAT(ComputeKernelFields(mesh, op, options), StatusIs(absl::StatusCode::kCancelled));
+}
+
+}  // namespace
+}  // namespace fieldspace
