@@ -29,10 +29,23 @@ void BuildJob::Unsubscribe(uint64_t token) {
   listeners_.erase(token);
 }
 
+void BuildJob::SetWaitingFor(const std::string& holder) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (progress_.finished || progress_.waiting_for == holder) return;
+    progress_.stage = BuildStage::kQueued;
+    progress_.fraction = 0;
+    progress_.waiting_for = holder;
+    last_notify_ = std::chrono::steady_clock::now();
+  }
+  Notify();
+}
+
 void BuildJob::SetStage(BuildStage stage, double fraction) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (progress_.finished) return;
+    progress_.waiting_for.clear();
     const bool stage_changed = stage != progress_.stage;
     progress_.stage = stage;
     progress_.fraction = std::clamp(fraction, 0.0, 1.0);
