@@ -1102,7 +1102,7 @@ int Cli::Design(const CommandLine& a) {
   kinds.insert(kinds.begin(), "open");
 
   const bool coefficients = !a.Has("no-coefficients");
-  std::unique_ptr<DesignStream> stream = client_->Design();
+  std::unique_ptr<DesignStream> stream = client_->Design(a.positional()[0]);
   for (size_t i = 0; i < edits.size(); ++i) {
     const auto sent = Clock::now();
     absl::StatusOr<v1::DesignUpdate> update = stream->Edit(edits[i]);

@@ -66,9 +66,25 @@ FieldClient::FieldClient(FieldClientOptions options) : options_(std::move(option
   stub_ = v1::FieldSpace::NewStub(channel_);
 }
 
-std::unique_ptr<grpc::ClientContext> FieldClient::NewContext() const {
+std::string RoutingKey(const google::protobuf::Message& request) {
+  const google::protobuf::Descriptor* descriptor = request.GetDescriptor();
+  const google::protobuf::Reflection* reflection = request.GetReflection();
+  for (const char* name : {"basis_id", "mesh_id"}) {
+    const google::protobuf::FieldDescriptor* field = descriptor->FindFieldByName(name);
+    if (field == nullptr || field->is_repeated() ||
+        field->type() != google::protobuf::FieldDescriptor::TYPE_STRING) {
+      continue;
+    }
+    std::string value = reflection->GetString(request, field);
+    if (!value.empty()) return value;
+  }
+  return "";
+}
+
+std::unique_ptr<grpc::ClientContext> FieldClient::NewContext(const std::string& routing_key) const {
   auto context = std::make_unique<grpc::ClientContext>();
   if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
+  if (!routing_key.empty()) context->AddMetadata(kRoutingKeyHeader, routing_key);
   if (options_.timeout) context->set_deadline(std::chrono::system_clock::now() + *options_.timeout);
   return context;
 }
@@ -77,7 +93,7 @@ template <typename Request, typename Response>
 absl::StatusOr<Response> FieldClient::Unary(
     grpc::Status (v1::FieldSpace::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
     const Request& request) const {
-  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  std::unique_ptr<grpc::ClientContext> context = NewContext(RoutingKey(request));
   Response response;
   if (absl::Status status = FromGrpc((stub_.get()->*method)(context.get(), request, &response));
       !status.ok()) {
@@ -193,7 +209,7 @@ absl::StatusOr<v1::DeleteMeshResponse> FieldClient::DeleteMesh(
 
 absl::StatusOr<MeshGeometry> FieldClient::GetMeshGeometry(
     const v1::GetMeshGeometryRequest& request) const {
-  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  std::unique_ptr<grpc::ClientContext> context = NewContext(RoutingKey(request));
   auto reader = stub_->GetMeshGeometry(context.get(), request);
   MeshGeometry geometry;
   absl::Status status = ReadAll(*reader, [&geometry](const v1::MeshGeometryChunk& chunk) {
@@ -207,7 +223,7 @@ absl::StatusOr<MeshGeometry> FieldClient::GetMeshGeometry(
 
 absl::StatusOr<v1::BasisInfo> FieldClient::BuildBasis(
     const v1::BuildBasisRequest& request, const BuildProgressCallback& on_progress) const {
-  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  std::unique_ptr<grpc::ClientContext> context = NewContext(RoutingKey(request));
   auto reader = stub_->BuildBasis(context.get(), request);
   std::optional<v1::BasisInfo> basis;
   absl::Status status = ReadAll(*reader, [&](const v1::BuildBasisProgress& progress) {
@@ -251,7 +267,7 @@ absl::StatusOr<std::vector<Chunk>> FieldClient::Collect(
     std::unique_ptr<grpc::ClientReader<Chunk>> (v1::FieldSpace::Stub::*method)(grpc::ClientContext*,
                                                                                const Request&),
     const Request& request) const {
-  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  std::unique_ptr<grpc::ClientContext> context = NewContext(RoutingKey(request));
   auto reader = (stub_.get()->*method)(context.get(), request);
   std::vector<Chunk> chunks;
   absl::Status status =
@@ -288,8 +304,8 @@ absl::StatusOr<v1::EigenfieldsResponse> FieldClient::Eigenfields(
   return Unary(&v1::FieldSpace::Stub::Eigenfields, request);
 }
 
-std::unique_ptr<DesignStream> FieldClient::Design() const {
-  return std::unique_ptr<DesignStream>(new DesignStream(NewContext(), stub_.get()));
+std::unique_ptr<DesignStream> FieldClient::Design(const std::string& basis_id) const {
+  return std::unique_ptr<DesignStream>(new DesignStream(NewContext(basis_id), stub_.get()));
 }
 
 DesignStream::DesignStream(std::unique_ptr<grpc::ClientContext> context, v1::FieldSpace::Stub* stub)

@@ -20,6 +20,7 @@
 #include "absl/strings/string_view.h"
 #include "core/mesh/triangle_mesh.h"
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
+#include "google/protobuf/message.h"
 #include "grpc/health/v1/health.pb.h"
 #include "grpcpp/grpcpp.h"
 
@@ -49,6 +50,13 @@ fieldspace::v1::UploadMeshHeader MeshFileHeader(const std::string& path,
                                                 const std::string& name = "");
 
 class DesignStream;
+
+// The routing key of a request: its `basis_id`, else its `mesh_id` (top-level string fields), else
+// "". Sent as `x-fieldspace-key` metadata so that a router (nginx `hash $http_x_fieldspace_key
+// consistent`, Envoy ring hash) sends the calls about one basis or mesh to the same replica
+// (docs/scale-out.md); servers ignore it.
+inline constexpr char kRoutingKeyHeader[] = "x-fieldspace-key";
+std::string RoutingKey(const google::protobuf::Message& request);
 
 class FieldClient {
  public:
@@ -122,13 +130,14 @@ class FieldClient {
   absl::StatusOr<fieldspace::v1::SmoothResponse> Align(
       const fieldspace::v1::AlignRequest& request) const;
 
-  // Starts a Design call; send `open` first (DesignStream::Open).
-  std::unique_ptr<DesignStream> Design() const;
+  // Starts a Design call; send `open` first (DesignStream::Open). `basis_id`, when given, is the
+  // call's routing key (it must be sent before the first message names the basis).
+  std::unique_ptr<DesignStream> Design(const std::string& basis_id = "") const;
 
  private:
   explicit FieldClient(FieldClientOptions options);
-  // A context with the token and the deadline of the options.
-  std::unique_ptr<grpc::ClientContext> NewContext() const;
+  // A context with the token, the deadline of the options and the routing key (when not empty).
+  std::unique_ptr<grpc::ClientContext> NewContext(const std::string& routing_key = "") const;
   // Unary calls of FieldSpace, one implementation for all.
   template <typename Request, typename Response>
   absl::StatusOr<Response> Unary(grpc::Status (fieldspace::v1::FieldSpace::Stub::*method)(

@@ -16,6 +16,23 @@ from .types import (BasisInfo, BuildProgress, Curvature, Eigenfields, MeshInfo, 
 
 __all__ = ["Client", "DEFAULT_ADDRESS"]
 
+# The metadata key of the routing key (see Client._metadata_for).
+ROUTING_KEY_HEADER = "x-fieldspace-key"
+
+
+def routing_key(request):
+    """The id a request names: its ``basis_id``, else its ``mesh_id``, else "" (also for request
+    streams, e.g. uploads, whose mesh id is known only to the server)."""
+    descriptor = getattr(request, "DESCRIPTOR", None)
+    for name in ("basis_id", "mesh_id"):
+        field = descriptor.fields_by_name.get(name) if descriptor is not None else None
+        if field is not None and field.type == field.TYPE_STRING and \
+                field.label != field.LABEL_REPEATED:
+            value = getattr(request, name)
+            if value:
+                return value
+    return ""
+
 DEFAULT_ADDRESS = "127.0.0.1:50051"
 _DEFAULT = object()  # "the client's default timeout"
 _FORMATS = {".obj": pb.MESH_FORMAT_OBJ, ".off": pb.MESH_FORMAT_OFF, ".ply": pb.MESH_FORMAT_PLY}
@@ -92,15 +109,23 @@ class Client:
     def _deadline(self, timeout):
         return self.timeout if timeout is _DEFAULT else timeout
 
+    def _metadata_for(self, key):
+        """The call's metadata: the token and, when ``key`` (the basis or mesh id the call names)
+        is not empty, the routing key ``x-fieldspace-key`` that a router hashes on (servers ignore
+        it; docs/scale-out.md)."""
+        return self._metadata + ((ROUTING_KEY_HEADER, key),) if key else self._metadata
+
     def _unary(self, what, method, request, timeout):
         try:
-            return method(request, timeout=self._deadline(timeout), metadata=self._metadata)
+            return method(request, timeout=self._deadline(timeout),
+                          metadata=self._metadata_for(routing_key(request)))
         except grpc.RpcError as e:
             raise from_rpc_error(e, what) from None
 
     def _collect(self, what, method, request, timeout):
         """All messages of a server-streaming call."""
-        call = method(request, timeout=self._deadline(timeout), metadata=self._metadata)
+        call = method(request, timeout=self._deadline(timeout),
+                      metadata=self._metadata_for(routing_key(request)))
         try:
             return list(call)
         except grpc.RpcError as e:
@@ -283,7 +308,8 @@ class Client:
         if face_weights is not None:
             request.face_weights.extend(np.asarray(face_weights, dtype=np.float64).ravel())
         bar = BuildBar.create(progress)
-        call = self._stub.BuildBasis(request, timeout=timeout, metadata=self._metadata)
+        call = self._stub.BuildBasis(request, timeout=timeout,
+                                     metadata=self._metadata_for(request.mesh_id))
         basis_id, joined, done = None, False, False
         try:
             for message in call:

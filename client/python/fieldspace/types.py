@@ -207,3 +207,7 @@ class DesignUpdate:
     refactorized: bool
     timings: dict
     constraint_id: Optional[int] = None
+    # True on the one update that answers an edit after the session was reopened (its replica
+    # died or drained) and its constraints, weights and watch were replayed; the coefficients
+    # are then those of the lost session plus that edit.
+    resumed: bool = False
