@@ -14,7 +14,16 @@ from .progress import BuildBar
 from .types import (BasisInfo, BuildProgress, Curvature, Eigenfields, MeshInfo, Projection,
                     Singularities, Smoothest, Solution, Weights, phase_name)
 
-__all__ = ["Client", "DEFAULT_ADDRESS"]
+__all__ = ["Client", "DEFAULT_ADDRESS", "ROUTING_KEY_HEADER", "routing_key"]
+
+DEFAULT_ADDRESS = "127.0.0.1:50051"
+_DEFAULT = object()  # "the client's default timeout"
+_FORMATS = {".obj": pb.MESH_FORMAT_OBJ, ".off": pb.MESH_FORMAT_OFF, ".ply": pb.MESH_FORMAT_PLY}
+_ESTIMATORS = {"jet": pb.CURVATURE_ESTIMATOR_JET,
+               "normal-differences": pb.CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES}
+_SOLVE_WEIGHTS = Weights(1.0, 0.0, 1.0)   # solve and design, as the CLI
+_SMOOTH_WEIGHTS = Weights(0.001, 0.0, 1.0)  # smooth and align, as the CLI
+
 
 # The metadata key of the routing key (see Client._metadata_for).
 ROUTING_KEY_HEADER = "x-fieldspace-key"
@@ -32,14 +41,6 @@ def routing_key(request):
             if value:
                 return value
     return ""
-
-DEFAULT_ADDRESS = "127.0.0.1:50051"
-_DEFAULT = object()  # "the client's default timeout"
-_FORMATS = {".obj": pb.MESH_FORMAT_OBJ, ".off": pb.MESH_FORMAT_OFF, ".ply": pb.MESH_FORMAT_PLY}
-_ESTIMATORS = {"jet": pb.CURVATURE_ESTIMATOR_JET,
-               "normal-differences": pb.CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES}
-_SOLVE_WEIGHTS = Weights(1.0, 0.0, 1.0)   # solve and design, as the CLI
-_SMOOTH_WEIGHTS = Weights(0.001, 0.0, 1.0)  # smooth and align, as the CLI
 
 
 def _id(target):

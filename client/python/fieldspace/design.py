@@ -18,6 +18,17 @@ _END = object()
 _RESUME_PAUSES = (0.0, 0.2, 0.5, 1.0, 2.0, 4.0)
 
 
+def _replica_lost(error):
+    """Whether a failed Design stream lost its replica (so that reopening may help): UNAVAILABLE
+    (the replica drained, or is unreachable), or the stream reset at the transport level, which
+    is what a router does when the replica behind it dies (nginx: RST_STREAM INTERNAL_ERROR). An
+    INTERNAL status sent by a server has its own message and is not retried."""
+    code = error.code()
+    if code == grpc.StatusCode.UNAVAILABLE:
+        return True
+    return code == grpc.StatusCode.INTERNAL and "RST_STREAM" in (error.details() or "")
+
+
 class DesignSession:
     """One session on one basis: every edit is answered by a DesignUpdate (the solution's
     coefficients, the watched faces' values, timings), in order.
@@ -37,10 +48,11 @@ class DesignSession:
     over (the server ends the stream) and further edits raise FailedPrecondition.
 
     Failover: the session sends its basis id as routing key (``x-fieldspace-key``), so that a
-    router keeps it on one replica. When the stream fails with UNAVAILABLE (the replica died or
-    drained), the edit in flight reopens the session (through a router: on another replica),
-    replays the open (current weights and watch) and the constraints in the order they were
-    added, sends the edit again and returns its update with ``resumed=True``.
+    router keeps it on one replica. When the stream fails because its replica died or drained
+    (UNAVAILABLE, or a stream reset by the router), the edit in flight reopens the session
+    (through a router: on another replica), replays the open (current weights and watch) and the
+    constraints in the order they were added, sends the edit again and returns its update with
+    ``resumed=True``.
     ``resumes`` counts how often that happened.
     """
 
@@ -157,7 +169,7 @@ class DesignSession:
                             add=pb.AddConstraint(id=cid, constraint=constraint)))
                 message = self._exchange(kind, request)
             except grpc.RpcError as e:
-                if e.code() != grpc.StatusCode.UNAVAILABLE:
+                if not _replica_lost(e):
                     raise
                 error = e
                 continue
@@ -197,7 +209,7 @@ class DesignSession:
             try:
                 message = self._exchange(kind, request)
             except grpc.RpcError as e:
-                if e.code() != grpc.StatusCode.UNAVAILABLE:
+                if not _replica_lost(e):
                     raise
                 message = self._resume(kind, request, e)
                 resumed = True
