@@ -1098,15 +1098,22 @@ int Cli::Design(const CommandLine& a) {
   o->mutable_weights()->set_mu_c(ParseDouble(a, "mu-c", 1.0));
   o->set_watch_encoding(v1::FIELD_ENCODING_AMBIENT);
   for (int32_t f : ParseFaceList(GetString(a, "watch"))) o->add_watch_faces(f);
-  edits.insert(edits.begin(), open);
   kinds.insert(kinds.begin(), "open");
 
   const bool coefficients = !a.Has("no-coefficients");
-  std::unique_ptr<DesignStream> stream = client_->Design(a.positional()[0]);
-  for (size_t i = 0; i < edits.size(); ++i) {
+  // Survives the loss of its replica (a daemon behind a router that dies or drains): the session
+  // is reopened and replayed, and the answer of that edit says "resumed": true.
+  ResumableDesign session(client_.get(), open.open());
+  absl::Status failed;
+  for (size_t i = 0; i < edits.size() + 1; ++i) {
     const auto sent = Clock::now();
-    absl::StatusOr<v1::DesignUpdate> update = stream->Edit(edits[i]);
-    if (!update.ok()) break;  // Close gives the session's status
+    absl::StatusOr<ResumableDesign::Update> resumable =
+        i == 0 ? session.Open(0) : session.Edit(edits[i - 1]);
+    if (!resumable.ok()) {
+      failed = resumable.status();
+      break;
+    }
+    const v1::DesignUpdate* update = &resumable->update;
     const double round_trip_ms =
         std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
     JsonWriter j;
@@ -1116,6 +1123,7 @@ int Cli::Design(const CommandLine& a) {
     j.Key("num_constraints").Int(update->num_constraints());
     j.Key("num_hard_constraints").Int(update->num_hard_constraints());
     j.Key("refactorized").Bool(update->timings().refactorized());
+    if (resumable->resumed) j.Key("resumed").Bool(true);
     j.Key("timings").BeginObject();
     j.Key("edit_ms").Number(update->timings().edit_ms());
     j.Key("lift_ms").Number(update->timings().lift_ms());
@@ -1139,7 +1147,8 @@ int Cli::Design(const CommandLine& a) {
     j.EndObject();
     Emit(j);
   }
-  if (absl::Status status = stream->Close(); !status.ok()) return Fail(status, "Design");
+  if (!failed.ok()) return Fail(failed, "Design");
+  if (absl::Status status = session.Close(); !status.ok()) return Fail(status, "Design");
   return 0;
 }
 

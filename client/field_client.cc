@@ -1,11 +1,14 @@
 #include "client/field_client.h"
 
+#include <algorithm>
 #include <bit>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 #include <utility>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
@@ -354,6 +357,97 @@ absl::Status DesignStream::Broken() {
   absl::Status status = Close();
   if (status.ok()) return absl::UnavailableError("the server ended the design session");
   return status;
+}
+
+bool ReplicaLost(const absl::Status& status) {
+  if (absl::IsUnavailable(status)) return true;
+  return absl::IsInternal(status) && absl::StrContains(status.message(), "RST_STREAM");
+}
+
+absl::StatusOr<v1::DesignUpdate> ResumableDesign::Exchange(const v1::DesignRequest& r) {
+  if (stream_ == nullptr) {
+    stream_ = client_->Design(open_.basis_id());
+  }
+  return stream_->Edit(r);
+}
+
+absl::StatusOr<v1::DesignUpdate> ResumableDesign::Resume(const v1::DesignRequest& r,
+                                                         absl::Status error) {
+  static constexpr int kPauseMs[kMaxReopens] = {0, 200, 500, 1000, 2000, 4000};
+  for (int attempt = 0; attempt < kMaxReopens; ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(kPauseMs[attempt]));
+    stream_.reset();  // cancels the broken call
+    absl::StatusOr<v1::DesignUpdate> update;
+    if (!r.has_open()) {
+      v1::DesignRequest open;
+      open.set_seq(r.seq());
+      *open.mutable_open() = open_;
+      update = Exchange(open);
+      for (size_t i = 0; update.ok() && i < constraints_.size(); ++i) {
+        v1::DesignRequest add;
+        add.set_seq(r.seq());
+        add.mutable_add()->set_id(constraints_[i].first);
+        *add.mutable_add()->mutable_constraint() = constraints_[i].second;
+        update = Exchange(add);
+      }
+    }
+    if (update.ok()) update = Exchange(r);
+    if (update.ok()) {
+      ++resumes_;
+      return update;
+    }
+    if (!ReplicaLost(update.status())) return update.status();
+    error = update.status();
+  }
+  return error;
+}
+
+void ResumableDesign::Remember(const v1::DesignRequest& r) {
+  auto find = [this](int32_t id) {
+    return std::find_if(constraints_.begin(), constraints_.end(),
+                        [id](const auto& c) { return c.first == id; });
+  };
+  if (r.has_add()) {
+    constraints_.emplace_back(r.add().id(), r.add().constraint());
+  } else if (r.has_move()) {
+    if (auto it = find(r.move().id()); it != constraints_.end()) {
+      it->second.set_face(r.move().face());
+      it->second.set_encoding(r.move().encoding());
+      *it->second.mutable_value() = r.move().value();
+    }
+  } else if (r.has_remove()) {
+    if (auto it = find(r.remove().id()); it != constraints_.end()) constraints_.erase(it);
+  } else if (r.has_set_weights()) {
+    *open_.mutable_weights() = r.set_weights();
+  } else if (r.has_watch()) {
+    *open_.mutable_watch_faces() = r.watch().faces();
+    open_.set_watch_encoding(r.watch().encoding());
+  }
+}
+
+absl::StatusOr<ResumableDesign::Update> ResumableDesign::Open(uint64_t seq) {
+  v1::DesignRequest request;
+  request.set_seq(seq);
+  *request.mutable_open() = open_;
+  return Edit(request);
+}
+
+absl::StatusOr<ResumableDesign::Update> ResumableDesign::Edit(const v1::DesignRequest& request) {
+  Update out;
+  absl::StatusOr<v1::DesignUpdate> update = Exchange(request);
+  if (!update.ok() && ReplicaLost(update.status())) {
+    update = Resume(request, update.status());
+    out.resumed = update.ok();
+  }
+  if (!update.ok()) return update.status();
+  Remember(request);
+  out.update = *std::move(update);
+  return out;
+}
+
+absl::Status ResumableDesign::Close() {
+  if (stream_ == nullptr) return absl::OkStatus();
+  return stream_->Close();
 }
 
 }  // namespace fieldspace::client

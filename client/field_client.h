@@ -196,6 +196,51 @@ class DesignStream {
   std::optional<absl::Status> final_status_;
 };
 
+// Whether a failed design call lost its replica, so that reopening the session may help:
+// UNAVAILABLE (the replica drained or is unreachable) or a stream reset at the transport level,
+// which is what a router does when the replica behind it dies (nginx: "Received RST_STREAM with
+// error code 2", INTERNAL). An INTERNAL status sent by a server is not such a loss.
+bool ReplicaLost(const absl::Status& status);
+
+// A design session that survives the loss of its replica (docs/scale-out.md). It keeps what the
+// server confirmed (the open with its current weights and watch, the constraints by id in the
+// order they were added); when an edit fails with ReplicaLost, it reopens the stream (through a
+// router: on another replica), replays that state, sends the edit again and returns its update
+// marked `resumed`, with the coefficients the lost session would have given. Other errors end the
+// session as with DesignStream. Belongs to one thread.
+class ResumableDesign {
+ public:
+  struct Update {
+    fieldspace::v1::DesignUpdate update;
+    bool resumed = false;
+  };
+  // Attempts and the pauses before them when reopening (a router may need a moment to mark the
+  // dead replica down).
+  static constexpr int kMaxReopens = 6;
+
+  ResumableDesign(const FieldClient* client, fieldspace::v1::OpenDesign open)
+      : client_(client), open_(std::move(open)) {}
+
+  // Opens the session (the first call; `seq` is echoed).
+  absl::StatusOr<Update> Open(uint64_t seq = 0);
+  // One edit (not an open).
+  absl::StatusOr<Update> Edit(const fieldspace::v1::DesignRequest& request);
+  absl::Status Close();
+  int resumes() const { return resumes_; }
+
+ private:
+  absl::StatusOr<fieldspace::v1::DesignUpdate> Exchange(const fieldspace::v1::DesignRequest& r);
+  absl::StatusOr<fieldspace::v1::DesignUpdate> Resume(const fieldspace::v1::DesignRequest& r,
+                                                      absl::Status error);
+  void Remember(const fieldspace::v1::DesignRequest& request);
+
+  const FieldClient* const client_;
+  fieldspace::v1::OpenDesign open_;
+  std::vector<std::pair<int32_t, fieldspace::v1::Constraint>> constraints_;
+  std::unique_ptr<DesignStream> stream_;
+  int resumes_ = 0;
+};
+
 }  // namespace fieldspace::client
 
 #endif  // FIELDSPACE_CLIENT_FIELD_CLIENT_H_

@@ -11,7 +11,9 @@ router by the Python package.
 - SIGKILLs the replica that holds the most sessions; every session then answers a no-op edit
   (watch the same faces): those of the killed replica with `resumed` set, all with the
   coefficients they had before (to 1e-10);
-- every stored artifact is still listed and loads (no artifact lost or damaged).
+- every stored artifact is still listed and loads (no artifact lost or damaged);
+- the CLI's `design` through the router survives the SIGKILL of its replica mid-script: one update
+  says "resumed": true, the script runs to its end.
 
 Exit 77 (skipped) when nginx is absent (.ci/install-deps installs nginx-light) or grpcio is.
 """
@@ -110,6 +112,7 @@ def read(path):
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--daemon", required=True)
+    parser.add_argument("--client", required=True, help="the fieldspace CLI")
     parser.add_argument("--python-dir", required=True, help="the build tree's python/ folder")
     parser.add_argument("--nginx", default=shutil.which("nginx") or "/usr/sbin/nginx")
     args = parser.parse_args()
@@ -264,6 +267,39 @@ def main():
                 check({b.id for b in c.bases()} == set(bases), "bases seen by %s" % d.address)
                 for m in meshes:
                     c.mesh_geometry(m.id)  # loads the mesh (checksums)
+
+        # --- The CLI: a long design script through the router; SIGKILL its replica midway.
+        client.basis(main_basis)
+        time.sleep(0.2)
+        line = [x for x in read(os.path.join(work, "access.log")).splitlines()
+                if x.startswith("/fieldspace.v1.FieldSpace/GetBasis \"%s\"" % main_basis)][-1]
+        holder = by_address[line.split()[2]]
+        check(holder is not victim_proc, "routed to the dead replica")
+        script = os.path.join(work, "edits.jsonl")
+        edits = 20000
+        with open(script, "w") as f:
+            for i in range(1, 9):
+                f.write('{"add": {"id": %d, "face": %d, "vector": [1, 0, 0]}}\n' % (i, 10 * i))
+            for k in range(edits - 8):
+                f.write('{"move": {"id": %d, "face": %d, "vector": [0, %d, 1]}}\n' %
+                        (1 + k % 8, (37 * k) % 1280, 1 + k % 3))
+        cli = subprocess.Popen([args.client, "--server", router, "design", main_basis, "--script",
+                                script, "--no-coefficients"], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+        out = []
+        while len(out) < 200:
+            out.append(cli.stdout.readline())
+        holder.proc.kill()
+        holder.proc.wait(10)
+        rest, err = cli.communicate(timeout=120)
+        out += rest.splitlines()
+        check(cli.returncode == 0, "CLI design exited %d: %s" % (cli.returncode, err[-2000:]))
+        check(len(out) == edits + 1, "CLI design printed %d updates of %d" % (len(out), edits + 1))
+        resumed_lines = [x for x in out if '"resumed":true' in x.replace(" ", "")]
+        check(len(resumed_lines) == 1, "CLI updates marked resumed: %d" % len(resumed_lines))
+        log("CLI design: %d updates, replica %s killed after 200, one resumed" %
+            (len(out), holder.address))
+
         client.close()
         log("PASS in %.1f s" % (time.time() - started))
         return 0
