@@ -418,7 +418,17 @@ void ResumableDesign::Remember(const v1::DesignRequest& r) {
   } else if (r.has_remove()) {
     if (auto it = find(r.remove().id()); it != constraints_.end()) constraints_.erase(it);
   } else if (r.has_set_weights()) {
-    *open_.mutable_weights() = r.set_weights();
+    // Weights an edit leaves out keep the session's values (where the proto tracks their
+    // presence; otherwise every value is sent).
+    const v1::Weights& w = r.set_weights();
+    const google::protobuf::Descriptor* descriptor = w.GetDescriptor();
+    v1::Weights* target = open_.mutable_weights();
+    for (int i = 0; i < descriptor->field_count(); ++i) {
+      const google::protobuf::FieldDescriptor* field = descriptor->field(i);
+      if (field->cpp_type() != google::protobuf::FieldDescriptor::CPPTYPE_DOUBLE) continue;
+      if (field->has_presence() && !w.GetReflection()->HasField(w, field)) continue;
+      target->GetReflection()->SetDouble(target, field, w.GetReflection()->GetDouble(w, field));
+    }
   } else if (r.has_watch()) {
     *open_.mutable_watch_faces() = r.watch().faces();
     open_.set_watch_encoding(r.watch().encoding());

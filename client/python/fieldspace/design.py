@@ -194,7 +194,15 @@ class DesignSession:
         elif kind == "remove":
             self._constraints.pop(request.remove.id, None)
         elif kind == "weights":
-            self._open.weights.CopyFrom(request.set_weights)
+            # Weights an edit leaves out keep the session's values (where the proto tracks their
+            # presence; otherwise every value is sent).
+            for name in ("mu_s", "mu_b", "mu_c"):
+                try:
+                    present = request.set_weights.HasField(name)
+                except ValueError:
+                    present = True
+                if present:
+                    setattr(self._open.weights, name, getattr(request.set_weights, name))
         elif kind == "watch":
             del self._open.watch_faces[:]
             self._open.watch_faces.extend(request.watch.faces)
