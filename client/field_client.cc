@@ -361,6 +361,9 @@ absl::Status DesignStream::Broken() {
 
 bool ReplicaLost(const absl::Status& status) {
   if (absl::IsUnavailable(status)) return true;
+  // gRPC's own UNKNOWN without a message: a call on a channel whose server went away (servers
+  // always say what went wrong).
+  if (absl::IsUnknown(status) && status.message().empty()) return true;
   return absl::IsInternal(status) && absl::StrContains(status.message(), "RST_STREAM");
 }
 
@@ -372,8 +375,9 @@ absl::StatusOr<v1::DesignUpdate> ResumableDesign::Exchange(const v1::DesignReque
 }
 
 absl::StatusOr<v1::DesignUpdate> ResumableDesign::Resume(const v1::DesignRequest& r,
-                                                         absl::Status error) {
-  static constexpr int kPauseMs[kMaxReopens] = {0, 200, 500, 1000, 2000, 4000};
+                                                         const absl::Status& lost) {
+  absl::Status error = lost;
+  static constexpr int kPauseMs[kMaxReopens] = {0, 100, 300, 600, 1000, 2000};
   for (int attempt = 0; attempt < kMaxReopens; ++attempt) {
     std::this_thread::sleep_for(std::chrono::milliseconds(kPauseMs[attempt]));
     stream_.reset();  // cancels the broken call
@@ -399,7 +403,11 @@ absl::StatusOr<v1::DesignUpdate> ResumableDesign::Resume(const v1::DesignRequest
     if (!ReplicaLost(update.status())) return update.status();
     error = update.status();
   }
-  return error;
+  // Why the session was lost, and why it could not be reopened.
+  return absl::Status(
+      lost.code(),
+      absl::StrCat(lost.message(), " (reopening the session failed ", kMaxReopens, " times, last: ",
+                   error.message().empty() ? "no server answered" : error.ToString(), ")"));
 }
 
 void ResumableDesign::Remember(const v1::DesignRequest& r) {

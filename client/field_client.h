@@ -197,9 +197,10 @@ class DesignStream {
 };
 
 // Whether a failed design call lost its replica, so that reopening the session may help:
-// UNAVAILABLE (the replica drained or is unreachable) or a stream reset at the transport level,
+// UNAVAILABLE (the replica drained or is unreachable), a stream reset at the transport level,
 // which is what a router does when the replica behind it dies (nginx: "Received RST_STREAM with
-// error code 2", INTERNAL). An INTERNAL status sent by a server is not such a loss.
+// error code 2", INTERNAL), or gRPC's UNKNOWN without a message (a call on a channel whose server
+// went away). Statuses sent by a server (they have a message) are not such a loss.
 bool ReplicaLost(const absl::Status& status);
 
 // A design session that survives the loss of its replica (docs/scale-out.md). It keeps what the
@@ -207,7 +208,8 @@ bool ReplicaLost(const absl::Status& status);
 // order they were added); when an edit fails with ReplicaLost, it reopens the stream (through a
 // router: on another replica), replays that state, sends the edit again and returns its update
 // marked `resumed`, with the coefficients the lost session would have given. Other errors end the
-// session as with DesignStream. Belongs to one thread.
+// session as with DesignStream; when every reopen fails, the edit fails with the status that lost
+// the session (its message says why reopening failed). Belongs to one thread.
 class ResumableDesign {
  public:
   struct Update {
@@ -231,7 +233,7 @@ class ResumableDesign {
  private:
   absl::StatusOr<fieldspace::v1::DesignUpdate> Exchange(const fieldspace::v1::DesignRequest& r);
   absl::StatusOr<fieldspace::v1::DesignUpdate> Resume(const fieldspace::v1::DesignRequest& r,
-                                                      absl::Status error);
+                                                      const absl::Status& lost);
   void Remember(const fieldspace::v1::DesignRequest& request);
 
   const FieldClient* const client_;

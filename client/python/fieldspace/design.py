@@ -15,7 +15,7 @@ from .types import DesignUpdate, Weights
 _END = object()
 # How often, and after which pauses (s), a session whose stream failed with UNAVAILABLE is
 # reopened before the error is raised.
-_RESUME_PAUSES = (0.0, 0.2, 0.5, 1.0, 2.0, 4.0)
+_RESUME_PAUSES = (0.0, 0.1, 0.3, 0.6, 1.0, 2.0)
 
 
 def _replica_lost(error):
@@ -26,6 +26,8 @@ def _replica_lost(error):
     code = error.code()
     if code == grpc.StatusCode.UNAVAILABLE:
         return True
+    if code == grpc.StatusCode.UNKNOWN and not error.details():
+        return True  # gRPC's own, on a channel whose server went away
     return code == grpc.StatusCode.INTERNAL and "RST_STREAM" in (error.details() or "")
 
 
@@ -153,9 +155,9 @@ class DesignSession:
             raise FieldspaceError("Design %s" % kind, "the server ended the session",
                                   grpc.StatusCode.UNAVAILABLE) from None
 
-    def _resume(self, kind, request, error):
-        """Reopens the session after `error` (UNAVAILABLE), replays it and sends `request`
-        again; the answer to it. Raises the last error when every attempt failed."""
+    def _resume(self, kind, request, lost):
+        """Reopens the session after `lost` (see _replica_lost), replays it and sends `request`
+        again; the answer to it. Raises `lost` when every attempt failed."""
         for pause in _RESUME_PAUSES:
             time.sleep(pause)
             self._call.cancel()
@@ -171,11 +173,10 @@ class DesignSession:
             except grpc.RpcError as e:
                 if not _replica_lost(e):
                     raise
-                error = e
                 continue
             self.resumes += 1
             return message
-        raise error
+        raise lost
 
     def _remember(self, kind, request):
         """Keeps the state a reopened session replays, once the server confirmed `request`."""
