@@ -606,6 +606,7 @@ int Cli::Build(const CommandLine& a) {
   const Clock::time_point start = Clock::now();
   v1::BuildPhase last_phase = v1::BUILD_PHASE_UNSPECIFIED;
   int last_decile = -1;
+  std::string last_waiting_for;
   absl::StatusOr<v1::BasisInfo> info =
       client_->BuildBasis(request, [&](const v1::BuildBasisProgress& progress) {
         interrupt.Name(progress.basis_id(), progress.joined());
@@ -620,15 +621,24 @@ int Cli::Build(const CommandLine& a) {
             eta = absl::StrCat(" ETA ", left / 60, ":", left % 60 < 10 ? "0" : "", left % 60);
           }
           const int filled = percent * 30 / 100;
+          const std::string waiting = progress.waiting_for().empty()
+                                          ? ""
+                                          : " waiting for replica " + progress.waiting_for();
           err_ << "\r[" << std::string(filled, '#') << std::string(30 - filled, ' ') << "] "
-               << percent << "% " << PhaseName(progress.phase()) << eta << "          "
+               << percent << "% " << PhaseName(progress.phase()) << waiting << eta << "          "
                << std::flush;
-        } else if (progress.phase() != last_phase || percent / 10 != last_decile) {
+        } else if (progress.phase() != last_phase || percent / 10 != last_decile ||
+                   progress.waiting_for() != last_waiting_for) {
           err_ << "build " << progress.basis_id() << ": " << PhaseName(progress.phase()) << " "
-               << percent << "%" << (progress.joined() ? " (joined a running build)" : "") << "\n";
+               << percent << "%" << (progress.joined() ? " (joined a running build)" : "")
+               << (progress.waiting_for().empty()
+                       ? ""
+                       : " (waiting for replica " + progress.waiting_for() + ", which builds it)")
+               << "\n";
         }
         last_phase = progress.phase();
         last_decile = percent / 10;
+        last_waiting_for = progress.waiting_for();
       });
   if (tty) err_ << "\n";
   if (!info.ok()) return Fail(info.status(), "BuildBasis");

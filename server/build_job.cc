@@ -62,6 +62,7 @@ void BuildJob::Finish(absl::Status status, const BasisRecord& record) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     progress_.finished = true;
+    progress_.waiting_for.clear();
     progress_.status = std::move(status);
     progress_.record = record;
     if (progress_.status.ok()) {

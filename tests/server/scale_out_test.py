@@ -151,12 +151,16 @@ def main():
 
         # --- One basis built once: through the router and, at the same time, directly on every
         # replica (which all must wait for the one that holds the lease).
-        results, errors = [], []
+        results, errors, waited_for = [], [], set()
 
         def build(address):
+            def seen(p):
+                if p.waiting_for:
+                    waited_for.add(p.waiting_for)
             try:
                 with fs.Client(address, timeout=120) as c:
-                    results.append(c.build(meshes[0].id, "vector", 100, progress=False))
+                    results.append(c.build(meshes[0].id, "vector", 100, progress=False,
+                                           on_progress=seen))
             except Exception as e:  # noqa: BLE001 (reported below)
                 errors.append("%s: %s" % (address, e))
 
@@ -175,9 +179,12 @@ def main():
                          if "basis %s: waiting for replica" % main_basis in line]
         check(len(built_lines) == 1, "built once across the replicas: %s" % built_lines)
         check(len(waiting_lines) >= 1, "no replica waited for the build lease")
+        builder = built_lines[0].split(" as ")[1].split(",")[0]
+        check(waited_for == {builder}, "progress named %s, the builder is %s" %
+              (waited_for, builder))
         check(os.listdir(os.path.join(store, "leases")) == [], "leases left behind")
-        log("basis %s built once (%s); %d replica(s) waited" %
-            (main_basis, built_lines[0].split(" as ")[1].split(",")[0], len(waiting_lines)))
+        log("basis %s built once (%s); %d replica(s) waited, their streams said so" %
+            (main_basis, builder, len(waiting_lines)))
 
         # --- 5 more bases (through the router), 12 sessions on the 6 bases.
         bases = [main_basis]

@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -14,6 +15,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "client/field_client.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/compute_pool.h"
@@ -28,6 +30,7 @@ namespace fieldspace::server {
 namespace {
 
 namespace fs = std::filesystem;
+namespace v1 = ::fieldspace::v1;
 using ::testing::HasSubstr;
 using namespace std::chrono_literals;
 
@@ -323,6 +326,69 @@ TEST_F(SharedStoreTest, SharedServersStartOnOneStoreAndAnExclusiveOneIsRefused) 
   ASSERT_FALSE(exclusive.ok());
   EXPECT_EQ(exclusive.status().code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_THAT(exclusive.status().message(), HasSubstr("shared mode"));
+}
+
+// Over the wire: a BuildBasis stream on the daemon that waits reports QUEUED with waiting_for (the
+// holder of the lease) and then DONE with the basis the other daemon stored.
+TEST_F(SharedStoreTest, AWaitingDaemonStreamsQueuedWaitingForTheHolderThenDone) {
+  FieldServerOptions options;
+  options.listen = "127.0.0.1:0";
+  options.store_dir = store_dir_;
+  options.threads = 1;
+  options.store_lock = StoreLockMode::kShared;
+  options.daemon_id = "builder";
+  options.debug_save_pause_ms = 800;  // holds the lease long enough
+  auto builder = FieldServer::Start(options);
+  ASSERT_TRUE(builder.ok()) << builder.status();
+  options.daemon_id = "waiter";
+  options.debug_save_pause_ms = 0;
+  auto waiter = FieldServer::Start(options);
+  ASSERT_TRUE(waiter.ok()) << waiter.status();
+  auto client_of = [](const FieldServer& server) {
+    client::FieldClientOptions o;
+    o.address = server.address();
+    return client::FieldClient::Create(o);
+  };
+  auto a = client_of(**builder);
+  auto b = client_of(**waiter);
+  ASSERT_TRUE(a.ok() && b.ok());
+  absl::StatusOr<v1::MeshInfo> mesh =
+      (*a)->UploadMeshArrays(ArraysOf(testing::Icosphere(3)), "ico");
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  v1::BuildBasisRequest request;
+  request.set_mesh_id(mesh->id());
+  request.mutable_field()->set_kind(v1::FIELD_KIND_VECTOR);
+  request.set_dimension(24);
+
+  absl::StatusOr<v1::BasisInfo> built;
+  std::thread first([&] { built = (*a)->BuildBasis(request); });
+  const std::string lease_dir = (fs::path(store_dir_) / "leases").string();
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  while (fs::is_empty(lease_dir) && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(1ms);
+  }
+  ASSERT_FALSE(fs::is_empty(lease_dir)) << "the builder never took the lease";
+  std::vector<v1::BuildBasisProgress> seen;
+  absl::StatusOr<v1::BasisInfo> waited =
+      (*b)->BuildBasis(request, [&](const v1::BuildBasisProgress& p) { seen.push_back(p); });
+  first.join();
+  ASSERT_TRUE(built.ok()) << built.status();
+  ASSERT_TRUE(waited.ok()) << waited.status();
+  EXPECT_EQ(waited->id(), built->id());
+  EXPECT_EQ(waited->created_unix_ms(), built->created_unix_ms());
+  ASSERT_GE(seen.size(), 2u);
+  // QUEUED at once, then QUEUED naming the daemon that builds it, then DONE.
+  EXPECT_EQ(seen.front().phase(), v1::BUILD_PHASE_QUEUED);
+  const auto waiting = std::find_if(seen.begin(), seen.end(),
+                                    [](const auto& p) { return !p.waiting_for().empty(); });
+  ASSERT_NE(waiting, seen.end()) << "no message named the replica it waited for";
+  EXPECT_EQ(waiting->phase(), v1::BUILD_PHASE_QUEUED);
+  EXPECT_THAT(waiting->waiting_for(), ::testing::EndsWith("/builder"));
+  EXPECT_EQ(seen.back().phase(), v1::BUILD_PHASE_DONE);
+  EXPECT_TRUE(seen.back().waiting_for().empty());
+  EXPECT_TRUE(seen.back().has_basis());
+  EXPECT_EQ((*waiter)->registry()->builds_run(), 0);
+  EXPECT_EQ((*builder)->registry()->builds_run(), 1);
 }
 
 }  // namespace

@@ -322,7 +322,8 @@ class Client:
                     fraction=message.fraction,
                     overall=message.overall_fraction,
                     joined=message.joined,
-                    basis=BasisInfo.from_proto(message.basis) if done else None)
+                    basis=BasisInfo.from_proto(message.basis) if done else None,
+                    waiting_for=message.waiting_for)
                 if bar is not None:
                     bar.update(update)
                 if on_progress is not None:

@@ -116,7 +116,9 @@ class BasisInfo:
 @dataclass(frozen=True)
 class BuildProgress:
     """One message of a build stream. ``fraction`` is of the current phase, ``overall`` an
-    estimate of the whole build's (fixed phase weights); ``basis`` is set on the last one."""
+    estimate of the whole build's (fixed phase weights); ``basis`` is set on the last one.
+    ``waiting_for`` names the replica ("HOST/PID/DAEMON_ID") that builds this basis while this
+    one waits for it (shared store, phase "queued"); empty otherwise."""
 
     basis_id: str
     phase: str
@@ -124,6 +126,7 @@ class BuildProgress:
     overall: float
     joined: bool
     basis: Optional[BasisInfo] = None
+    waiting_for: str = ""
 
 
 @dataclass(frozen=True)
