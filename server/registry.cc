@@ -157,12 +157,15 @@ void Registry::Rescan() const {
   }
   for (DamagedEntry& d : contents.damaged) {
     (d.is_basis ? basis_ids : mesh_ids).insert(d.id);
+    auto mark = [&d](auto& e) {
+      if (e.loaded != nullptr) return;  // in use: the copy in memory was checked when loaded
+      e.record.id = d.id;
+      e.damaged = d.status;
+    };
     if (d.is_basis) {
-      BasisEntry& e = bases_[d.id];
-      if (e.loaded == nullptr) e.record.id = d.id, e.damaged = d.status;
+      mark(bases_[d.id]);
     } else {
-      MeshEntry& e = meshes_[d.id];
-      if (e.loaded == nullptr) e.record.id = d.id, e.damaged = d.status;
+      mark(meshes_[d.id]);
     }
   }
   for (auto it = meshes_.begin(); it != meshes_.end();) {
