@@ -88,7 +88,7 @@ SessionResult RunSession(const client::FieldClient& field_client, const std::str
   std::mt19937 rng(seed);
   std::uniform_int_distribution<int32_t> face(0, num_faces - 1);
   std::normal_distribution<double> value(0.0, 1.0);
-  std::unique_ptr<client::DesignStream> stream = field_client.Design();
+  std::unique_ptr<client::DesignStream> stream = field_client.Design(basis_id);
   v1::OpenDesign open;
   open.set_basis_id(basis_id);
   open.mutable_weights()->set_mu_s(1.0);

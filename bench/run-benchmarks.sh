@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs the benchmarks recorded in bench/RESULTS.md, one after the other (they use every core, so
 # never run two at once), and appends "$ command" and its JSON output to LOG.
-#   bench/run-benchmarks.sh [basis|approx|eigen|design|serve-load|all] [LOG]
+#   bench/run-benchmarks.sh [basis|approx|eigen|design|serve-load|serve-load-router|all] [LOG]
 # Meshes come from $FIELDSPACE_MESH_DIR or ../shared/meshes; binaries from build/bin.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -61,4 +61,11 @@ if [[ $what == serve-load || $what == all ]]; then
   # paced like users dragging constraints at 30 edits/s each
   run $B serve-load $M/armadillo_loop2_1384k.ply --dim 2000 --sessions 16 --edits 200
   run $B serve-load $M/armadillo_loop2_1384k.ply --dim 2000 --sessions 16 --edits 300 --rate 30
+fi
+if [[ $what == serve-load-router || $what == all ]]; then
+  # 3 --shared-store replicas behind nginx vs the replica directly vs a plain daemon (needs nginx)
+  run /usr/bin/python3 bench/serve_load_router.py --mesh $M/armadillo_86k.obj --dim 2000 \
+      --sessions 16 --edits 200 --rounds 3 --single
+  run /usr/bin/python3 bench/serve_load_router.py --mesh $M/armadillo_86k.obj --dim 2000 \
+      --sessions 16 --edits 300 --rate 30 --rounds 2 --single
 fi

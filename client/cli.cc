@@ -736,6 +736,7 @@ int Cli::Build(const CommandLine& a) {
   const Clock::time_point start = Clock::now();
   v1::BuildPhase last_phase = v1::BUILD_PHASE_UNSPECIFIED;
   int last_decile = -1;
+  std::string last_waiting_for;
   absl::StatusOr<v1::BasisInfo> info =
       client_->BuildBasis(request, [&](const v1::BuildBasisProgress& progress) {
         interrupt.Name(progress.basis_id(), progress.joined());
@@ -750,15 +751,24 @@ int Cli::Build(const CommandLine& a) {
             eta = absl::StrCat(" ETA ", left / 60, ":", left % 60 < 10 ? "0" : "", left % 60);
           }
           const int filled = percent * 30 / 100;
+          const std::string waiting = progress.waiting_for().empty()
+                                          ? ""
+                                          : " waiting for replica " + progress.waiting_for();
           err_ << "\r[" << std::string(filled, '#') << std::string(30 - filled, ' ') << "] "
-               << percent << "% " << PhaseName(progress.phase()) << eta << "          "
+               << percent << "% " << PhaseName(progress.phase()) << waiting << eta << "          "
                << std::flush;
-        } else if (progress.phase() != last_phase || percent / 10 != last_decile) {
+        } else if (progress.phase() != last_phase || percent / 10 != last_decile ||
+                   progress.waiting_for() != last_waiting_for) {
           err_ << "build " << progress.basis_id() << ": " << PhaseName(progress.phase()) << " "
-               << percent << "%" << (progress.joined() ? " (joined a running build)" : "") << "\n";
+               << percent << "%" << (progress.joined() ? " (joined a running build)" : "")
+               << (progress.waiting_for().empty()
+                       ? ""
+                       : " (waiting for replica " + progress.waiting_for() + ", which builds it)")
+               << "\n";
         }
         last_phase = progress.phase();
         last_decile = percent / 10;
+        last_waiting_for = progress.waiting_for();
       });
   if (tty) err_ << "\n";
   if (!info.ok()) return Fail(info.status(), "BuildBasis");
@@ -1224,15 +1234,22 @@ int Cli::Design(const CommandLine& a) {
   o->set_watch_encoding(v1::FIELD_ENCODING_AMBIENT);
   o->set_singularities(a.Has("singularities"));
   for (int32_t f : ParseFaceList(GetString(a, "watch"))) o->add_watch_faces(f);
-  edits.insert(edits.begin(), open);
   kinds.insert(kinds.begin(), "open");
 
   const bool coefficients = !a.Has("no-coefficients");
-  std::unique_ptr<DesignStream> stream = client_->Design();
-  for (size_t i = 0; i < edits.size(); ++i) {
+  // Survives the loss of its replica (a daemon behind a router that dies or drains): the session
+  // is reopened and replayed, and the answer of that edit says "resumed": true.
+  ResumableDesign session(client_.get(), open.open());
+  absl::Status failed;
+  for (size_t i = 0; i < edits.size() + 1; ++i) {
     const auto sent = Clock::now();
-    absl::StatusOr<v1::DesignUpdate> update = stream->Edit(edits[i]);
-    if (!update.ok()) break;  // Close gives the session's status
+    absl::StatusOr<ResumableDesign::Update> resumable =
+        i == 0 ? session.Open(0) : session.Edit(edits[i - 1]);
+    if (!resumable.ok()) {
+      failed = resumable.status();
+      break;
+    }
+    const v1::DesignUpdate* update = &resumable->update;
     const double round_trip_ms =
         std::chrono::duration<double, std::milli>(Clock::now() - sent).count();
     JsonWriter j;
@@ -1242,6 +1259,7 @@ int Cli::Design(const CommandLine& a) {
     j.Key("num_constraints").Int(update->num_constraints());
     j.Key("num_hard_constraints").Int(update->num_hard_constraints());
     j.Key("refactorized").Bool(update->timings().refactorized());
+    if (resumable->resumed) j.Key("resumed").Bool(true);
     j.Key("timings").BeginObject();
     j.Key("edit_ms").Number(update->timings().edit_ms());
     j.Key("lift_ms").Number(update->timings().lift_ms());
@@ -1278,7 +1296,8 @@ int Cli::Design(const CommandLine& a) {
     j.EndObject();
     Emit(j);
   }
-  if (absl::Status status = stream->Close(); !status.ok()) return Fail(status, "Design");
+  if (!failed.ok()) return Fail(failed, "Design");
+  if (absl::Status status = session.Close(); !status.ok()) return Fail(status, "Design");
   return 0;
 }
 

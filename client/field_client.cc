@@ -1,11 +1,14 @@
 #include "client/field_client.h"
 
+#include <algorithm>
 #include <bit>
 #include <filesystem>
 #include <fstream>
+#include <thread>
 #include <utility>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
@@ -66,9 +69,25 @@ FieldClient::FieldClient(FieldClientOptions options) : options_(std::move(option
   stub_ = v1::FieldSpace::NewStub(channel_);
 }
 
-std::unique_ptr<grpc::ClientContext> FieldClient::NewContext() const {
+std::string RoutingKey(const google::protobuf::Message& request) {
+  const google::protobuf::Descriptor* descriptor = request.GetDescriptor();
+  const google::protobuf::Reflection* reflection = request.GetReflection();
+  for (const char* name : {"basis_id", "mesh_id"}) {
+    const google::protobuf::FieldDescriptor* field = descriptor->FindFieldByName(name);
+    if (field == nullptr || field->is_repeated() ||
+        field->type() != google::protobuf::FieldDescriptor::TYPE_STRING) {
+      continue;
+    }
+    std::string value = reflection->GetString(request, field);
+    if (!value.empty()) return value;
+  }
+  return "";
+}
+
+std::unique_ptr<grpc::ClientContext> FieldClient::NewContext(const std::string& routing_key) const {
   auto context = std::make_unique<grpc::ClientContext>();
   if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
+  if (!routing_key.empty()) context->AddMetadata(kRoutingKeyHeader, routing_key);
   if (options_.timeout) context->set_deadline(std::chrono::system_clock::now() + *options_.timeout);
   return context;
 }
@@ -77,7 +96,7 @@ template <typename Request, typename Response>
 absl::StatusOr<Response> FieldClient::Unary(
     grpc::Status (v1::FieldSpace::Stub::*method)(grpc::ClientContext*, const Request&, Response*),
     const Request& request) const {
-  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  std::unique_ptr<grpc::ClientContext> context = NewContext(RoutingKey(request));
   Response response;
   if (absl::Status status = FromGrpc((stub_.get()->*method)(context.get(), request, &response));
       !status.ok()) {
@@ -193,7 +212,7 @@ absl::StatusOr<v1::DeleteMeshResponse> FieldClient::DeleteMesh(
 
 absl::StatusOr<MeshGeometry> FieldClient::GetMeshGeometry(
     const v1::GetMeshGeometryRequest& request) const {
-  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  std::unique_ptr<grpc::ClientContext> context = NewContext(RoutingKey(request));
   auto reader = stub_->GetMeshGeometry(context.get(), request);
   MeshGeometry geometry;
   absl::Status status = ReadAll(*reader, [&geometry](const v1::MeshGeometryChunk& chunk) {
@@ -207,7 +226,7 @@ absl::StatusOr<MeshGeometry> FieldClient::GetMeshGeometry(
 
 absl::StatusOr<v1::BasisInfo> FieldClient::BuildBasis(
     const v1::BuildBasisRequest& request, const BuildProgressCallback& on_progress) const {
-  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  std::unique_ptr<grpc::ClientContext> context = NewContext(RoutingKey(request));
   auto reader = stub_->BuildBasis(context.get(), request);
   std::optional<v1::BasisInfo> basis;
   absl::Status status = ReadAll(*reader, [&](const v1::BuildBasisProgress& progress) {
@@ -251,7 +270,7 @@ absl::StatusOr<std::vector<Chunk>> FieldClient::Collect(
     std::unique_ptr<grpc::ClientReader<Chunk>> (v1::FieldSpace::Stub::*method)(grpc::ClientContext*,
                                                                                const Request&),
     const Request& request) const {
-  std::unique_ptr<grpc::ClientContext> context = NewContext();
+  std::unique_ptr<grpc::ClientContext> context = NewContext(RoutingKey(request));
   auto reader = (stub_.get()->*method)(context.get(), request);
   std::vector<Chunk> chunks;
   absl::Status status =
@@ -288,8 +307,8 @@ absl::StatusOr<v1::EigenfieldsResponse> FieldClient::Eigenfields(
   return Unary(&v1::FieldSpace::Stub::Eigenfields, request);
 }
 
-std::unique_ptr<DesignStream> FieldClient::Design() const {
-  return std::unique_ptr<DesignStream>(new DesignStream(NewContext(), stub_.get()));
+std::unique_ptr<DesignStream> FieldClient::Design(const std::string& basis_id) const {
+  return std::unique_ptr<DesignStream>(new DesignStream(NewContext(basis_id), stub_.get()));
 }
 
 DesignStream::DesignStream(std::unique_ptr<grpc::ClientContext> context, v1::FieldSpace::Stub* stub)
@@ -338,6 +357,115 @@ absl::Status DesignStream::Broken() {
   absl::Status status = Close();
   if (status.ok()) return absl::UnavailableError("the server ended the design session");
   return status;
+}
+
+bool ReplicaLost(const absl::Status& status) {
+  if (absl::IsUnavailable(status)) return true;
+  // gRPC's own UNKNOWN without a message: a call on a channel whose server went away (servers
+  // always say what went wrong).
+  if (absl::IsUnknown(status) && status.message().empty()) return true;
+  return absl::IsInternal(status) && absl::StrContains(status.message(), "RST_STREAM");
+}
+
+absl::StatusOr<v1::DesignUpdate> ResumableDesign::Exchange(const v1::DesignRequest& r) {
+  if (stream_ == nullptr) {
+    stream_ = client_->Design(open_.basis_id());
+  }
+  return stream_->Edit(r);
+}
+
+absl::StatusOr<v1::DesignUpdate> ResumableDesign::Resume(const v1::DesignRequest& r,
+                                                         const absl::Status& lost) {
+  absl::Status error = lost;
+  static constexpr int kPauseMs[kMaxReopens] = {0, 100, 300, 600, 1000, 2000};
+  for (int attempt = 0; attempt < kMaxReopens; ++attempt) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(kPauseMs[attempt]));
+    stream_.reset();  // cancels the broken call
+    absl::StatusOr<v1::DesignUpdate> update;
+    if (!r.has_open()) {
+      v1::DesignRequest open;
+      open.set_seq(r.seq());
+      *open.mutable_open() = open_;
+      update = Exchange(open);
+      for (size_t i = 0; update.ok() && i < constraints_.size(); ++i) {
+        v1::DesignRequest add;
+        add.set_seq(r.seq());
+        add.mutable_add()->set_id(constraints_[i].first);
+        *add.mutable_add()->mutable_constraint() = constraints_[i].second;
+        update = Exchange(add);
+      }
+    }
+    if (update.ok()) update = Exchange(r);
+    if (update.ok()) {
+      ++resumes_;
+      return update;
+    }
+    if (!ReplicaLost(update.status())) return update.status();
+    error = update.status();
+  }
+  // Why the session was lost, and why it could not be reopened.
+  return absl::Status(
+      lost.code(),
+      absl::StrCat(lost.message(), " (reopening the session failed ", kMaxReopens, " times, last: ",
+                   error.message().empty() ? "no server answered" : error.ToString(), ")"));
+}
+
+void ResumableDesign::Remember(const v1::DesignRequest& r) {
+  auto find = [this](int32_t id) {
+    return std::find_if(constraints_.begin(), constraints_.end(),
+                        [id](const auto& c) { return c.first == id; });
+  };
+  if (r.has_add()) {
+    constraints_.emplace_back(r.add().id(), r.add().constraint());
+  } else if (r.has_move()) {
+    if (auto it = find(r.move().id()); it != constraints_.end()) {
+      it->second.set_face(r.move().face());
+      it->second.set_encoding(r.move().encoding());
+      *it->second.mutable_value() = r.move().value();
+    }
+  } else if (r.has_remove()) {
+    if (auto it = find(r.remove().id()); it != constraints_.end()) constraints_.erase(it);
+  } else if (r.has_set_weights()) {
+    // Weights an edit leaves out keep the session's values (where the proto tracks their
+    // presence; otherwise every value is sent).
+    const v1::Weights& w = r.set_weights();
+    const google::protobuf::Descriptor* descriptor = w.GetDescriptor();
+    v1::Weights* target = open_.mutable_weights();
+    for (int i = 0; i < descriptor->field_count(); ++i) {
+      const google::protobuf::FieldDescriptor* field = descriptor->field(i);
+      if (field->cpp_type() != google::protobuf::FieldDescriptor::CPPTYPE_DOUBLE) continue;
+      if (field->has_presence() && !w.GetReflection()->HasField(w, field)) continue;
+      target->GetReflection()->SetDouble(target, field, w.GetReflection()->GetDouble(w, field));
+    }
+  } else if (r.has_watch()) {
+    *open_.mutable_watch_faces() = r.watch().faces();
+    open_.set_watch_encoding(r.watch().encoding());
+  }
+}
+
+absl::StatusOr<ResumableDesign::Update> ResumableDesign::Open(uint64_t seq) {
+  v1::DesignRequest request;
+  request.set_seq(seq);
+  *request.mutable_open() = open_;
+  return Edit(request);
+}
+
+absl::StatusOr<ResumableDesign::Update> ResumableDesign::Edit(const v1::DesignRequest& request) {
+  Update out;
+  absl::StatusOr<v1::DesignUpdate> update = Exchange(request);
+  if (!update.ok() && ReplicaLost(update.status())) {
+    update = Resume(request, update.status());
+    out.resumed = update.ok();
+  }
+  if (!update.ok()) return update.status();
+  Remember(request);
+  out.update = *std::move(update);
+  return out;
+}
+
+absl::Status ResumableDesign::Close() {
+  if (stream_ == nullptr) return absl::OkStatus();
+  return stream_->Close();
 }
 
 }  // namespace fieldspace::client

@@ -20,6 +20,7 @@
 #include "absl/strings/string_view.h"
 #include "core/mesh/triangle_mesh.h"
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
+#include "google/protobuf/message.h"
 #include "grpc/health/v1/health.pb.h"
 #include "grpcpp/grpcpp.h"
 
@@ -49,6 +50,13 @@ fieldspace::v1::UploadMeshHeader MeshFileHeader(const std::string& path,
                                                 const std::string& name = "");
 
 class DesignStream;
+
+// The routing key of a request: its `basis_id`, else its `mesh_id` (top-level string fields), else
+// "". Sent as `x-fieldspace-key` metadata so that a router (nginx `hash $http_x_fieldspace_key
+// consistent`, Envoy ring hash) sends the calls about one basis or mesh to the same replica
+// (docs/scale-out.md); servers ignore it.
+inline constexpr char kRoutingKeyHeader[] = "x-fieldspace-key";
+std::string RoutingKey(const google::protobuf::Message& request);
 
 class FieldClient {
  public:
@@ -122,13 +130,14 @@ class FieldClient {
   absl::StatusOr<fieldspace::v1::SmoothResponse> Align(
       const fieldspace::v1::AlignRequest& request) const;
 
-  // Starts a Design call; send `open` first (DesignStream::Open).
-  std::unique_ptr<DesignStream> Design() const;
+  // Starts a Design call; send `open` first (DesignStream::Open). `basis_id`, when given, is the
+  // call's routing key (it must be sent before the first message names the basis).
+  std::unique_ptr<DesignStream> Design(const std::string& basis_id = "") const;
 
  private:
   explicit FieldClient(FieldClientOptions options);
-  // A context with the token and the deadline of the options.
-  std::unique_ptr<grpc::ClientContext> NewContext() const;
+  // A context with the token, the deadline of the options and the routing key (when not empty).
+  std::unique_ptr<grpc::ClientContext> NewContext(const std::string& routing_key = "") const;
   // Unary calls of FieldSpace, one implementation for all.
   template <typename Request, typename Response>
   absl::StatusOr<Response> Unary(grpc::Status (fieldspace::v1::FieldSpace::Stub::*method)(
@@ -185,6 +194,53 @@ class DesignStream {
       grpc::ClientReaderWriter<fieldspace::v1::DesignRequest, fieldspace::v1::DesignUpdate>>
       stream_;
   std::optional<absl::Status> final_status_;
+};
+
+// Whether a failed design call lost its replica, so that reopening the session may help:
+// UNAVAILABLE (the replica drained or is unreachable), a stream reset at the transport level,
+// which is what a router does when the replica behind it dies (nginx: "Received RST_STREAM with
+// error code 2", INTERNAL), or gRPC's UNKNOWN without a message (a call on a channel whose server
+// went away). Statuses sent by a server (they have a message) are not such a loss.
+bool ReplicaLost(const absl::Status& status);
+
+// A design session that survives the loss of its replica (docs/scale-out.md). It keeps what the
+// server confirmed (the open with its current weights and watch, the constraints by id in the
+// order they were added); when an edit fails with ReplicaLost, it reopens the stream (through a
+// router: on another replica), replays that state, sends the edit again and returns its update
+// marked `resumed`, with the coefficients the lost session would have given. Other errors end the
+// session as with DesignStream; when every reopen fails, the edit fails with the status that lost
+// the session (its message says why reopening failed). Belongs to one thread.
+class ResumableDesign {
+ public:
+  struct Update {
+    fieldspace::v1::DesignUpdate update;
+    bool resumed = false;
+  };
+  // Attempts and the pauses before them when reopening (a router may need a moment to mark the
+  // dead replica down).
+  static constexpr int kMaxReopens = 6;
+
+  ResumableDesign(const FieldClient* client, fieldspace::v1::OpenDesign open)
+      : client_(client), open_(std::move(open)) {}
+
+  // Opens the session (the first call; `seq` is echoed).
+  absl::StatusOr<Update> Open(uint64_t seq = 0);
+  // One edit (not an open).
+  absl::StatusOr<Update> Edit(const fieldspace::v1::DesignRequest& request);
+  absl::Status Close();
+  int resumes() const { return resumes_; }
+
+ private:
+  absl::StatusOr<fieldspace::v1::DesignUpdate> Exchange(const fieldspace::v1::DesignRequest& r);
+  absl::StatusOr<fieldspace::v1::DesignUpdate> Resume(const fieldspace::v1::DesignRequest& r,
+                                                      const absl::Status& lost);
+  void Remember(const fieldspace::v1::DesignRequest& request);
+
+  const FieldClient* const client_;
+  fieldspace::v1::OpenDesign open_;
+  std::vector<std::pair<int32_t, fieldspace::v1::Constraint>> constraints_;
+  std::unique_ptr<DesignStream> stream_;
+  int resumes_ = 0;
 };
 
 }  // namespace fieldspace::client

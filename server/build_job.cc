@@ -29,10 +29,23 @@ void BuildJob::Unsubscribe(uint64_t token) {
   listeners_.erase(token);
 }
 
+void BuildJob::SetWaitingFor(const std::string& holder) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (progress_.finished || progress_.waiting_for == holder) return;
+    progress_.stage = BuildStage::kQueued;
+    progress_.fraction = 0;
+    progress_.waiting_for = holder;
+    last_notify_ = std::chrono::steady_clock::now();
+  }
+  Notify();
+}
+
 void BuildJob::SetStage(BuildStage stage, double fraction) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (progress_.finished) return;
+    progress_.waiting_for.clear();
     const bool stage_changed = stage != progress_.stage;
     progress_.stage = stage;
     progress_.fraction = std::clamp(fraction, 0.0, 1.0);
@@ -49,6 +62,7 @@ void BuildJob::Finish(absl::Status status, const BasisRecord& record) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     progress_.finished = true;
+    progress_.waiting_for.clear();
     progress_.status = std::move(status);
     progress_.record = record;
     if (progress_.status.ok()) {

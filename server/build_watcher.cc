@@ -129,6 +129,7 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
       }
       const v1::BuildPhase phase = PhaseToProto(progress.stage);
       if (!progress.finished && sent_any_ && phase == msg_.phase() &&
+          progress.waiting_for == msg_.waiting_for() &&
           std::abs(progress.fraction - msg_.fraction()) < 0.005) {
         return;
       }
@@ -138,6 +139,7 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
       msg_.set_fraction(progress.fraction);
       msg_.set_overall_fraction(OverallFraction(progress.stage, progress.fraction));
       msg_.set_joined(joined_);
+      msg_.set_waiting_for(progress.waiting_for);
       sent_any_ = true;
       if (progress.finished) {
         finished_ = true;

@@ -12,6 +12,16 @@
 namespace fieldspace::server {
 namespace {
 
+// How a draining server ends a session: UNAVAILABLE with a retry hint (message and the trailing
+// metadata `x-fieldspace-retry: reopen`), so that clients reopen it, through a router on another
+// replica, and replay their edits (the client library does; docs/scale-out.md).
+constexpr char kRetryHintKey[] = "x-fieldspace-retry";
+absl::Status DrainedSession() {
+  return absl::UnavailableError(
+      "server is shutting down: reopen the design session (on another replica) and replay its "
+      "constraints and weights");
+}
+
 DesignEditorOptions EditorOptions(const ServiceOptions& service) {
   DesignEditorOptions options;
   options.verify_interval = service.design_verify_interval;
@@ -26,6 +36,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
  public:
   DesignReactor(FieldService* service, grpc::CallbackServerContext* context)
       : service_(service),
+        context_(context),
         editor_([registry =
                      service->registry()](const std::string& id) { return registry->GetBasis(id); },
                 EditorOptions(service->options())) {
@@ -117,7 +128,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
         FinishWith(this, (absl::CancelledError("the client went away")));
         break;
       case kFinishDrain:
-        FinishWith(this, (ShuttingDown()));
+        FinishDrained();
         break;
       case kNothing:
         break;
@@ -142,10 +153,15 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
         finish_sent_ = true;
       }
     }
-    if (finish) FinishWith(this, (ShuttingDown()));
+    if (finish) FinishDrained();
   }
 
  private:
+  void FinishDrained() {
+    context_->AddTrailingMetadata(kRetryHintKey, "reopen");
+    FinishWith(this, DrainedSession());
+  }
+
   void Work() {
     update_.Clear();
     absl::Status status = cancelled_.load()
@@ -171,6 +187,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
   }
 
   FieldService* const service_;
+  grpc::CallbackServerContext* const context_;
   bool registered_ = false;
   std::atomic<bool> cancelled_{false};
   std::mutex mu_;

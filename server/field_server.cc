@@ -117,6 +117,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   s->store_lock_.emplace(std::move(lock));
   StoreOptions store_options;
   store_options.save_pause_ms = options.debug_save_pause_ms;
+  store_options.shared = options.store_lock == StoreLockMode::kShared;
   ASSIGN_OR_RETURN(s->store_, Store::Open(options.store_dir, store_options));
   ComputePool::Options pool_options;
   pool_options.interactive_threads = threads;
@@ -126,6 +127,9 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   registry_options.memory_budget_bytes = options.memory_budget_mb << 20;
   registry_options.build_threads = threads;
   registry_options.max_dimension = options.max_dimension;
+  registry_options.shared_store = options.store_lock == StoreLockMode::kShared;
+  registry_options.daemon_id = options.daemon_id;
+  registry_options.lease = options.lease;
   ASSIGN_OR_RETURN(s->registry_,
                    Registry::Create(s->store_.get(), s->pool_.get(), registry_options));
 

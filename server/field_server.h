@@ -9,6 +9,7 @@
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "server/lease.h"
 #include "server/store_lock.h"
 
 namespace grpc {
@@ -37,8 +38,11 @@ struct FieldServerOptions {
   // Listening on a non-loopback address needs an auth token, or this explicit opt-out.
   bool insecure = false;
   int32_t debug_save_pause_ms = 0;  // testing only (see StoreOptions)
-  // Whether other daemons may use the same store (see StoreLock).
+  // Whether other daemons may use the same store (see StoreLock): kShared is --shared-store
+  // (RegistryOptions::shared_store; docs/scale-out.md).
   StoreLockMode store_lock = StoreLockMode::kExclusive;
+  std::string daemon_id;  // shared store: names this daemon in leases and logs; random if empty
+  Lease::Options lease;   // shared store: build lease heartbeat and staleness
 };
 
 // The daemon: store + registry + compute pool + gRPC server with FieldSpace, server reflection and

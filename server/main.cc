@@ -3,7 +3,7 @@
 //   fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]
 //               [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]
 //               [--max-dimension N] [--design-verify-every K] [--auth-token-file FILE]
-//               [--insecure] [--drain-seconds S]
+//               [--insecure] [--drain-seconds S] [--shared-store [--daemon-id ID]]
 //               [--demo]
 //
 // Prints "listening on HOST:PORT" as the first line on stdout once serving (port 0 picks a free
@@ -34,7 +34,7 @@ constexpr char kUsage[] =
     "                   [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]\n"
     "                   [--max-dimension N] [--design-verify-every K] [--max-design-sessions N]\n"
     "                   [--auth-token-file FILE] [--insecure]\n"
-    "                   [--drain-seconds S] [--demo]\n"
+    "                   [--drain-seconds S] [--shared-store [--daemon-id ID]] [--demo]\n"
     "\n"
     "  --listen HOST:PORT      address to serve on (default 127.0.0.1:50051; port 0 = any free\n"
     "                          port). Non-loopback needs --auth-token-file or --insecure.\n"
@@ -51,6 +51,10 @@ constexpr char kUsage[] =
     "  --auth-token-file FILE  clients must send 'authorization: Bearer <token>'\n"
     "  --insecure              allow a non-loopback address without a token\n"
     "  --drain-seconds S       how long shutdown waits for in-flight RPCs (10)\n"
+    "  --shared-store          several daemons use --store (e.g. replicas behind a router on a\n"
+    "                          shared file system): lookups on a miss, a build lease per basis\n"
+    "                          (docs/scale-out.md). Every daemon on the store needs it.\n"
+    "  --daemon-id ID          this daemon's name in build leases and logs (default: random)\n"
     "  --demo                  store the demo mesh and build its vector basis in the background\n";
 
 int Fail(const std::string& message) {
@@ -71,7 +75,8 @@ int main(int argc, char** argv) {
   std::map<std::string, std::string*> string_flags = {{"listen", &options.listen},
                                                       {"store", &options.store_dir},
                                                       {"data-root", &options.data_root},
-                                                      {"auth-token-file", &token_file}};
+                                                      {"auth-token-file", &token_file},
+                                                      {"daemon-id", &options.daemon_id}};
   std::map<std::string, int64_t*> int64_flags = {{"memory-budget-mb", &options.memory_budget_mb},
                                                  {"max-message-mb", &options.max_message_mb},
                                                  {"max-upload-mb", &options.max_upload_mb}};
@@ -82,7 +87,7 @@ int main(int argc, char** argv) {
       {"max-design-sessions", &options.max_design_sessions},
       {"debug-save-pause-ms", &options.debug_save_pause_ms}};
   fieldspace::FlagSpec spec;
-  spec.switches = {"help", "demo", "insecure"};
+  spec.switches = {"help", "demo", "insecure", "shared-store"};
   spec.value_flags = {"drain-seconds"};
   for (const auto& flag : string_flags) spec.value_flags.push_back(flag.first);
   for (const auto& flag : int64_flags) spec.value_flags.push_back(flag.first);
@@ -104,6 +109,7 @@ int main(int argc, char** argv) {
   }
   demo = args->Has("demo");
   options.insecure = args->Has("insecure");
+  if (args->Has("shared-store")) options.store_lock = fieldspace::server::StoreLockMode::kShared;
   for (const auto& [name, target] : string_flags) *target = args->Get(name).value_or(*target);
   for (const auto& [name, target] : int64_flags) {
     absl::StatusOr<int64_t> value = args->GetInt(name, *target);
@@ -118,6 +124,10 @@ int main(int argc, char** argv) {
   absl::StatusOr<double> drain = args->GetDouble("drain-seconds", drain_seconds);
   if (!drain.ok() || *drain < 0) return Fail("--drain-seconds needs a non-negative number");
   drain_seconds = *drain;
+  if (!options.daemon_id.empty() &&
+      options.store_lock != fieldspace::server::StoreLockMode::kShared) {
+    return Fail("--daemon-id needs --shared-store");
+  }
   if (options.store_dir.empty()) {
     std::cerr << kUsage;
     return Fail("--store DIR is required");

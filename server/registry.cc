@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iostream>
+#include <set>
 #include <thread>
 #include <utility>
 
@@ -80,6 +82,153 @@ absl::StatusOr<std::unique_ptr<Registry>> Registry::Create(Store* store, Compute
 
 Registry::~Registry() { CancelAllBuilds(std::chrono::milliseconds(0)); }
 
+// --- Shared store -------------------------------------------------------------------------------
+
+template <typename E>
+void Registry::DropLocked(std::map<std::string, E>& entries,
+                          typename std::map<std::string, E>::iterator it) const {
+  // Sessions and requests that hold the loaded copy keep it until they let go.
+  if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+  entries.erase(it);
+}
+
+void Registry::SyncMesh(const std::string& id) const {
+  if (!options_.shared_store) return;
+  const bool on_disk = store_->HasMesh(id);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = meshes_.find(id);
+    if (!on_disk) {
+      if (it != meshes_.end()) DropLocked(meshes_, it);
+      return;
+    }
+    if (it != meshes_.end() && it->second.damaged.ok()) return;
+  }
+  absl::StatusOr<MeshRecord> record = store_->ReadMeshRecord(id);
+  if (!record.ok() && record.status().code() != absl::StatusCode::kDataLoss) return;
+  std::lock_guard<std::mutex> lock(mu_);
+  MeshEntry& e = meshes_[id];
+  if (e.loaded != nullptr) return;  // an upload here won the race
+  e.record.id = id;
+  e.damaged = record.status();
+  if (record.ok()) e.record = *std::move(record);
+}
+
+void Registry::SyncBasis(const std::string& id) const {
+  if (!options_.shared_store) return;
+  const bool on_disk = store_->HasBasis(id);
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = bases_.find(id);
+    if (!on_disk) {
+      if (it != bases_.end()) DropLocked(bases_, it);
+      return;
+    }
+    if (it != bases_.end() && it->second.damaged.ok()) return;
+  }
+  absl::StatusOr<BasisRecord> record = store_->ReadBasisRecord(id);
+  if (!record.ok() && record.status().code() != absl::StatusCode::kDataLoss) return;
+  std::lock_guard<std::mutex> lock(mu_);
+  BasisEntry& e = bases_[id];
+  if (e.loaded != nullptr) return;
+  e.record.id = id;
+  e.damaged = record.status();
+  if (record.ok()) e.record = *std::move(record);
+}
+
+void Registry::Rescan() const {
+  if (!options_.shared_store) return;
+  StoreContents contents = store_->Scan();
+  std::set<std::string> mesh_ids, basis_ids;
+  std::lock_guard<std::mutex> lock(mu_);
+  for (MeshRecord& r : contents.meshes) {
+    mesh_ids.insert(r.id);
+    MeshEntry& e = meshes_[r.id];
+    if (e.loaded != nullptr && e.damaged.ok()) continue;
+    e.damaged = absl::OkStatus();
+    e.record = std::move(r);
+  }
+  for (BasisRecord& r : contents.bases) {
+    basis_ids.insert(r.id);
+    BasisEntry& e = bases_[r.id];
+    if (e.loaded != nullptr && e.damaged.ok()) continue;
+    e.damaged = absl::OkStatus();
+    e.record = std::move(r);
+  }
+  for (DamagedEntry& d : contents.damaged) {
+    (d.is_basis ? basis_ids : mesh_ids).insert(d.id);
+    auto mark = [&d](auto& e) {
+      if (e.loaded != nullptr) return;  // in use: the copy in memory was checked when loaded
+      e.record.id = d.id;
+      e.damaged = d.status;
+    };
+    if (d.is_basis) {
+      mark(bases_[d.id]);
+    } else {
+      mark(meshes_[d.id]);
+    }
+  }
+  for (auto it = meshes_.begin(); it != meshes_.end();) {
+    auto next = std::next(it);
+    if (mesh_ids.count(it->first) == 0) DropLocked(meshes_, it);
+    it = next;
+  }
+  for (auto it = bases_.begin(); it != bases_.end();) {
+    auto next = std::next(it);
+    if (basis_ids.count(it->first) == 0) DropLocked(bases_, it);
+    it = next;
+  }
+}
+
+absl::StatusOr<std::unique_ptr<Lease>> Registry::AwaitBuildLease(BuildJob& job,
+                                                                 BasisRecord* built) {
+  const std::string& id = job.basis_id();
+  const std::string dir = store_->LeaseDir();
+  Lease::State watched;
+  watched.mtime_ns = -1;
+  auto unchanged_since = std::chrono::steady_clock::now();
+  std::string announced;
+  while (true) {
+    if (job.cancel_flag()->load()) return absl::CancelledError("build cancelled");
+    if (absl::StatusOr<BasisRecord> r = store_->ReadBasisRecord(id); r.ok()) {
+      *built = *std::move(r);
+      return nullptr;
+    }
+    LeaseOwner holder;
+    ASSIGN_OR_RETURN(std::unique_ptr<Lease> lease,
+                     Lease::TryAcquire(dir, id, me_, options_.lease, &holder));
+    if (lease != nullptr) {
+      // The holder may have saved and released between our two looks.
+      if (absl::StatusOr<BasisRecord> r = store_->ReadBasisRecord(id); r.ok()) {
+        *built = *std::move(r);
+        return nullptr;
+      }
+      return lease;
+    }
+    if (holder.ToString() != announced) {
+      announced = holder.ToString();
+      std::cerr << "fieldspaced: basis " << id << ": waiting for replica " << announced
+                << " (it holds the build lease)" << std::endl;
+    }
+    job.SetWaitingFor(announced);
+    const auto now = std::chrono::steady_clock::now();
+    if (absl::StatusOr<Lease::State> state = Lease::Read(dir, id); state.ok()) {
+      if (!(state->owner == watched.owner) || state->mtime_ns != watched.mtime_ns) {
+        watched = *state;
+        unchanged_since = now;
+      } else if (now - unchanged_since > options_.lease.stale_after) {
+        std::cerr << "fieldspaced: basis " << id << ": the lease of " << announced
+                  << " has had no heartbeat for "
+                  << std::chrono::duration<double>(now - unchanged_since).count()
+                  << " s: taking it over" << std::endl;
+        RETURN_IF_ERROR(Lease::BreakStale(dir, id, watched.owner, watched.mtime_ns));
+        continue;
+      }
+    }
+    std::this_thread::sleep_for(options_.lease_poll);
+  }
+}
+
 int64_t Registry::memory_in_use() const {
   std::lock_guard<std::mutex> lock(mu_);
   return memory_in_use_;
@@ -126,6 +275,7 @@ absl::StatusOr<MeshRecord> Registry::AddMesh(MeshArrays arrays, const std::strin
   record.name = name;
   record.polygons_triangulated = polygons_triangulated;
   record.created_unix_ms = NowUnixMs();
+  SyncMesh(record.id);
   {
     std::lock_guard<std::mutex> lock(mu_);
     auto it = meshes_.find(record.id);
@@ -155,6 +305,7 @@ absl::StatusOr<MeshRecord> Registry::AddMesh(MeshArrays arrays, const std::strin
 }
 
 absl::StatusOr<MeshRecord> Registry::GetMeshRecord(const std::string& id) const {
+  SyncMesh(id);
   std::lock_guard<std::mutex> lock(mu_);
   auto it = meshes_.find(id);
   if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
@@ -163,6 +314,7 @@ absl::StatusOr<MeshRecord> Registry::GetMeshRecord(const std::string& id) const 
 }
 
 std::vector<MeshRecord> Registry::ListMeshes() const {
+  Rescan();
   std::lock_guard<std::mutex> lock(mu_);
   std::vector<MeshRecord> out;
   for (const auto& [id, e] : meshes_) {
@@ -180,6 +332,7 @@ bool Registry::IsMeshLoaded(const std::string& id) const {
 absl::StatusOr<std::vector<std::string>> Registry::DeleteMesh(const std::string& id, bool cascade) {
   std::vector<std::string> basis_ids;
   std::vector<std::shared_ptr<BuildJob>> jobs;
+  Rescan();  // shared store: the bases other daemons built on this mesh
   {
     std::lock_guard<std::mutex> lock(mu_);
     auto it = meshes_.find(id);
@@ -261,6 +414,7 @@ absl::StatusOr<std::shared_ptr<const typename E::ValueType>> Registry::GetOrLoad
 }
 
 absl::StatusOr<std::shared_ptr<const TriangleMesh>> Registry::GetMesh(const std::string& id) {
+  SyncMesh(id);
   return GetOrLoad<MeshEntry>(
       meshes_, id, [&] { return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'")); },
       [&]() -> absl::StatusOr<std::shared_ptr<const TriangleMesh>> {
@@ -366,6 +520,7 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
   pending.key = key;
   pending.dofs = static_cast<int32_t>(dofs);
 
+  SyncBasis(pending.id);
   std::lock_guard<std::mutex> lock(mu_);
   StartedBuild out;
   if (auto it = bases_.find(pending.id); it != bases_.end() && it->second.damaged.ok()) {
@@ -395,8 +550,21 @@ void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest reque
   context.threads = options_.build_threads;
   context.progress = [job](BuildStage stage, double fraction) { job->SetStage(stage, fraction); };
 
+  std::unique_ptr<Lease> lease;          // shared store: held from before the build to the save
+  std::optional<BasisRecord> elsewhere;  // shared store: another daemon built it
   auto build = [&]() -> absl::StatusOr<std::shared_ptr<const ServedBasis>> {
     if (job->cancel_flag()->load()) return absl::CancelledError("build cancelled");
+    if (options_.shared_store) {
+      BasisRecord built;
+      ASSIGN_OR_RETURN(lease, AwaitBuildLease(*job, &built));
+      if (lease == nullptr) {
+        elsewhere = std::move(built);
+        return nullptr;
+      }
+      std::cerr << "fieldspaced: building basis " << record.id << " (mesh " << record.key.mesh_id
+                << ", d " << record.key.dimension << ") as " << me_.ToString() << ", lease "
+                << lease->path() << std::endl;
+    }
     job->SetStage(BuildStage::kOperator, 0);
     ASSIGN_OR_RETURN(std::shared_ptr<const TriangleMesh> mesh, GetMesh(record.key.mesh_id));
     ASSIGN_OR_RETURN(BuiltBasis built,
@@ -419,6 +587,7 @@ void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest reque
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     ASSIGN_OR_RETURN(std::string payload, EncodeBasis(basis, record.key.mesh_id));
     RETURN_IF_ERROR(store_->SaveBasis(record, {payload}));
+    builds_run_.fetch_add(1);
     auto published = std::make_shared<ServedBasis>(*served);
     published->record = record;  // with the figures known only now
     return std::shared_ptr<const ServedBasis>(std::move(published));
@@ -436,11 +605,20 @@ void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest reque
     result = absl::UnavailableError(
         "the server shut down before the build finished; request it again after the restart");
   }
+  if (elsewhere) record = *elsewhere;
+  if (options_.shared_store) SyncMesh(record.key.mesh_id);
   bool orphaned = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
     builds_.erase(record.id);
-    if (result.ok()) {
+    if (result.ok() && elsewhere) {
+      // Built by another daemon: known from now on, loaded on first use.
+      BasisEntry& e = bases_[record.id];
+      if (e.loaded == nullptr) {
+        e.record = record;
+        e.damaged = absl::OkStatus();
+      }
+    } else if (result.ok()) {
       if (meshes_.count(record.key.mesh_id) == 0) {
         orphaned = true;  // the mesh was deleted while we were building
         result = absl::CancelledError("the basis's mesh was deleted during the build");
@@ -458,6 +636,7 @@ void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest reque
     }
   }
   if (orphaned) (void)store_->DeleteBasis(record.id);
+  lease.reset();  // after the file is in place: waiters look for the file before the lease
   job->Finish(result.status(), record);
 }
 
@@ -476,6 +655,7 @@ absl::Status Registry::CancelBuild(const std::string& basis_id) {
 }
 
 absl::StatusOr<BasisStatus> Registry::GetBasisStatus(const std::string& id) const {
+  SyncBasis(id);
   std::lock_guard<std::mutex> lock(mu_);
   if (auto it = bases_.find(id); it != bases_.end()) {
     if (!it->second.damaged.ok()) return it->second.damaged;
@@ -496,6 +676,7 @@ absl::StatusOr<BasisStatus> Registry::GetBasisStatus(const std::string& id) cons
 }
 
 std::vector<BasisStatus> Registry::ListBases(const std::string& mesh_id_filter) const {
+  Rescan();
   std::lock_guard<std::mutex> lock(mu_);
   std::vector<BasisStatus> out;
   for (const auto& [id, e] : bases_) {
@@ -520,6 +701,7 @@ std::vector<BasisStatus> Registry::ListBases(const std::string& mesh_id_filter) 
 }
 
 absl::Status Registry::DeleteBasis(const std::string& id) {
+  SyncBasis(id);
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (builds_.count(id) > 0) {
@@ -535,6 +717,7 @@ absl::Status Registry::DeleteBasis(const std::string& id) {
 }
 
 absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std::string& id) {
+  SyncBasis(id);
   return GetOrLoad<BasisEntry>(
       bases_, id,
       [&] {

@@ -17,6 +17,7 @@
 #include "absl/status/statusor.h"
 #include "core/mesh/triangle_mesh.h"
 #include "server/compute_pool.h"
+#include "server/lease.h"
 #include "server/records.h"
 #include "server/served_basis.h"
 #include "server/store.h"
@@ -29,6 +30,14 @@ struct RegistryOptions {
   int64_t memory_budget_bytes = int64_t{4} << 30;
   int32_t build_threads = 0;     // passed to the basis construction; 0: all
   int32_t max_dimension = 8192;  // larger d is ResourceExhausted (dense reduced matrices are d x d)
+  // Several daemons share the store (--shared-store; docs/scale-out.md): ids missing from memory
+  // are looked up in the store, requests naming an id check that its file still exists (deletes
+  // by other daemons), listings read the store, and a basis is built once across the daemons
+  // (a lease per build in DIR/leases; the others wait for its file).
+  bool shared_store = false;
+  std::string daemon_id;  // in lease files and logs; random when empty
+  Lease::Options lease;
+  std::chrono::milliseconds lease_poll{250};  // how often a waiting build looks again
 };
 
 // One basis build, shared by every request that asked for the same basis id. Runs on the compute
@@ -39,6 +48,8 @@ class BuildJob {
     BuildStage stage = BuildStage::kQueued;
     double fraction = 0;
     bool finished = false;
+    // Shared store: the replica whose lease this build waits for (stage kQueued), or empty.
+    std::string waiting_for;
     absl::Status status;  // when finished
     BasisRecord record;   // when finished OK
   };
@@ -60,6 +71,8 @@ class BuildJob {
 
   // Called by the registry.
   void SetStage(BuildStage stage, double fraction);
+  // Shared store: waiting (stage kQueued) for the replica `holder` that builds this basis.
+  void SetWaitingFor(const std::string& holder);
   void Finish(absl::Status status, const BasisRecord& record);
 
  private:
@@ -133,6 +146,10 @@ class Registry {
   void CancelAllBuilds(std::chrono::milliseconds timeout);
 
   int64_t memory_in_use() const;
+  // How many basis builds this registry ran to the end (not joined, not found built elsewhere).
+  int64_t builds_run() const { return builds_run_.load(); }
+  // "HOST/PID/DAEMON_ID" as written into lease files.
+  std::string owner_name() const { return me_.ToString(); }
 
  private:
   // A stored artifact (mesh or basis) and its in-memory copy, if loaded.
@@ -161,7 +178,20 @@ class Registry {
       const std::function<int64_t(const typename E::ValueType&)>& bytes);
 
   Registry(Store* store, ComputePool* pool, const RegistryOptions& options)
-      : store_(store), pool_(pool), options_(options) {}
+      : store_(store), pool_(pool), options_(options), me_(LocalLeaseOwner(options.daemon_id)) {}
+
+  // Shared store only (no-ops otherwise), called without mu_: brings the entry of `id` in line
+  // with its store file (one stat; the header on first sight); Rescan does it for all files.
+  void SyncMesh(const std::string& id) const;
+  void SyncBasis(const std::string& id) const;
+  void Rescan() const;
+  // Removes an entry that a delete elsewhere made stale. Requires mu_.
+  template <typename E>
+  void DropLocked(std::map<std::string, E>& entries,
+                  typename std::map<std::string, E>::iterator it) const;
+  // Shared store: waits until this daemon holds the build lease of the job's basis (returned), or
+  // until another daemon stored the basis (nullptr, `*built` set).
+  absl::StatusOr<std::unique_ptr<Lease>> AwaitBuildLease(BuildJob& job, BasisRecord* built);
 
   void RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request);
   absl::StatusOr<std::shared_ptr<const ServedBasis>> LoadBasis(const std::string& id);
@@ -171,13 +201,16 @@ class Registry {
   Store* const store_;
   ComputePool* const pool_;
   const RegistryOptions options_;
+  const LeaseOwner me_;
 
   mutable std::mutex mu_;
-  std::map<std::string, MeshEntry> meshes_;
-  std::map<std::string, BasisEntry> bases_;
+  // Mutable: lookups in a shared store bring them in line with the store.
+  mutable std::map<std::string, MeshEntry> meshes_;
+  mutable std::map<std::string, BasisEntry> bases_;
   std::map<std::string, std::shared_ptr<BuildJob>> builds_;
   std::atomic<bool> shutting_down_{false};
-  int64_t memory_in_use_ = 0;
+  std::atomic<int64_t> builds_run_{0};
+  mutable int64_t memory_in_use_ = 0;
   uint64_t clock_ = 0;  // LRU clock
 };
 

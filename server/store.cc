@@ -323,7 +323,8 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir,
                                                    const StoreOptions& options) {
   if (dir.empty()) return absl::InvalidArgumentError("store directory must not be empty");
   std::error_code ec;
-  for (const char* sub : {"meshes", "bases"}) {
+  for (const char* sub : {"meshes", "bases", "leases"}) {
+    if (std::string_view(sub) == "leases" && !options.shared) continue;
     fs::create_directories(fs::path(dir) / sub, ec);
     if (ec) {
       return absl::PermissionDeniedError(absl::StrCat(
@@ -334,9 +335,13 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir,
   for (const char* sub : {"meshes", "bases"}) {
     for (const auto& entry : fs::directory_iterator(fs::path(dir) / sub, ec)) {
       const std::string name = entry.path().filename().string();
-      if (IsTemporaryFileName(name)) {
-        fs::remove(entry.path(), ec);
+      if (!IsTemporaryFileName(name)) continue;
+      if (options.shared) {
+        // Another daemon may be writing it right now: only old ones are a crash's leftovers.
+        const auto mtime = fs::last_write_time(entry.path(), ec);
+        if (ec || fs::file_time_type::clock::now() - mtime < options.stale_temp_age) continue;
       }
+      fs::remove(entry.path(), ec);
     }
   }
   return std::unique_ptr<Store>(new Store(fs::absolute(dir).lexically_normal().string(), options));
@@ -456,6 +461,36 @@ absl::StatusOr<Store::LoadedBasisFile> Store::LoadBasis(const std::string& id) c
   out.payload.resize(f.header.payload_len);
   RETURN_IF_ERROR(ReadPayload(f, {{out.payload.data(), out.payload.size()}}, path));
   return out;
+}
+
+absl::StatusOr<MeshRecord> Store::ReadMeshRecord(const std::string& id) const {
+  if (!ValidId(id, 'm')) return absl::NotFoundError("no mesh " + id);
+  const std::string path = MeshPath(id);
+  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kMeshMagic));
+  MeshRecord record;
+  if (!DecodeMeshRecord(f.meta, &record) || record.id != id) {
+    return absl::DataLossError(path + ": corrupt metadata");
+  }
+  return record;
+}
+
+absl::StatusOr<BasisRecord> Store::ReadBasisRecord(const std::string& id) const {
+  if (!ValidId(id, 'b')) return absl::NotFoundError("no basis " + id);
+  const std::string path = BasisPath(id);
+  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kBasisMagic));
+  BasisRecord record;
+  if (!DecodeBasisRecord(f.meta, &record) || record.id != id) {
+    return absl::DataLossError(path + ": corrupt metadata");
+  }
+  return record;
+}
+
+bool Store::HasMesh(const std::string& id) const {
+  return ValidId(id, 'm') && ::access(MeshPath(id).c_str(), F_OK) == 0;
+}
+
+bool Store::HasBasis(const std::string& id) const {
+  return ValidId(id, 'b') && ::access(BasisPath(id).c_str(), F_OK) == 0;
 }
 
 absl::Status Store::DeleteMesh(const std::string& id) const {

@@ -1,6 +1,7 @@
 #ifndef FIELDSPACE_SERVER_STORE_H_
 #define FIELDSPACE_SERVER_STORE_H_
 
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -18,6 +19,10 @@ struct StoreOptions {
   // Testing only: pause this long in the middle of writing a basis payload (before the fsync and
   // the rename), so that a crash test can kill the process during a save.
   int32_t save_pause_ms = 0;
+  // Several daemons use the store (--shared-store): Open leaves other daemons' temporary files
+  // alone unless they are older than `stale_temp_age` (a save in progress keeps writing).
+  bool shared = false;
+  std::chrono::seconds stale_temp_age{600};
 };
 
 // A store file that exists but cannot be used (bad header, checksum mismatch, truncated).
@@ -69,6 +74,16 @@ class Store {
     std::string payload;
   };
   absl::StatusOr<LoadedBasisFile> LoadBasis(const std::string& id) const;
+
+  // The record of one file (header and metadata only): NotFound if absent, DataLoss if damaged.
+  // For lookups on a miss in a shared store.
+  absl::StatusOr<MeshRecord> ReadMeshRecord(const std::string& id) const;
+  absl::StatusOr<BasisRecord> ReadBasisRecord(const std::string& id) const;
+  // Whether the file exists (one stat).
+  bool HasMesh(const std::string& id) const;
+  bool HasBasis(const std::string& id) const;
+  // DIR/leases: build leases of a shared store (server/lease.h).
+  std::string LeaseDir() const { return dir_ + "/leases"; }
 
   // OK if the file did not exist.
   absl::Status DeleteMesh(const std::string& id) const;

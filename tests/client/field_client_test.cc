@@ -362,5 +362,88 @@ TEST_F(FieldClientBasisTest, DesignSessionDeadlineCoversTheWholeStream) {
   EXPECT_EQ(stream->Close().code(), absl::StatusCode::kDeadlineExceeded);
 }
 
+// ResumableDesign: a session whose server drains resumes on the next server on the same address
+// and shared store (what a router gives), with the same solution, and says so once.
+TEST(ResumableDesignTest, ADrainedSessionResumesOnTheNextServerWithTheSameSolution) {
+  const fs::path root =
+      fs::temp_directory_path() / absl::StrFormat("fs_client_%d_resumable", ::getpid());
+  fs::remove_all(root);
+  server::FieldServerOptions options;
+  options.listen = "127.0.0.1:0";
+  options.store_dir = (root / "store").string();
+  options.threads = 2;
+  options.store_lock = server::StoreLockMode::kShared;
+  auto first = server::FieldServer::Start(options);
+  ASSERT_TRUE(first.ok()) << first.status();
+  const std::string address = (*first)->address();
+  FieldClientOptions client_options;
+  client_options.address = address;
+  auto client = FieldClient::Create(client_options);
+  ASSERT_TRUE(client.ok()) << client.status();
+  const v1::BasisInfo basis = UploadAndBuild(**client);
+  ASSERT_FALSE(basis.id().empty());
+
+  v1::OpenDesign open = OpenRequest(basis.id());
+  open.add_watch_faces(3);
+  ResumableDesign session(client->get(), open);
+  ASSERT_TRUE(session.Open(0).ok());
+  ASSERT_TRUE(session.Edit(AddConstraint(1, 1, 10)).ok());
+  ASSERT_TRUE(session.Edit(AddConstraint(2, 2, 20)).ok());
+  ASSERT_TRUE(session.Edit(AddConstraint(3, 3, 30)).ok());
+  v1::DesignRequest move;
+  move.set_seq(4);
+  move.mutable_move()->set_id(2);
+  move.mutable_move()->set_face(21);
+  for (double v : {0.0, 1.0, 0.0}) move.mutable_move()->add_value(v);
+  move.mutable_move()->set_encoding(v1::FIELD_ENCODING_AMBIENT);
+  ASSERT_TRUE(session.Edit(move).ok());
+  v1::DesignRequest remove;
+  remove.set_seq(5);
+  remove.mutable_remove()->set_id(1);
+  ASSERT_TRUE(session.Edit(remove).ok());
+  v1::DesignRequest weights;
+  weights.set_seq(6);
+  weights.mutable_set_weights()->set_mu_s(1.0);
+  weights.mutable_set_weights()->set_mu_b(0.01);
+  weights.mutable_set_weights()->set_mu_c(1.0);
+  absl::StatusOr<ResumableDesign::Update> before = session.Edit(weights);
+  ASSERT_TRUE(before.ok()) << before.status();
+  EXPECT_FALSE(before->resumed);
+
+  (*first)->Shutdown(std::chrono::seconds(2));  // drains: the session ends UNAVAILABLE
+  first->reset();
+  options.listen = address;
+  auto second = server::FieldServer::Start(options);
+  ASSERT_TRUE(second.ok()) << second.status();
+
+  v1::DesignRequest watch;  // changes nothing
+  watch.set_seq(7);
+  watch.mutable_watch()->add_faces(3);
+  watch.mutable_watch()->set_encoding(v1::FIELD_ENCODING_AMBIENT);
+  absl::StatusOr<ResumableDesign::Update> after = session.Edit(watch);
+  ASSERT_TRUE(after.ok()) << after.status();
+  EXPECT_TRUE(after->resumed);
+  EXPECT_EQ(session.resumes(), 1);
+  EXPECT_EQ(after->update.seq(), 7u);
+  EXPECT_EQ(after->update.num_constraints(), 2);
+  ASSERT_EQ(after->update.coefficients_size(), before->update.coefficients_size());
+  for (int i = 0; i < after->update.coefficients_size(); ++i) {
+    EXPECT_NEAR(after->update.coefficients(i), before->update.coefficients(i), 1e-10) << i;
+  }
+  absl::StatusOr<ResumableDesign::Update> next = session.Edit(AddConstraint(8, 4, 40));
+  ASSERT_TRUE(next.ok()) << next.status();
+  EXPECT_FALSE(next->resumed);
+  EXPECT_EQ(next->update.num_constraints(), 3);
+  EXPECT_TRUE(session.Close().ok());
+  // Other errors are not retried.
+  EXPECT_TRUE(ReplicaLost(absl::UnavailableError("x")));
+  EXPECT_TRUE(ReplicaLost(absl::InternalError("Received RST_STREAM with error code 2")));
+  EXPECT_FALSE(ReplicaLost(absl::InternalError("basis build failed")));
+  EXPECT_FALSE(ReplicaLost(absl::NotFoundError("no basis")));
+  (*second)->Shutdown(std::chrono::seconds(1));
+  second->reset();
+  fs::remove_all(root);
+}
+
 }  // namespace
 }  // namespace fieldspace::client

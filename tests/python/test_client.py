@@ -5,6 +5,7 @@ Environment (set by tests/python/CMakeLists.txt): FIELDSPACED (the daemon binary
 with the build tree's python/ folder (the package with its generated stubs).
 """
 
+import concurrent.futures
 import os
 import shutil
 import signal
@@ -347,6 +348,72 @@ class SolveAndDesignTest(unittest.TestCase):
             with self.assertRaises(fs.InvalidArgument):
                 s2.add(3, [1, 0, 0, 0])
             self.assertEqual(s2.add(3, [1, 0, 0]).num_constraints, 1)
+
+
+class RoutingKeyTest(unittest.TestCase):
+    def test_calls_that_name_an_id_send_it_as_routing_key(self):
+        recorded = []
+
+        class Recorder(grpc.GenericRpcHandler):
+            def service(self, details):
+                metadata = dict(details.invocation_metadata)
+                recorded.append((details.method.rsplit("/", 1)[1],
+                                 metadata.get("x-fieldspace-key")))
+                return None  # UNIMPLEMENTED
+
+        server = grpc.server(concurrent.futures.ThreadPoolExecutor(2))
+        server.add_generic_rpc_handlers((Recorder(),))
+        port = server.add_insecure_port("127.0.0.1:0")
+        server.start()
+        try:
+            with fs.Client("127.0.0.1:%d" % port, timeout=10) as c:
+                calls = [lambda: c.mesh("m-0000000000000001"), lambda: c.meshes(),
+                         lambda: c.basis("b-0000000000000002"),
+                         lambda: c.build("m-0000000000000003", "vector", 8, progress=False),
+                         lambda: c.delete_basis("b-0000000000000004")]
+                for call in calls:
+                    with self.assertRaises(fs.FieldspaceError):
+                        call()
+        finally:
+            server.stop(None)
+        self.assertEqual(recorded, [("GetMesh", "m-0000000000000001"), ("ListMeshes", None),
+                                    ("GetBasis", "b-0000000000000002"),
+                                    ("BuildBasis", "m-0000000000000003"),
+                                    ("DeleteBasis", "b-0000000000000004")])
+
+
+class FailoverTest(unittest.TestCase):
+    def test_a_drained_session_resumes_on_the_next_daemon_with_the_same_solution(self):
+        store = os.path.join(WORK, "shared")
+        a = Daemon(DAEMON, store, extra=["--shared-store"]).start()
+        b = None
+        try:
+            with fs.Client(a.address, timeout=60) as c:
+                mesh = c.upload(SV, SF, name="icosphere")
+                basis = c.build(mesh.id, "vector", 40, progress=False)
+                s = c.design(basis, watch=[0, 5])
+                s.add(10, [1, 0, 0])
+                s.add(20, [0, 1, 0], hard=True)
+                moved = s.add(30, [0, 0, 1], weight=3.0)
+                s.add(40, [1, 1, 0])
+                s.move(moved.constraint_id, 31, [1, 0, 1])
+                s.remove(1)
+                s.set_weights(mu_b=0.01)
+                before = s.coefficients.copy()
+                self.assertEqual(a.stop(), 0)  # drains: the session ends UNAVAILABLE
+                b = Daemon(DAEMON, store, extra=["--shared-store"], listen=a.address).start()
+                u = s.watch([0, 5])  # changes nothing: the resumed solution is the old one
+                self.assertTrue(u.resumed)
+                self.assertEqual((s.resumes, u.num_constraints, u.num_hard_constraints), (1, 3, 1))
+                self.assertLess(np.max(np.abs(u.coefficients - before)), 1e-10)
+                v = s.add(50, [0, 0, 1])
+                self.assertFalse(v.resumed)
+                self.assertEqual(v.constraint_id, 5)
+                s.close()
+        finally:
+            for d in (a, b):
+                if d is not None and d.alive():
+                    d.stop()
 
 
 class ErrorTest(unittest.TestCase):

@@ -63,8 +63,9 @@ def torus_obj(major=48, minor=24, R=1.0, r=0.4):
 class Daemon:
     """A fieldspaced process on 127.0.0.1 with a free port."""
 
-    def __init__(self, binary, store, data_root=None, extra=(), log=None):
-        self.args = [binary, "--listen", "127.0.0.1:0", "--store", store, "--threads", "2"]
+    def __init__(self, binary, store, data_root=None, extra=(), log=None, listen="127.0.0.1:0",
+                 threads=2):
+        self.args = [binary, "--listen", listen, "--store", store, "--threads", str(threads)]
         if data_root:
             self.args += ["--data-root", data_root]
         self.args += list(extra)

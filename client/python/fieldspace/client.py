@@ -15,7 +15,7 @@ from .progress import BuildBar
 from .types import (BasisInfo, BuildProgress, Curvature, Eigenfields, MeshInfo, Projection,
                     Singularities, Smoothest, Solution, Weights, phase_name)
 
-__all__ = ["Client", "DEFAULT_ADDRESS"]
+__all__ = ["Client", "DEFAULT_ADDRESS", "ROUTING_KEY_HEADER", "routing_key"]
 
 DEFAULT_ADDRESS = "127.0.0.1:50051"
 _DEFAULT = object()  # "the client's default timeout"
@@ -24,6 +24,24 @@ _ESTIMATORS = {"jet": pb.CURVATURE_ESTIMATOR_JET,
                "normal-differences": pb.CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES}
 _SOLVE_WEIGHTS = Weights(1.0, 0.0, 1.0)   # solve and design, as the CLI
 _SMOOTH_WEIGHTS = Weights(0.001, 0.0, 1.0)  # smooth and align, as the CLI
+
+
+# The metadata key of the routing key (see Client._metadata_for).
+ROUTING_KEY_HEADER = "x-fieldspace-key"
+
+
+def routing_key(request):
+    """The id a request names: its ``basis_id``, else its ``mesh_id``, else "" (also for request
+    streams, e.g. uploads, whose mesh id is known only to the server)."""
+    descriptor = getattr(request, "DESCRIPTOR", None)
+    for name in ("basis_id", "mesh_id"):
+        field = descriptor.fields_by_name.get(name) if descriptor is not None else None
+        if field is not None and field.type == field.TYPE_STRING and \
+                field.label != field.LABEL_REPEATED:
+            value = getattr(request, name)
+            if value:
+                return value
+    return ""
 
 
 def _id(target):
@@ -93,15 +111,23 @@ class Client:
     def _deadline(self, timeout):
         return self.timeout if timeout is _DEFAULT else timeout
 
+    def _metadata_for(self, key):
+        """The call's metadata: the token and, when ``key`` (the basis or mesh id the call names)
+        is not empty, the routing key ``x-fieldspace-key`` that a router hashes on (servers ignore
+        it; docs/scale-out.md)."""
+        return self._metadata + ((ROUTING_KEY_HEADER, key),) if key else self._metadata
+
     def _unary(self, what, method, request, timeout):
         try:
-            return method(request, timeout=self._deadline(timeout), metadata=self._metadata)
+            return method(request, timeout=self._deadline(timeout),
+                          metadata=self._metadata_for(routing_key(request)))
         except grpc.RpcError as e:
             raise from_rpc_error(e, what) from None
 
     def _collect(self, what, method, request, timeout):
         """All messages of a server-streaming call."""
-        call = method(request, timeout=self._deadline(timeout), metadata=self._metadata)
+        call = method(request, timeout=self._deadline(timeout),
+                      metadata=self._metadata_for(routing_key(request)))
         try:
             return list(call)
         except grpc.RpcError as e:
@@ -284,7 +310,8 @@ class Client:
         if face_weights is not None:
             request.face_weights.extend(np.asarray(face_weights, dtype=np.float64).ravel())
         bar = BuildBar.create(progress)
-        call = self._stub.BuildBasis(request, timeout=timeout, metadata=self._metadata)
+        call = self._stub.BuildBasis(request, timeout=timeout,
+                                     metadata=self._metadata_for(request.mesh_id))
         basis_id, joined, done = None, False, False
         try:
             for message in call:
@@ -296,7 +323,8 @@ class Client:
                     fraction=message.fraction,
                     overall=message.overall_fraction,
                     joined=message.joined,
-                    basis=BasisInfo.from_proto(message.basis) if done else None)
+                    basis=BasisInfo.from_proto(message.basis) if done else None,
+                    waiting_for=message.waiting_for)
                 if bar is not None:
                     bar.update(update)
                 if on_progress is not None:

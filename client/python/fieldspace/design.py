@@ -1,5 +1,6 @@
 """Interactive design sessions (the Design stream) as context managers."""
 
+import collections
 import queue
 import time
 
@@ -12,6 +13,22 @@ from .errors import FailedPrecondition, FieldspaceError, from_rpc_error
 from .types import DesignUpdate, Weights
 
 _END = object()
+# How often, and after which pauses (s), a session whose stream failed with UNAVAILABLE is
+# reopened before the error is raised.
+_RESUME_PAUSES = (0.0, 0.1, 0.3, 0.6, 1.0, 2.0)
+
+
+def _replica_lost(error):
+    """Whether a failed Design stream lost its replica (so that reopening may help): UNAVAILABLE
+    (the replica drained, or is unreachable), or the stream reset at the transport level, which
+    is what a router does when the replica behind it dies (nginx: RST_STREAM INTERNAL_ERROR). An
+    INTERNAL status sent by a server has its own message and is not retried."""
+    code = error.code()
+    if code == grpc.StatusCode.UNAVAILABLE:
+        return True
+    if code == grpc.StatusCode.UNKNOWN and not error.details():
+        return True  # gRPC's own, on a channel whose server went away
+    return code == grpc.StatusCode.INTERNAL and "RST_STREAM" in (error.details() or "")
 
 
 class DesignSession:
@@ -31,6 +48,14 @@ class DesignSession:
     DOFs ((2,), tensors (3,)) by shape, as in Client.solve. Leaving the ``with`` block closes the
     session (an exception inside it cancels the stream). After a failed edit the session is
     over (the server ends the stream) and further edits raise FailedPrecondition.
+
+    Failover: the session sends its basis id as routing key (``x-fieldspace-key``), so that a
+    router keeps it on one replica. When the stream fails because its replica died or drained
+    (UNAVAILABLE, or a stream reset by the router), the edit in flight reopens the session
+    (through a router: on another replica), replays the open (current weights and watch) and the
+    constraints in the order they were added, sends the edit again and returns its update with
+    ``resumed=True``.
+    ``resumes`` counts how often that happened.
     """
 
     def __init__(self, client, basis, weights, watch, watch_encoding, timeout):
@@ -44,15 +69,25 @@ class DesignSession:
         open_message = pb.OpenDesign(basis_id=self.basis_id, weights=weights.proto(),
                                      watch_encoding=fld.encoding_proto(watch_encoding, "Design"))
         open_message.watch_faces.extend(self._watch.tolist())
-        self._requests = queue.Queue()
-        self._call = client._stub.Design(iter(self._requests.get, _END), timeout=timeout,
-                                         metadata=client._metadata)
+        self._timeout = timeout
         self._seq = 0
         self._ids = set()
         self._next_id = 1
         self._closed = False
         self.last = None
+        self.resumes = 0
+        # What a reopened session replays: the open (kept up to date with weights and watch) and
+        # the constraints by id, in the order they were added, as the server last confirmed.
+        self._open = pb.OpenDesign()
+        self._constraints = collections.OrderedDict()
+        self._start_call()
         self._send("open", pb.DesignRequest(open=open_message), None)
+
+    def _start_call(self):
+        self._requests = queue.Queue()
+        self._call = self._client._stub.Design(
+            iter(self._requests.get, _END), timeout=self._timeout,
+            metadata=self._client._metadata_for(self.basis_id))
 
     # -- edits ---------------------------------------------------------------------------------
 
@@ -108,19 +143,88 @@ class DesignSession:
 
     # -- the stream ----------------------------------------------------------------------------
 
+    def _exchange(self, kind, request):
+        """Sends one request and returns the server's answer; raises grpc.RpcError as is and
+        FieldspaceError(UNAVAILABLE) when the server ended the stream without an answer."""
+        request.seq = self._seq
+        self._seq += 1
+        self._requests.put(request)
+        try:
+            return next(self._call)
+        except StopIteration:
+            raise FieldspaceError("Design %s" % kind, "the server ended the session",
+                                  grpc.StatusCode.UNAVAILABLE) from None
+
+    def _resume(self, kind, request, lost):
+        """Reopens the session after `lost` (see _replica_lost), replays it and sends `request`
+        again; the answer to it. Raises `lost` when every attempt failed."""
+        for pause in _RESUME_PAUSES:
+            time.sleep(pause)
+            self._call.cancel()
+            self._requests.put(_END)
+            self._start_call()
+            try:
+                if kind != "open":
+                    self._exchange("open", pb.DesignRequest(open=self._open))
+                    for cid, constraint in self._constraints.items():
+                        self._exchange("add", pb.DesignRequest(
+                            add=pb.AddConstraint(id=cid, constraint=constraint)))
+                message = self._exchange(kind, request)
+            except grpc.RpcError as e:
+                if not _replica_lost(e):
+                    raise
+                continue
+            self.resumes += 1
+            return message
+        raise lost
+
+    def _remember(self, kind, request):
+        """Keeps the state a reopened session replays, once the server confirmed `request`."""
+        if kind == "open":
+            self._open.CopyFrom(request.open)
+        elif kind == "add":
+            self._constraints[request.add.id] = pb.Constraint()
+            self._constraints[request.add.id].CopyFrom(request.add.constraint)
+        elif kind == "move":
+            c = self._constraints.get(request.move.id)
+            if c is not None:
+                c.face = request.move.face
+                c.encoding = request.move.encoding
+                del c.value[:]
+                c.value.extend(request.move.value)
+        elif kind == "remove":
+            self._constraints.pop(request.remove.id, None)
+        elif kind == "weights":
+            # Weights an edit leaves out keep the session's values (where the proto tracks their
+            # presence; otherwise every value is sent).
+            for name in ("mu_s", "mu_b", "mu_c"):
+                try:
+                    present = request.set_weights.HasField(name)
+                except ValueError:
+                    present = True
+                if present:
+                    setattr(self._open.weights, name, getattr(request.set_weights, name))
+        elif kind == "watch":
+            del self._open.watch_faces[:]
+            self._open.watch_faces.extend(request.watch.faces)
+            self._open.watch_encoding = request.watch.encoding
+
     def _send(self, kind, request, constraint_id, watch=None, watch_encoding=None):
         if self._closed:
             raise FailedPrecondition("Design %s" % kind, "the session is closed")
-        request.seq = self._seq
-        self._seq += 1
         sent = time.perf_counter()
-        self._requests.put(request)
+        resumed = False
         try:
-            message = next(self._call)
-        except StopIteration:
+            try:
+                message = self._exchange(kind, request)
+            except grpc.RpcError as e:
+                if not _replica_lost(e):
+                    raise
+                message = self._resume(kind, request, e)
+                resumed = True
+        except FieldspaceError:
             self._end()
-            raise FieldspaceError("Design %s" % kind, "the server ended the session",
-                                  grpc.StatusCode.UNAVAILABLE) from None
+            raise
         except grpc.RpcError as e:
             self._end()
             raise from_rpc_error(e, "Design %s" % kind) from None
@@ -128,6 +232,7 @@ class DesignSession:
             self.cancel()
             raise
         round_trip_ms = 1000.0 * (time.perf_counter() - sent)
+        self._remember(kind, request)
         if watch is not None:
             self._watch, self._watch_encoding = watch, watch_encoding
         timings = {"edit_ms": message.timings.edit_ms, "lift_ms": message.timings.lift_ms,
@@ -146,7 +251,7 @@ class DesignSession:
             num_constraints=message.num_constraints,
             num_hard_constraints=message.num_hard_constraints,
             refactorized=message.timings.refactorized, timings=timings,
-            constraint_id=None if constraint_id is None else int(constraint_id))
+            constraint_id=None if constraint_id is None else int(constraint_id), resumed=resumed)
         return self.last
 
     def _end(self):

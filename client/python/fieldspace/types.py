@@ -116,7 +116,9 @@ class BasisInfo:
 @dataclass(frozen=True)
 class BuildProgress:
     """One message of a build stream. ``fraction`` is of the current phase, ``overall`` an
-    estimate of the whole build's (fixed phase weights); ``basis`` is set on the last one."""
+    estimate of the whole build's (fixed phase weights); ``basis`` is set on the last one.
+    ``waiting_for`` names the replica ("HOST/PID/DAEMON_ID") that builds this basis while this
+    one waits for it (shared store, phase "queued"); empty otherwise."""
 
     basis_id: str
     phase: str
@@ -124,6 +126,7 @@ class BuildProgress:
     overall: float
     joined: bool
     basis: Optional[BasisInfo] = None
+    waiting_for: str = ""
 
 
 @dataclass(frozen=True)
@@ -223,3 +226,7 @@ class DesignUpdate:
     refactorized: bool
     timings: dict
     constraint_id: Optional[int] = None
+    # True on the one update that answers an edit after the session was reopened (its replica
+    # died or drained) and its constraints, weights and watch were replayed; the coefficients
+    # are then those of the lost session plus that edit.
+    resumed: bool = False
