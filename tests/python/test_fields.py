@@ -218,10 +218,11 @@ class CliFilesTest(unittest.TestCase):
             mesh_id = json.loads(cli("upload", mesh)[1])["id"]
             rng = np.random.default_rng(11)
             coefficients = os.path.join(cls.dir, "c.txt")
-            np.savetxt(coefficients, rng.normal(size=24))
             for kind, extra in (("vector", []), ("nfield", ["--n", "4"]), ("tensor", [])):
-                basis = json.loads(cli("build", mesh_id, "--field", kind, *extra,
-                                       "--dim", "24")[1])["id"]
+                info = json.loads(cli("build", mesh_id, "--field", kind, *extra, "--dim", "24")[1])
+                basis = info["id"]
+                # d = 24 local columns plus the kernel columns (harmonic fields of the torus).
+                np.savetxt(coefficients, rng.normal(size=info["columns"]))
                 for encoding in ("ambient", "dof"):
                     cli("lift", basis, coefficients, "--encoding", encoding, "--out",
                         os.path.join(cls.dir, "%s_%s.txt" % (kind, encoding)))
