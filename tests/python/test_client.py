@@ -20,23 +20,11 @@ import grpc
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "server"))
-from fs_testlib import Daemon, icosphere_obj, torus_obj  # noqa: E402
+from fs_testlib import Daemon, icosphere_obj, obj_arrays, torus_obj  # noqa: E402
 
 import fieldspace as fs  # noqa: E402
 
 DAEMON = os.environ.get("FIELDSPACED")
-
-
-def obj_arrays(text):
-    """(V, F) of OBJ text with `v` and triangle `f` lines."""
-    V, F = [], []
-    for line in text.splitlines():
-        parts = line.split()
-        if parts and parts[0] == "v":
-            V.append([float(x) for x in parts[1:4]])
-        elif parts and parts[0] == "f":
-            F.append([int(x) - 1 for x in parts[1:4]])
-    return np.array(V), np.array(F, dtype=np.int32)
 
 
 def normals_of(V, F):

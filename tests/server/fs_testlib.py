@@ -60,6 +60,20 @@ def torus_obj(major=48, minor=24, R=1.0, r=0.4):
     return "\n".join(lines) + "\n", 2 * major * minor
 
 
+def obj_arrays(text):
+    """(V, F) numpy arrays of OBJ text with `v` and triangle `f` lines (icosphere_obj, torus_obj)."""
+    import numpy as np
+
+    V, F = [], []
+    for line in text.splitlines():
+        parts = line.split()
+        if parts and parts[0] == "v":
+            V.append([float(x) for x in parts[1:4]])
+        elif parts and parts[0] == "f":
+            F.append([int(x) - 1 for x in parts[1:4]])
+    return np.array(V), np.array(F, dtype=np.int32)
+
+
 class Daemon:
     """A fieldspaced process on 127.0.0.1 with a free port."""
 

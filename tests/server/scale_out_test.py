@@ -31,7 +31,7 @@ import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from fs_testlib import Daemon, check, icosphere_obj, log, torus_obj  # noqa: E402
+from fs_testlib import Daemon, check, icosphere_obj, log, obj_arrays, torus_obj  # noqa: E402
 
 NGINX_CONF = """\
 {user}worker_processes 1;
@@ -68,17 +68,6 @@ def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def obj_arrays(text, np):
-    V, F = [], []
-    for line in text.splitlines():
-        parts = line.split()
-        if parts and parts[0] == "v":
-            V.append([float(x) for x in parts[1:4]])
-        elif parts and parts[0] == "f":
-            F.append([int(x) - 1 for x in parts[1:4]])
-    return np.array(V), np.array(F, dtype=np.int32)
 
 
 def start_nginx(nginx, prefix, upstreams):
@@ -144,9 +133,9 @@ def main():
         check(client.health() == "SERVING", "health through the router")
 
         # --- 3 meshes.
-        meshes = [client.upload(*obj_arrays(icosphere_obj(3)[0], np), name="ico3"),
-                  client.upload(*obj_arrays(torus_obj(24, 12)[0], np), name="torus"),
-                  client.upload(*obj_arrays(icosphere_obj(2)[0], np), name="ico2")]
+        meshes = [client.upload(*obj_arrays(icosphere_obj(3)[0]), name="ico3"),
+                  client.upload(*obj_arrays(torus_obj(24, 12)[0]), name="torus"),
+                  client.upload(*obj_arrays(icosphere_obj(2)[0]), name="ico2")]
         check(len({m.id for m in meshes}) == 3, "3 distinct meshes")
 
         # --- One basis built once: through the router and, at the same time, directly on every
