@@ -179,7 +179,12 @@ def main():
         bases = [main_basis]
         for mesh, d in ((meshes[0], 40), (meshes[1], 40), (meshes[1], 60), (meshes[2], 40),
                         (meshes[2], 60)):
-            bases.append(client.build(mesh.id, "vector", d, progress=False))
+            # The paper's bases (no kernel columns): with kernel columns, the harmonic directions
+            # of a soft-constrained design are fixed only by the soft terms, and a replay that
+            # takes another path (weights first, then the constraints) agrees only to ~1e-5
+            # (docs/scale-out.md, Failover); this test holds failover to 1e-10.
+            bases.append(client.build(mesh.id, "vector", d, kernel_columns=False,
+                                      progress=False))
         check(len(set(bases)) == 6, "6 distinct bases")
         mesh_faces = {m.id: m.num_faces for m in meshes}
         basis_mesh = {b: client.basis(b).mesh_id for b in bases}

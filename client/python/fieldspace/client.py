@@ -283,8 +283,8 @@ class Client:
     # -- bases ---------------------------------------------------------------------------------
 
     def build(self, mesh, field, dimension, *, n=None, sigma=None, seed=0, fields_per_region=0,
-              face_weights=None, coarse_dimension=0, progress=None, on_progress=None,
-              cancel_on_interrupt=True, timeout=None):
+              face_weights=None, coarse_dimension=0, kernel_columns=True, progress=None,
+              on_progress=None, cancel_on_interrupt=True, timeout=None):
         """Builds (or joins the identical running build of, or finds) a basis; returns its id.
 
         Args:
@@ -292,6 +292,8 @@ class Client:
             dimension: d, the number of basis fields.
             sigma, seed, fields_per_region, face_weights (#F positive numbers: adaptivity),
                 coarse_dimension: as BuildBasisRequest (docs/api.md).
+            kernel_columns: append the kernel of the Laplacian (harmonic fields) as extra
+                columns (default); False gives the paper's basis exactly.
             progress: a tqdm progress bar on stderr: None (default) shows it when stderr is a
                 terminal, True always, False never.
             on_progress: called with every BuildProgress (the last one carries ``basis``).
@@ -304,7 +306,7 @@ class Client:
         request = pb.BuildBasisRequest(
             mesh_id=_id(mesh), field=fld.field_type_proto(field, n, what),
             dimension=int(dimension), seed=int(seed), fields_per_region=int(fields_per_region),
-            coarse_dimension=int(coarse_dimension))
+            coarse_dimension=int(coarse_dimension), kernel_columns=bool(kernel_columns))
         if sigma is not None:
             request.sigma = float(sigma)
         if face_weights is not None:
