@@ -171,8 +171,7 @@ TEST(EditScriptTest, Errors) {
   EXPECT_THAT(ParseEdit(R"({"add": {}, "remove": {}})", "x"),
               StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_THAT(ParseEdit(R"({"remove": {}})", "x"), StatusIs(absl::StatusCode::kInvalidArgument));
-  EXPECT_THAT(ParseEdit(R"({"weights": {}})", "x"),
-              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(ParseEdit(R"({"weights": {}})", "x"), StatusIs(absl::StatusCode::kInvalidArgument));
   // Weights left out are left out of the request (the session keeps their values).
   absl::StatusOr<v1::DesignRequest> only_s = ParseEdit(R"({"weights": {"mu_s": 1}})", "x");
   ASSERT_TRUE(only_s.ok()) << only_s.status();
