@@ -278,16 +278,18 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
         response->mutable_coefficients()->Add(
             result.coefficients.data(), result.coefficients.data() + result.coefficients.size());
         double lift_ms = 0;
+        Eigen::VectorXd dofs;  // the lifted field, once, for return_field and singularities
         if (request->return_field()) {
           const auto lift_start = Clock::now();
           response->mutable_field()->set_encoding(EncodingToProto(encoding));
           RETURN_IF_ERROR(LiftAllToValues(*basis, result.coefficients, encoding,
-                                          response->mutable_field()->mutable_values()));
+                                          response->mutable_field()->mutable_values(), &dofs));
           lift_ms = MsSince(lift_start);
         }
         if (request->singularities()) {
-          ASSIGN_OR_RETURN(Eigen::VectorXd dofs,
-                           fieldspace::Lift(*basis->system, result.coefficients));
+          if (dofs.size() == 0) {
+            ASSIGN_OR_RETURN(dofs, fieldspace::Lift(*basis->system, result.coefficients));
+          }
           RETURN_IF_ERROR(SingularitiesToProto(*basis, dofs, 0, response->mutable_singularities()));
         }
         v1::SolveTimings* t = response->mutable_timings();
@@ -406,15 +408,18 @@ absl::Status SmoothInto(const ServedBasis& basis, const Eigen::VectorXd& X0,
   response->mutable_coefficients()->Add(result.coefficients.data(),
                                         result.coefficients.data() + result.coefficients.size());
   double lift_ms = 0;
+  Eigen::VectorXd dofs;  // the lifted field, once, for return_field and singularities
   if (return_field) {
     const auto lift_start = Clock::now();
     response->mutable_field()->set_encoding(EncodingToProto(encoding));
     RETURN_IF_ERROR(LiftAllToValues(basis, result.coefficients, encoding,
-                                    response->mutable_field()->mutable_values()));
+                                    response->mutable_field()->mutable_values(), &dofs));
     lift_ms = MsSince(lift_start);
   }
   if (singularities) {
-    ASSIGN_OR_RETURN(Eigen::VectorXd dofs, fieldspace::Lift(*basis.system, result.coefficients));
+    if (dofs.size() == 0) {
+      ASSIGN_OR_RETURN(dofs, fieldspace::Lift(*basis.system, result.coefficients));
+    }
     RETURN_IF_ERROR(SingularitiesToProto(basis, dofs, 0, response->mutable_singularities()));
   }
   v1::SmoothTimings* t = response->mutable_timings();

@@ -348,11 +348,15 @@ absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
 }
 
 absl::Status LiftAllToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
-                             FieldEncoding encoding, google::protobuf::RepeatedField<float>* out) {
+                             FieldEncoding encoding, google::protobuf::RepeatedField<float>* out,
+                             Eigen::VectorXd* dofs_out) {
   ASSIGN_OR_RETURN(Eigen::VectorXd dofs, Lift(*basis.system, x));
   std::vector<int32_t> faces(basis.mesh->num_faces());
   std::iota(faces.begin(), faces.end(), 0);
-  return EncodeDofs(basis, faces, absl::MakeConstSpan(dofs.data(), dofs.size()), encoding, out);
+  RETURN_IF_ERROR(
+      EncodeDofs(basis, faces, absl::MakeConstSpan(dofs.data(), dofs.size()), encoding, out));
+  if (dofs_out != nullptr) *dofs_out = std::move(dofs);
+  return absl::OkStatus();
 }
 
 }  // namespace fieldspace::server

@@ -81,9 +81,11 @@ absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
                           absl::Span<const int32_t> faces, FieldEncoding encoding,
                           google::protobuf::RepeatedField<float>* out);
 
-// The same for all faces: one parallel pass of the LiftPlan over every row of U.
+// The same for all faces: one parallel pass of the LiftPlan over every row of U. `dofs`
+// (optional) receives the lifted field, for a caller that needs it too (singularities).
 absl::Status LiftAllToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
-                             FieldEncoding encoding, google::protobuf::RepeatedField<float>* out);
+                             FieldEncoding encoding, google::protobuf::RepeatedField<float>* out,
+                             Eigen::VectorXd* dofs = nullptr);
 
 }  // namespace fieldspace::server
 

@@ -297,6 +297,7 @@ TEST_F(ApplicationsTest, SolveSmoothAndAlignReturnSingularitiesOnRequest) {
   c->add_value(1);
   c->add_value(0);
   solve.set_singularities(true);
+  solve.set_return_field(true);  // the lifted field serves both
   auto solved = client_->Solve(solve);
   ASSERT_THAT(solved.status(), IsOk());
   ASSERT_TRUE(solved->has_singularities());
