@@ -70,10 +70,22 @@ absl::Status ValidateWeights(const EnergyWeights& w) {
   RETURN_IF_ERROR(check(w.mu_s, "mu_s"));
   RETURN_IF_ERROR(check(w.mu_b, "mu_b"));
   RETURN_IF_ERROR(check(w.mu_c, "mu_c"));
+  RETURN_IF_ERROR(check(w.mu_a, "mu_a"));
   if (w.mu_s + w.mu_b <= 0.0) {
     return absl::InvalidArgumentError(
         "energy weights mu_s and mu_b are both 0; at least one must be > 0 (otherwise the energy "
         "does not determine the field away from the constraints)");
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateWeightsWithoutDataTerm(const EnergyWeights& w) {
+  RETURN_IF_ERROR(ValidateWeights(w));
+  if (w.mu_a != 0.0) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "energy weight mu_a = %g has no term to weigh: only a design session opened with a data "
+        "(alignment) term has one",
+        w.mu_a));
   }
   return absl::OkStatus();
 }
@@ -98,7 +110,12 @@ SpMat BiharmonicMatrix(const FieldOperator& op) {
 absl::StatusOr<ModelSystem> AssembleModelSystem(const FieldOperator& op,
                                                 const ModelProblem& problem) {
   RETURN_IF_ERROR(CheckOperator(op));
-  RETURN_IF_ERROR(ValidateWeights(problem.weights));
+  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
+  if (problem.scale_free) {
+    return absl::InvalidArgumentError(
+        "scale-free weights are defined relative to a subspace (each soft constraint's face "
+        "stiffness in span(U)); the full-space model problem takes raw weights");
+  }
   const EnergyWeights& w = problem.weights;
   const int64_t k = op.dofs();
   const int32_t p = op.type.dofs_per_face();

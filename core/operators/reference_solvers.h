@@ -37,12 +37,18 @@ struct EnergyWeights {
   double mu_s = 1.0;  // harmonic (Dirichlet) energy, >= 0
   double mu_b = 0.0;  // biharmonic energy, >= 0
   double mu_c = 1.0;  // soft constraints (scales every soft constraint's weight), >= 0
+  // A design session's data (alignment) term mu_a (X - X0)^T W M (X - X0), >= 0
+  // (DesignSessionOptions::data_term); no other problem has that term, and they need it 0.
+  double mu_a = 0.0;
 };
 
 // InvalidArgument (naming the weight) unless every weight is finite and >= 0 and
 // mu_s + mu_b > 0 (otherwise the energy does not determine the field away from the
 // constraints). mu_c = 0 is valid: the soft constraints then do nothing.
 absl::Status ValidateWeights(const EnergyWeights& weights);
+// ValidateWeights, and mu_a = 0: for every problem without a data term (all but design sessions
+// opened with one), so that a data weight is never silently ignored.
+absl::Status ValidateWeightsWithoutDataTerm(const EnergyWeights& weights);
 
 enum class ConstraintKind : uint8_t {
   kSoft = 0,  // the term mu_c * weight * |X_face - value|^2
@@ -67,6 +73,14 @@ struct FieldConstraint {
 struct ModelProblem {
   EnergyWeights weights;
   std::vector<FieldConstraint> constraints;  // soft and hard, in any order
+  // Scale-free weights (docs/conventions.md, "Scale-free weights"): mu_b is multiplied by the
+  // mesh's total area and each soft constraint's weight divided by its face's stiffness in the
+  // subspace (FaceStiffness, core/subspace/kkt_solver.h), so that the same weights give the same
+  // field on a scaled or refined mesh and a soft constraint alone pulls its face at least
+  // mu_c w / (1 + mu_c w) of the way to its value. Defined by a subspace: only the reduced
+  // solvers (SolveReducedModelProblem, DesignSession) take it; the full-space ones answer
+  // InvalidArgument. false: the paper's raw weights.
+  bool scale_free = false;
 };
 
 // Normal equations of eq. 9 before hard constraints are applied:

@@ -14,8 +14,8 @@ namespace {
 
 // ValidateWeights, and mu_c > 0: a session keeps each soft constraint as the diagonal term
 // 1 / (mu_c weight) of its Woodbury update.
-absl::Status ValidateSessionWeights(const EnergyWeights& weights) {
-  RETURN_IF_ERROR(ValidateWeights(weights));
+absl::Status ValidateSessionWeights(const EnergyWeights& weights, bool data_term) {
+  RETURN_IF_ERROR(data_term ? ValidateWeights(weights) : ValidateWeightsWithoutDataTerm(weights));
   if (!(weights.mu_c > 0)) {
     return absl::InvalidArgumentError(
         absl::StrCat("energy weight mu_c = ", weights.mu_c,
@@ -28,37 +28,51 @@ absl::Status ValidateSessionWeights(const EnergyWeights& weights) {
 }  // namespace
 
 absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
-    const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options) {
-  RETURN_IF_ERROR(ValidateWeights(weights));
-  auto out = std::make_shared<EnergyFactorization>();
-  Eigen::SparseMatrix<double> A = system.stiffness();
-  const double* s = system.stiffness().valuePtr();
-  const double* b = system.bilaplacian().valuePtr();
-  double* v = A.valuePtr();
-  for (int64_t p = 0; p < A.nonZeros(); ++p) {
-    v[p] = weights.mu_s * s[p] + weights.mu_b * b[p];
+    const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options,
+    const ReducedSmoother* data) {
+  RETURN_IF_ERROR(data != nullptr ? ValidateWeights(weights)
+                                  : ValidateWeightsWithoutDataTerm(weights));
+  if (data != nullptr && &data->system() != &system) {
+    return absl::InvalidArgumentError("FactorizeEnergy: the data term belongs to another system");
   }
-  ASSIGN_OR_RETURN(SupernodalFactor f,
-                   FactorizeRegularized(system.pattern_symbolic(), ShiftKernelColumns(system, A),
-                                        options, &out->regularization));
+  auto out = std::make_shared<EnergyFactorization>();
+  Eigen::SparseMatrix<double> A;
+  std::shared_ptr<const SupernodalSymbolic> symbolic = system.pattern_symbolic();
+  if (data != nullptr) {
+    A = data->WeightedSum(weights.mu_s, weights.mu_b, weights.mu_a);
+    symbolic = data->symbolic();
+  } else {
+    A = system.stiffness();
+    const double* s = system.stiffness().valuePtr();
+    const double* b = system.bilaplacian().valuePtr();
+    double* v = A.valuePtr();
+    for (int64_t p = 0; p < A.nonZeros(); ++p) {
+      v[p] = weights.mu_s * s[p] + weights.mu_b * b[p];
+    }
+  }
+  ASSIGN_OR_RETURN(SupernodalFactor f, FactorizeRegularized(symbolic, ShiftKernelColumns(system, A),
+                                                            options, &out->regularization));
   out->factor = std::make_unique<SupernodalFactor>(std::move(f));
-  ASSIGN_OR_RETURN(SupernodalMatrix panels, SupernodalMatrix::Create(system.pattern_symbolic(), A));
+  ASSIGN_OR_RETURN(SupernodalMatrix panels, SupernodalMatrix::Create(symbolic, A));
   out->A = std::make_unique<SupernodalMatrix>(std::move(panels));
   return std::shared_ptr<const EnergyFactorization>(std::move(out));
 }
 
 bool EnergyFactorCache::Key::operator<(const Key& o) const {
-  return std::tie(system, mu_s, mu_b, regularization, max_regularization, parallel) <
-         std::tie(o.system, o.mu_s, o.mu_b, o.regularization, o.max_regularization, o.parallel);
+  return std::tie(system, data, mu_s, mu_b, mu_a, regularization, max_regularization, parallel) <
+         std::tie(o.system, o.data, o.mu_s, o.mu_b, o.mu_a, o.regularization, o.max_regularization,
+                  o.parallel);
 }
 
 absl::StatusOr<std::shared_ptr<const EnergyFactorization>> EnergyFactorCache::Get(
     const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options,
-    bool* factorized) {
+    bool* factorized, const ReducedSmoother* data) {
   if (factorized != nullptr) *factorized = false;
   const Key key{&system,
+                data,
                 weights.mu_s,
                 weights.mu_b,
+                data != nullptr ? weights.mu_a : 0.0,
                 options.regularization,
                 options.max_regularization,
                 options.parallel};
@@ -81,7 +95,7 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> EnergyFactorCache::Ge
   if (std::shared_ptr<const EnergyFactorization> value = entry->value.lock()) return value;
   // On error (or cancellation) nothing is stored; the next caller tries again.
   ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> value,
-                   FactorizeEnergy(system, weights, options));
+                   FactorizeEnergy(system, weights, options, data));
   entry->value = value;
   if (factorized != nullptr) *factorized = true;
   return value;
@@ -104,7 +118,10 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
     std::shared_ptr<const ReducedSystem> system, const EnergyWeights& weights,
     const DesignSessionOptions& options) {
   if (system == nullptr) return absl::InvalidArgumentError("DesignSession: no reduced system");
-  RETURN_IF_ERROR(ValidateSessionWeights(weights));
+  RETURN_IF_ERROR(ValidateSessionWeights(weights, options.data_term != nullptr));
+  if (options.data_term != nullptr && &options.data_term->system() != system.get()) {
+    return absl::InvalidArgumentError("DesignSession: the data term belongs to another basis");
+  }
   RETURN_IF_ERROR(ValidateSolveOptions(options.solve));
   if (options.verify_interval < 1) {
     return absl::InvalidArgumentError("DesignSession: verify_interval must be >= 1");
@@ -112,6 +129,7 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
   std::unique_ptr<DesignSession> session(new DesignSession(std::move(system), options));
   ASSIGN_OR_RETURN(session->energy_, session->Energy(weights));
   session->weights_ = weights;
+  session->UpdateDataRhs();
   session->kkt_ = std::make_unique<KktSolver>(session->system_->dimension(),
                                               session->system_->dofs_per_face(), options.solve);
   session->kkt_->SetMatrix(session->energy_->A.get(), session->energy_->factor.get());
@@ -123,13 +141,30 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
 absl::StatusOr<std::shared_ptr<const EnergyFactorization>> DesignSession::Energy(
     const EnergyWeights& weights) {
   last_factorized_ = false;
+  EnergyWeights effective = EffectiveEnergyWeights(*system_, weights, options_.scale_free);
+  const ReducedSmoother* data = options_.data_term.get();
+  if (data != nullptr && options_.scale_free) effective.mu_a /= data->total_area();
   if (options_.energy_cache != nullptr) {
-    return options_.energy_cache->Get(*system_, weights, options_.solve, &last_factorized_);
+    return options_.energy_cache->Get(*system_, effective, options_.solve, &last_factorized_, data);
   }
   ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> energy,
-                   FactorizeEnergy(*system_, weights, options_.solve));
+                   FactorizeEnergy(*system_, effective, options_.solve, data));
   last_factorized_ = true;
   return energy;
+}
+
+absl::StatusOr<double> DesignSession::Stiffness(const std::vector<SparseRow>& rows) const {
+  if (!options_.scale_free) return 1.0;
+  // With a data term the kernel columns have energy (its mass) like the others.
+  const bool data_energy = has_data_term() && weights_.mu_a > 0;
+  return FaceStiffness(*system_, *energy_->factor, rows, /*skip_kernel_columns=*/!data_energy);
+}
+
+void DesignSession::UpdateDataRhs() {
+  const ReducedSmoother* data = options_.data_term.get();
+  if (data == nullptr) return;
+  const double mu_a = options_.scale_free ? weights_.mu_a / data->total_area() : weights_.mu_a;
+  data_rhs_ = mu_a * data->rhs();
 }
 
 void DesignSession::Resolve() {
@@ -144,7 +179,7 @@ void DesignSession::Resolve() {
   const bool verify = shifted || solves_since_check_ >= options_.verify_interval ||
                       !verified_since_factorization_ || last_check_close_ ||
                       kkt_->schur_min_pivot() < kNearlyDependentPivot;
-  ReducedSolution sol = kkt_->Solve(nullptr, verify);
+  ReducedSolution sol = kkt_->Solve(has_data_term() ? &data_rhs_ : nullptr, verify);
   if (verify) {
     verified_since_factorization_ = true;
     // The default diagonal shift (1e-13) alone gives backward errors of ~5e-14: a margin of 4
@@ -164,8 +199,13 @@ absl::Status DesignSession::AddConstraint(int64_t id, const FieldConstraint& con
   }
   const bool soft = !constraint.hard();
   RETURN_IF_ERROR(ValidateConstraint(*system_, constraint));
-  kkt_->Append(BasisRowsOfFace(*system_, constraint.face), constraint.value,
-               soft ? SoftE(constraint.weight) : 0.0, !soft);
+  std::vector<SparseRow> rows = BasisRowsOfFace(*system_, constraint.face);
+  double stiffness = 1.0;
+  if (soft) {
+    ASSIGN_OR_RETURN(stiffness, Stiffness(rows));
+  }
+  kkt_->Append(std::move(rows), constraint.value, soft ? SoftE(constraint.weight, stiffness) : 0.0,
+               !soft);
   if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
     // The previous factorization of H is still in place and matches the restored state.
     kkt_->RemoveSwapLast(kkt_->num_groups() - 1);
@@ -175,6 +215,7 @@ absl::Status DesignSession::AddConstraint(int64_t id, const FieldConstraint& con
   slot_by_id_[id] = static_cast<int32_t>(ids_by_slot_.size());
   ids_by_slot_.push_back(id);
   records_.push_back(constraint);
+  stiffness_.push_back(stiffness);
   num_hard_ += soft ? 0 : 1;
   Resolve();
   return absl::OkStatus();
@@ -202,25 +243,31 @@ absl::Status DesignSession::MoveConstraint(int64_t id, const FieldConstraint& ta
   constraint.kind = record.kind;  // a move keeps the kind
   const bool soft = !record.hard();
   RETURN_IF_ERROR(ValidateConstraint(*system_, constraint));
-  const double e = soft ? SoftE(constraint.weight) : 0.0;
+  double stiffness = stiffness_[slot];
   if (constraint.face == record.face) {
     kkt_->SetTarget(slot, constraint.value);
     if (soft && constraint.weight != record.weight) {
-      kkt_->SetE(slot, e);
+      kkt_->SetE(slot, SoftE(constraint.weight, stiffness));
       // A positive change of a soft row's diagonal cannot create a dependence.
       RETURN_IF_ERROR(kkt_->FactorizeSchur());
     }
   } else {
-    kkt_->Replace(slot, BasisRowsOfFace(*system_, constraint.face), constraint.value, e);
+    std::vector<SparseRow> rows = BasisRowsOfFace(*system_, constraint.face);
+    if (soft) {
+      ASSIGN_OR_RETURN(stiffness, Stiffness(rows));
+    }
+    kkt_->Replace(slot, std::move(rows), constraint.value,
+                  soft ? SoftE(constraint.weight, stiffness) : 0.0);
     if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
       const FieldConstraint& old = record;
       kkt_->Replace(slot, BasisRowsOfFace(*system_, old.face), old.value,
-                    soft ? SoftE(old.weight) : 0.0);
+                    soft ? SoftE(old.weight, stiffness_[slot]) : 0.0);
       RETURN_IF_ERROR(kkt_->FactorizeSchur());
       return st;
     }
   }
   record = std::move(constraint);
+  stiffness_[slot] = stiffness;
   Resolve();
   return absl::OkStatus();
 }
@@ -238,10 +285,12 @@ absl::Status DesignSession::RemoveConstraint(int64_t id) {
   if (slot != last) {
     ids_by_slot_[slot] = ids_by_slot_[last];
     records_[slot] = std::move(records_[last]);
+    stiffness_[slot] = stiffness_[last];
     slot_by_id_[ids_by_slot_[slot]] = slot;
   }
   ids_by_slot_.pop_back();
   records_.pop_back();
+  stiffness_.pop_back();
   // Removing rows keeps the remaining hard rows independent, so this cannot fail.
   RETURN_IF_ERROR(kkt_->FactorizeSchur());
   Resolve();
@@ -253,38 +302,59 @@ void DesignSession::ClearConstraints() {
   slot_by_id_.clear();
   ids_by_slot_.clear();
   records_.clear();
+  stiffness_.clear();
   num_hard_ = 0;
   (void)kkt_->FactorizeSchur();  // empty: always succeeds
   Resolve();
 }
 
 absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
-  RETURN_IF_ERROR(ValidateSessionWeights(weights));
+  RETURN_IF_ERROR(ValidateSessionWeights(weights, has_data_term()));
   const EnergyWeights old_weights = weights_;
-  const bool energy_changed = weights.mu_s != weights_.mu_s || weights.mu_b != weights_.mu_b;
+  const bool energy_changed = weights.mu_s != weights_.mu_s || weights.mu_b != weights_.mu_b ||
+                              (has_data_term() && weights.mu_a != weights_.mu_a);
   std::shared_ptr<const EnergyFactorization> old_energy = energy_;
+  std::vector<double> old_stiffness = stiffness_;
   last_factorized_ = false;
+  // Puts the session back as it was (the old factorization of H matches it again).
+  const auto restore = [&]() -> absl::Status {
+    weights_ = old_weights;
+    stiffness_ = old_stiffness;
+    UpdateDataRhs();
+    if (energy_changed) {
+      energy_ = old_energy;
+      kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
+      verified_since_factorization_ = false;
+    }
+    for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
+      if (!records_[slot].hard()) kkt_->SetE(slot, SoftE(records_[slot].weight, stiffness_[slot]));
+    }
+    return kkt_->FactorizeSchur();
+  };
   if (energy_changed) {
     ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> energy, Energy(weights));
     energy_ = std::move(energy);
     kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
     verified_since_factorization_ = false;
+    weights_ = weights;  // Stiffness() reads mu_a; restore() puts the old weights back
+    // Scale-free soft weights are relative to the faces' stiffness under the new energy.
+    for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
+      if (records_[slot].hard()) continue;
+      absl::StatusOr<double> g = Stiffness(kkt_->GroupRows(slot));
+      if (!g.ok()) {
+        RETURN_IF_ERROR(restore());
+        return g.status();
+      }
+      stiffness_[slot] = *g;
+    }
   }
   weights_ = weights;
+  UpdateDataRhs();
   for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
-    if (!records_[slot].hard()) kkt_->SetE(slot, SoftE(records_[slot].weight));
+    if (!records_[slot].hard()) kkt_->SetE(slot, SoftE(records_[slot].weight, stiffness_[slot]));
   }
   if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
-    weights_ = old_weights;
-    if (energy_changed) {
-      energy_ = std::move(old_energy);
-      kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
-      verified_since_factorization_ = false;
-    }
-    for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
-      if (!records_[slot].hard()) kkt_->SetE(slot, SoftE(records_[slot].weight));
-    }
-    RETURN_IF_ERROR(kkt_->FactorizeSchur());
+    RETURN_IF_ERROR(restore());
     return st;
   }
   Resolve();
@@ -310,6 +380,8 @@ absl::StatusOr<FieldConstraint> DesignSession::GetConstraint(int64_t id) const {
 ModelProblem DesignSession::problem() const {
   ModelProblem problem;
   problem.weights = weights_;
+  problem.weights.mu_a = 0;  // the data term is the session's own
+  problem.scale_free = options_.scale_free;
   for (const auto& [id, slot] : slot_by_id_) problem.constraints.push_back(records_[slot]);
   return problem;
 }

@@ -15,23 +15,29 @@
 #include "core/linalg/supernodal_cholesky.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/reduced_system.h"
+#include "core/subspace/smoothing.h"
 
 namespace fieldspace {
 
 class KktSolver;
+struct SparseRow;
 
-// The energy matrix A = U^T (mu_S S + mu_B B) U of one reduced system for one (mu_S, mu_B), and
-// its (possibly regularized) factorization. Immutable; shared by sessions.
+// The energy matrix A = U^T (mu_S S + mu_B B) U (+ mu_A U^T W M U with a data term) of one
+// reduced system for one (mu_S, mu_B[, mu_A]), and its (possibly regularized) factorization.
+// Immutable; shared by sessions.
 struct EnergyFactorization {
   std::unique_ptr<SupernodalMatrix> A;  // d x d, on the system's shared pattern
   std::unique_ptr<SupernodalFactor> factor;
   double regularization = 0;  // the diagonal shift that was needed
 };
 
-// Factorizes A for `weights` (mu_S, mu_B) with the regularization policy of `options`.
-// FailedPrecondition when it cannot be factorized; Cancelled (options.cancel).
+// Factorizes A for `weights` (mu_S, mu_B as given: callers apply EffectiveEnergyWeights) with
+// the regularization policy of `options`; with `data` (not null; of the same system), plus
+// weights.mu_a times the data term's weighted mass (as given, too). FailedPrecondition when it
+// cannot be factorized; Cancelled (options.cancel).
 absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
-    const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options);
+    const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options,
+    const ReducedSmoother* data = nullptr);
 
 // Energy factorizations shared by the design sessions of a reduced system: sessions with the
 // same (mu_S, mu_B) and regularization policy use one factorization while any of them holds it,
@@ -44,17 +50,17 @@ class EnergyFactorCache {
   // As FactorizeEnergy(system, weights, options), shared. The system's address is part of the
   // key, so one cache may serve several systems (each entry keeps none of them alive).
   // *factorized (optional): whether this call computed the factorization.
-  absl::StatusOr<std::shared_ptr<const EnergyFactorization>> Get(const ReducedSystem& system,
-                                                                 const EnergyWeights& weights,
-                                                                 const ReducedSolveOptions& options,
-                                                                 bool* factorized = nullptr);
+  absl::StatusOr<std::shared_ptr<const EnergyFactorization>> Get(
+      const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options,
+      bool* factorized = nullptr, const ReducedSmoother* data = nullptr);
   // Entries with a live factorization.
   int32_t live_entries() const;
 
  private:
   struct Key {
     const ReducedSystem* system;
-    double mu_s, mu_b, regularization, max_regularization;
+    const ReducedSmoother* data;
+    double mu_s, mu_b, mu_a, regularization, max_regularization;
     bool parallel;
     bool operator<(const Key& o) const;
   };
@@ -65,6 +71,11 @@ class EnergyFactorCache {
   mutable std::mutex mu_;
   std::map<Key, std::shared_ptr<Entry>> entries_;
 };
+
+// The weights of a session with a data term when a caller gives none: smoothing's
+// (kDefaultSmoothingWeights, with the data term as mu_a) plus soft constraints at mu_c = 1.
+inline constexpr EnergyWeights kDefaultDataTermSessionWeights{
+    .mu_s = kDefaultSmoothingWeights.mu_s, .mu_b = 0.0, .mu_c = 1.0, .mu_a = 1.0};
 
 struct DesignSessionOptions {
   ReducedSolveOptions solve;
@@ -79,11 +90,21 @@ struct DesignSessionOptions {
   int32_t verify_interval = 1;
   // Where energy factorizations come from; null: the session factorizes its own.
   std::shared_ptr<EnergyFactorCache> energy_cache;
+  // Scale-free weights (ModelProblem::scale_free): mu_B times the total area, each soft
+  // constraint's weight divided by its face's stiffness (FaceStiffness), a data term's mu_A
+  // divided by the total area (as SmoothingOptions::scale_free).
+  bool scale_free = false;
+  // A data (alignment) term mu_A (X - X0)^T W M (X - X0) in the energy (paper section 8, Fig. 16:
+  // a field aligned to curvature, then interpolation constraints on top), with X0, W and their
+  // passes over U from the smoother (of the same system; its own scale_free is not used). Null:
+  // none, and mu_A must be 0.
+  std::shared_ptr<const ReducedSmoother> data_term;
 };
 
 // An interactive design session on one basis (paper section 8; docs/conventions.md, Model
 // problem): the model problem (eq. 8) reduced to the subspace (eq. 10, 11), with soft and hard
-// constraints edited one at a time.
+// constraints edited one at a time, optionally plus a data term (DesignSessionOptions::data_term;
+// its matrix joins A and its right-hand side mu_A U^T W M X0 every solve).
 //
 // Cost model: the energy matrix A = U^T (mu_S S + mu_B B) U is factorized once per (mu_S, mu_B)
 // (sparse supernodal Cholesky P A P^T = L L^T on the basis's shared symbolic analysis; shared
@@ -92,8 +113,8 @@ struct DesignSessionOptions {
 // moved to another face), and every edit refactorizes only the small dense matrix
 // H = U_C A^-1 U_C^T + E = W^T W + E over the current constraint rows (Woodbury for soft
 // constraints, Schur complement for hard ones; see KktSolver). An edit costs
-// O(nnz(L) + d r + r^3) for r constraint rows instead of a refactorization. Changing mu_S or mu_B
-// refactorizes A and recomputes W; changing only mu_C does not.
+// O(nnz(L) + d r + r^3) for r constraint rows instead of a refactorization. Changing mu_S, mu_B
+// or mu_A refactorizes A and recomputes W; changing only mu_C does not.
 //
 // Every successful call leaves coefficients() = the minimizer for the current weights and
 // constraint set, equal (up to the solver tolerance) to SolveReducedModelProblem(problem()).
@@ -126,10 +147,10 @@ class DesignSession {
   absl::Status MoveConstraint(int64_t id, int32_t face, Eigen::VectorXd value);
   // NotFound for an unknown id.
   absl::Status RemoveConstraint(int64_t id);
-  // Removes every constraint (the solution becomes 0).
+  // Removes every constraint (the solution becomes 0, or the data term's minimizer).
   void ClearConstraints();
-  // New weights (InvalidArgument if invalid, see ValidateWeights). Refactorizes A when mu_S or
-  // mu_B change; FailedPrecondition (session unchanged) if that factorization fails.
+  // New weights (InvalidArgument if invalid, see ValidateWeights). Refactorizes A when mu_S, mu_B
+  // or mu_A change; FailedPrecondition (session unchanged) if that factorization fails.
   absl::Status SetWeights(const EnergyWeights& weights);
 
   // d: the current reduced solution x.
@@ -145,8 +166,10 @@ class DesignSession {
   // NotFound for an unknown id.
   absl::StatusOr<FieldConstraint> GetConstraint(int64_t id) const;
   // The current problem (soft and hard constraints in increasing id order), as solved by
-  // SolveReducedModelProblem or, in the full space, SolveModelProblem.
+  // SolveReducedModelProblem or, in the full space, SolveModelProblem (without the data term,
+  // which neither has).
   ModelProblem problem() const;
+  bool has_data_term() const { return options_.data_term != nullptr; }
   const ReducedSystem& system() const { return *system_; }
   // Of the last solve: backward error and refinement steps; of the factorization: the diagonal
   // shift that was needed.
@@ -160,10 +183,18 @@ class DesignSession {
 
  private:
   DesignSession(std::shared_ptr<const ReducedSystem> system, const DesignSessionOptions& options);
-  // mu_S U^T S U + mu_B U^T B U, from the cache when there is one; sets last_factorized_.
+  // mu_S U^T S U + mu_B U^T B U (+ mu_A U^T W M U) with the effective weights, from the cache
+  // when there is one; sets last_factorized_.
   absl::StatusOr<std::shared_ptr<const EnergyFactorization>> Energy(const EnergyWeights& weights);
+  // The diagonal of a soft constraint's rows in the KKT system: stiffness / (mu_C weight).
+  double SoftE(double weight, double stiffness) const {
+    return stiffness / (weights_.mu_c * weight);
+  }
+  // 1 with raw weights; else FaceStiffness of `rows` under the current energy factorization.
+  absl::StatusOr<double> Stiffness(const std::vector<SparseRow>& rows) const;
+  // mu_A' U^T W M X0 for the current weights (empty without a data term).
+  void UpdateDataRhs();
   void Resolve();
-  double SoftE(double weight) const { return 1.0 / (weights_.mu_c * weight); }
 
   std::shared_ptr<const ReducedSystem> system_;
   DesignSessionOptions options_;
@@ -173,6 +204,8 @@ class DesignSession {
   std::map<int64_t, int32_t> slot_by_id_;
   std::vector<int64_t> ids_by_slot_;
   std::vector<FieldConstraint> records_;  // by slot
+  std::vector<double> stiffness_;         // by slot: see Stiffness()
+  Eigen::VectorXd data_rhs_;
   int32_t num_hard_ = 0;
   Eigen::VectorXd coefficients_;
   double last_backward_error_ = 0;

@@ -5,6 +5,7 @@
 #include <limits>
 #include <utility>
 
+#include "Eigen/Eigenvalues"
 #include "absl/strings/str_cat.h"
 #include "core/subspace/subspace_util.h"
 
@@ -20,6 +21,40 @@ std::vector<SparseRow> BasisRowsOfFace(const ReducedSystem& system, int32_t face
     for (int64_t q = 0; q < row.size; ++q) rows[c].vals[q] = static_cast<double>(row.vals[q]);
   }
   return rows;
+}
+
+absl::StatusOr<double> FaceStiffness(const ReducedSystem& system, const SupernodalFactor& factor,
+                                     const std::vector<SparseRow>& rows,
+                                     bool skip_kernel_columns) {
+  const int64_t d = system.dimension();
+  const int64_t first_kernel =
+      skip_kernel_columns ? d - std::max<int32_t>(0, system.basis().kernel_columns) : d;
+  const int32_t p = static_cast<int32_t>(rows.size());
+  Eigen::MatrixXd W(d, p);
+  std::vector<int32_t> cols;
+  std::vector<double> vals;
+  for (int32_t c = 0; c < p; ++c) {
+    cols.clear();
+    vals.clear();
+    for (size_t q = 0; q < rows[c].cols.size(); ++q) {
+      if (rows[c].cols[q] >= first_kernel) continue;
+      cols.push_back(rows[c].cols[q]);
+      vals.push_back(rows[c].vals[q]);
+    }
+    factor.ForwardSparse(cols, vals, W.col(c));
+  }
+  const Eigen::MatrixXd G = W.transpose() * W;
+  const double g = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(G, Eigen::EigenvaluesOnly)
+                       .eigenvalues()
+                       .minCoeff();
+  // Relative to the largest: a face where one DOF direction has no support.
+  if (!(g > 1e-12 * G.trace()) || !std::isfinite(g)) {
+    return absl::FailedPreconditionError(
+        "a scale-free soft constraint's face has (almost) no support in the subspace: no basis "
+        "field controls one of its DOF directions, so its weight cannot be normalized; use raw "
+        "weights or another face");
+  }
+  return g;
 }
 
 Eigen::SparseMatrix<double> ShiftKernelColumns(const ReducedSystem& system,

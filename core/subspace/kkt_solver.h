@@ -43,6 +43,21 @@ inline constexpr double kKernelColumnShift = 1e-6;
 Eigen::SparseMatrix<double> ShiftKernelColumns(const ReducedSystem& system,
                                                const Eigen::SparseMatrix<double>& A);
 
+// The stiffness of a face in the subspace, which scale-free soft constraints divide their weight
+// by (ModelProblem::scale_free): the smallest eigenvalue of G = R F^-1 R^T (p x p) for the face's
+// rows R of U (BasisRowsOfFace) and the factorization F of the energy matrix, with the entries of
+// the basis's kernel columns left out of R when `skip_kernel_columns` (when the energy is the
+// Laplacians' alone, whose kernel columns have zero energy: their diagonal shift,
+// ShiftKernelColumns, must not enter, and a kernel direction only makes a constraint pull harder;
+// with a data term they have energy like any other column and stay in). A soft constraint
+// alone with weight mu / g pulls its face's DOFs G (G + (g / mu) I)^-1 of the way to its value:
+// at least mu / (1 + mu) in every direction. Dimensionless (S is scale invariant). p sparse
+// forward substitutions. FailedPrecondition when no (non-kernel) basis field is nonzero at the
+// face.
+absl::StatusOr<double> FaceStiffness(const ReducedSystem& system, const SupernodalFactor& factor,
+                                     const std::vector<SparseRow>& rows,
+                                     bool skip_kernel_columns = true);
+
 // Factorizes `A` (on the system's shared pattern or any pattern with its own analysis) with the
 // regularization policy of ReducedSolveOptions: diagonal scaled by (1 + tau), tau raised 1000x
 // on failure up to max_regularization. Returns the tau used through `tau`.

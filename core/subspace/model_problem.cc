@@ -9,6 +9,8 @@
 #include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/kkt_solver.h"
+#include "oneapi/tbb/blocked_range.h"
+#include "oneapi/tbb/parallel_for.h"
 
 namespace fieldspace {
 
@@ -34,6 +36,13 @@ absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstrai
   return absl::OkStatus();
 }
 
+EnergyWeights EffectiveEnergyWeights(const ReducedSystem& system, const EnergyWeights& weights,
+                                     bool scale_free) {
+  EnergyWeights w = weights;
+  if (scale_free) w.mu_b *= system.mass().sum() / system.dofs_per_face();
+  return w;
+}
+
 absl::Status ValidateSolveOptions(const ReducedSolveOptions& o) {
   if (!(o.regularization >= 0) || !(o.max_regularization >= o.regularization) ||
       !std::isfinite(o.max_regularization) || !(o.tolerance >= 0) || o.max_refinement_steps < 0 ||
@@ -49,8 +58,8 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
                                                          const ModelProblem& problem,
                                                          const ReducedSolveOptions& options) {
   RETURN_IF_ERROR(ValidateSolveOptions(options));
-  RETURN_IF_ERROR(ValidateWeights(problem.weights));
-  const EnergyWeights& w = problem.weights;
+  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
+  const EnergyWeights w = EffectiveEnergyWeights(system, problem.weights, problem.scale_free);
   for (const FieldConstraint& c : problem.constraints) {
     RETURN_IF_ERROR(ValidateConstraint(system, c));
   }
@@ -69,10 +78,42 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   const bool any_soft = std::any_of(problem.constraints.begin(), problem.constraints.end(),
                                     [](const FieldConstraint& c) { return !c.hard(); });
   if (any_soft && w.mu_c > 0) {
+    // Scale-free: each soft weight divided by its face's stiffness under the energy alone.
+    std::vector<double> stiffness(problem.constraints.size(), 1.0);
+    if (problem.scale_free) {
+      double tau0 = 0;
+      ASSIGN_OR_RETURN(SupernodalFactor energy,
+                       FactorizeRegularized(system.pattern_symbolic(),
+                                            ShiftKernelColumns(system, A), options, &tau0));
+      if (IsCancelled(options.cancel)) return cancelled_error;
+      std::vector<absl::Status> errors(problem.constraints.size());
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, problem.constraints.size(), 16),
+                        [&](const tbb::blocked_range<size_t>& range) {
+                          for (size_t i = range.begin(); i != range.end(); ++i) {
+                            const FieldConstraint& c = problem.constraints[i];
+                            if (c.hard()) continue;
+                            absl::StatusOr<double> g =
+                                FaceStiffness(system, energy, BasisRowsOfFace(system, c.face));
+                            if (g.ok()) {
+                              stiffness[i] = *g;
+                            } else {
+                              errors[i] = g.status();
+                            }
+                          }
+                        });
+      for (size_t i = 0; i < errors.size(); ++i) {
+        if (!errors[i].ok()) {
+          return absl::Status(errors[i].code(),
+                              absl::StrCat("constraint on face ", problem.constraints[i].face, ": ",
+                                           errors[i].message()));
+        }
+      }
+    }
     std::vector<Eigen::Triplet<double>> triplets;
-    for (const FieldConstraint& c : problem.constraints) {
+    for (size_t i = 0; i < problem.constraints.size(); ++i) {
+      const FieldConstraint& c = problem.constraints[i];
       if (c.hard()) continue;
-      const double mu = w.mu_c * c.weight;
+      const double mu = w.mu_c * c.weight / stiffness[i];
       const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
       for (size_t comp = 0; comp < rows.size(); ++comp) {
         const SparseRow& row = rows[comp];

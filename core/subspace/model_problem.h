@@ -25,6 +25,12 @@ namespace fieldspace {
 // soft constraint) a finite positive weight.
 absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c);
 
+// The energy weights a problem is factorized with: `weights`, with mu_b multiplied by the mesh's
+// total area A when scale_free (X^T B X scales like 1 / L^2 and A like L^2, so mu_b becomes
+// dimensionless like mu_s and mu_c; docs/conventions.md, "Scale-free weights").
+EnergyWeights EffectiveEnergyWeights(const ReducedSystem& system, const EnergyWeights& weights,
+                                     bool scale_free);
+
 // How reduced systems are factorized and solved (DesignSession and SolveReducedModelProblem).
 struct ReducedSolveOptions {
   // The energy matrix A = U^T (mu_S S + mu_B B) U is only positive semi-definite in general (its
@@ -66,13 +72,14 @@ struct ReducedSolution {
 
 // Solves the reduced problem (eq. 10, 11) from scratch: factorizes
 //   U^T (mu_s S + mu_b B) U + mu_c sum_soft w_i U_i^T U_i   (U_i: the rows of U at face f(i))
-// and imposes the hard constraints U_h x = c_h with a Schur complement on that factorization.
-// Use DesignSession for repeated solves with changing constraints.
-// Weights: see ValidateWeights (mu_c = 0 disables the soft constraints). Errors: InvalidArgument
-// for invalid weights or constraints (bad face id, wrong value size, non-finite value, non-positive
-// soft weight); FailedPrecondition when the hard constraints are linearly dependent in the subspace
-// (e.g. the same face twice, or more constraint DOFs than d) or the system cannot be factorized;
-// Cancelled (options.cancel).
+// (with problem.scale_free: mu_b times the total area and w_i / g_i, g_i = FaceStiffness of the
+// face from a factorization of the energy alone) and imposes the hard constraints U_h x = c_h with
+// a Schur complement on that factorization. Use DesignSession for repeated solves with changing
+// constraints. Weights: see ValidateWeights (mu_c = 0 disables the soft constraints). Errors:
+// InvalidArgument for invalid weights or constraints (bad face id, wrong value size, non-finite
+// value, non-positive soft weight); FailedPrecondition when the hard constraints are linearly
+// dependent in the subspace (e.g. the same face twice, or more constraint DOFs than d) or the
+// system cannot be factorized; Cancelled (options.cancel).
 absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& system,
                                                          const ModelProblem& problem,
                                                          const ReducedSolveOptions& options = {});

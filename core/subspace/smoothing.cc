@@ -109,6 +109,19 @@ absl::StatusOr<ReducedSmoother> ReducedSmoother::Create(
   return smoother;
 }
 
+Eigen::SparseMatrix<double> ReducedSmoother::WeightedSum(double mu_s, double mu_b,
+                                                         double mu_data) const {
+  // Value by value on the shared pattern.
+  Eigen::SparseMatrix<double> A = data_mass();
+  double* a = A.valuePtr();
+  const double* s = stiffness().valuePtr();
+  const double* b = bilaplacian().valuePtr();
+  const double* c = data_mass().valuePtr();
+  const int64_t nnz = A.nonZeros();
+  for (int64_t q = 0; q < nnz; ++q) a[q] = mu_s * s[q] + mu_b * b[q] + mu_data * c[q];
+  return A;
+}
+
 const Eigen::SparseMatrix<double>& ReducedSmoother::stiffness() const {
   return own_pattern_ ? stiffness_ : system_->stiffness();
 }
@@ -120,7 +133,7 @@ const Eigen::SparseMatrix<double>& ReducedSmoother::data_mass() const {
 }
 
 absl::StatusOr<SmoothingResult> ReducedSmoother::Solve(const EnergyWeights& weights) const {
-  RETURN_IF_ERROR(ValidateWeights(weights));
+  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(weights));
   const absl::Status cancelled = absl::CancelledError("ReducedSmoother: cancelled");
   if (IsCancelled(options_.cancel)) return cancelled;
   const double mu_s = weights.mu_s;
@@ -129,16 +142,7 @@ absl::StatusOr<SmoothingResult> ReducedSmoother::Solve(const EnergyWeights& weig
 
   SmoothingResult result;
   const auto t_factor = std::chrono::steady_clock::now();
-  // A = mu_S S^ + mu_B B^ + mu_C C^, value by value on the shared pattern.
-  Eigen::SparseMatrix<double> A = data_mass();
-  {
-    double* a = A.valuePtr();
-    const double* s = stiffness().valuePtr();
-    const double* b = bilaplacian().valuePtr();
-    const double* c = data_mass().valuePtr();
-    const int64_t nnz = A.nonZeros();
-    for (int64_t q = 0; q < nnz; ++q) a[q] = mu_s * s[q] + mu_b * b[q] + mu_c * c[q];
-  }
+  const Eigen::SparseMatrix<double> A = WeightedSum(mu_s, mu_b, mu_c);
   ReducedSolveOptions solve_options = options_.solve;
   solve_options.cancel = options_.cancel;
   if (mu_c == 0) {

@@ -104,6 +104,10 @@ class ReducedSmoother {
   absl::StatusOr<SmoothingResult> Solve(const EnergyWeights& weights) const;
 
   const ReducedSystem& system() const { return *system_; }
+  // mu_s U^T S U + mu_b U^T B U + mu_data U^T W M U as given (no scale_free scaling), on
+  // symbolic()'s pattern: the system's shared one unless the weighted mass needed a larger one.
+  Eigen::SparseMatrix<double> WeightedSum(double mu_s, double mu_b, double mu_data) const;
+  const std::shared_ptr<const SupernodalSymbolic>& symbolic() const { return symbolic_; }
   // rhs_ms and weighted_mass_ms of Create (the other fields 0).
   const SmoothingTimings& setup_timings() const { return setup_timings_; }
   // d: U^T W M X0 (without mu_C).
