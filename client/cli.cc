@@ -65,9 +65,11 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   cancel BASIS_ID                     cancel a running build
   project BASIS_ID FIELD_FILE         coefficients and relative error of the projection
   solve BASIS_ID --constraints FILE [--mu-s X] [--mu-b X] [--mu-c X] [--out FIELD_FILE]
-        [--encoding ambient|dof] [--singularities]
-                                      the model problem with soft/hard constraints;
-                                      --singularities: also the solution's singular vertices
+        [--encoding ambient|dof] [--singularities] [--raw-weights]
+                                      the model problem with soft/hard constraints (defaults
+                                      1, 0, 1; scale-free: a soft constraint alone pulls its
+                                      face >= mu_c w / (1 + mu_c w) of the way, unless
+                                      --raw-weights); --singularities: also the singular vertices
   lift BASIS_ID COEFFS_FILE (--out FIELD_FILE | --faces F1,F2,...) [--encoding ambient|dof]
         [--mode K]                    --mode K: eigenfield K of `eigen --coefficients` output
   eigen BASIS_ID --count K [--coefficients]
@@ -88,9 +90,12 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   singularities BASIS_ID COEFFS_FILE [--zero-tolerance T] [--mode K]
                                       vertex indices (in turns) of the lifted field
   design BASIS_ID --script EDITS.jsonl [--mu-s X] [--mu-b X] [--mu-c X] [--watch F1,F2,...]
-        [--no-coefficients] [--singularities]
+        [--no-coefficients] [--singularities] [--raw-weights]
+        [--align-curvature [--estimator E] | --data FIELD_FILE [--face-weights FILE]] [--mu-a X]
                                       stream edits; one JSON line per update (--singularities:
-                                      how the singular vertices changed, in each)
+                                      how the singular vertices changed, in each); weights as
+                                      solve's; --align-curvature / --data: a data term (weight
+                                      mu_a; then defaults 0.001, 0, 1, 1) the edits act on top of
 
   export MESH FIELD_FILE --out FILE.vtu|.vtk|.ply|.rawfield
                                       the field on its mesh for ParaView, meshio, Directional;
@@ -245,6 +250,29 @@ void SetWeights(const CommandLine& a, const char* mu_s_flag, v1::Weights* w) {
   if (a.Has(mu_s_flag)) w->set_mu_s(ParseDouble(a, mu_s_flag, 0));
   if (a.Has("mu-b")) w->set_mu_b(ParseDouble(a, "mu-b", 0));
   if (a.Has("mu-c")) w->set_mu_c(ParseDouble(a, "mu-c", 0));
+  if (a.Has("mu-a")) w->set_mu_a(ParseDouble(a, "mu-a", 0));
+}
+
+// --estimator jet|normal-differences (default jet).
+v1::CurvatureEstimator ParseEstimator(const CommandLine& a) {
+  const std::string estimator = GetString(a, "estimator", "jet");
+  if (estimator == "jet") return v1::CURVATURE_ESTIMATOR_JET;
+  if (estimator == "normal-differences") return v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES;
+  throw UsageError("--estimator must be jet or normal-differences");
+}
+
+// --face-weights FILE (one number per face) into `out`; nothing without the flag.
+absl::Status ReadFaceWeights(const CommandLine& a, google::protobuf::RepeatedField<double>* out) {
+  if (!a.Has("face-weights")) return absl::OkStatus();
+  const std::string path = GetString(a, "face-weights");
+  absl::StatusOr<std::string> text = ReadFile(path);
+  if (!text.ok()) return text.status();
+  absl::StatusOr<std::vector<double>> weights = ParseCoefficients(*text);
+  if (!weights.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": ", weights.status().message()));
+  }
+  out->Add(weights->begin(), weights->end());
+  return absl::OkStatus();
 }
 
 // --mode K (an eigenfield of `eigen --coefficients`), or -1.
@@ -502,12 +530,15 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"cancel", {{}, 1, &Cli::Cancel}},
         {"project", {{}, 2, &Cli::Project}},
         {"solve",
-         {Flags({"constraints", "mu-s", "mu-b", "mu-c", "out", "encoding"}, {"singularities"}), 1,
-          &Cli::Solve}},
+         {Flags({"constraints", "mu-s", "mu-b", "mu-c", "out", "encoding"},
+                {"singularities", "raw-weights"}),
+          1, &Cli::Solve}},
         {"lift", {Flags({"out", "faces", "encoding", "mode"}), 2, &Cli::Lift}},
         {"eigen", {Flags({"count"}, {"coefficients"}), 1, &Cli::Eigen}},
         {"design",
-         {Flags({"script", "mu-s", "mu-b", "mu-c", "watch"}, {"no-coefficients", "singularities"}),
+         {Flags({"script", "mu-s", "mu-b", "mu-c", "mu-a", "watch", "data", "face-weights",
+                 "estimator"},
+                {"no-coefficients", "singularities", "raw-weights", "align-curvature"}),
           1, &Cli::Design}},
         {"curvature", {Flags({"out", "encoding", "estimator", "principal"}), 1, &Cli::Curvature}},
         {"smoothest", {Flags({"out", "encoding"}), 1, &Cli::Smoothest}},
@@ -906,6 +937,7 @@ int Cli::Solve(const CommandLine& a) {
   v1::SolveRequest request;
   request.set_basis_id(a.positional()[0]);
   SetWeights(a, "mu-s", request.mutable_weights());
+  request.set_raw_weights(a.Has("raw-weights"));
   request.set_singularities(a.Has("singularities"));
   for (v1::Constraint& c : *constraints) *request.add_constraints() = std::move(c);
   absl::StatusOr<v1::SolveResponse> response = client_->Solve(request);
@@ -1012,14 +1044,7 @@ int Cli::Curvature(const CommandLine& a) {
   request.set_mesh_id(a.positional()[0]);
   const v1::FieldEncoding encoding = ParseEncoding(a);
   request.set_encoding(encoding);
-  const std::string estimator = GetString(a, "estimator", "jet");
-  if (estimator == "jet") {
-    request.set_estimator(v1::CURVATURE_ESTIMATOR_JET);
-  } else if (estimator == "normal-differences") {
-    request.set_estimator(v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES);
-  } else {
-    throw UsageError("--estimator must be jet or normal-differences");
-  }
+  request.set_estimator(ParseEstimator(a));
   request.set_principal(a.Has("principal"));
   absl::StatusOr<std::vector<v1::CurvatureChunk>> chunks = client_->Curvature(request);
   if (!chunks.ok()) return Fail(chunks.status(), "Curvature");
@@ -1061,7 +1086,7 @@ int Cli::Curvature(const CommandLine& a) {
   j.BeginObject();
   j.Key("mesh_id").String(request.mesh_id());
   j.Key("faces").Int(field.num_faces());
-  j.Key("estimator").String(estimator);
+  j.Key("estimator").String(GetString(a, "estimator", "jet"));
   j.Key("encoding").String(encoding == v1::FIELD_ENCODING_AMBIENT ? "ambient" : "dof");
   j.Key("out").String(out);
   if (a.Has("principal")) {
@@ -1128,15 +1153,8 @@ int Cli::Smooth(const CommandLine& a) {
   SetWeights(a, "mu-s", request.mutable_weights());
   request.set_scale_free(!a.Has("raw-weights"));
   request.set_singularities(a.Has("singularities"));
-  if (a.Has("face-weights")) {
-    const std::string path = GetString(a, "face-weights");
-    absl::StatusOr<std::string> text = ReadFile(path);
-    if (!text.ok()) return Fail(text.status());
-    absl::StatusOr<std::vector<double>> weights = ParseCoefficients(*text);
-    if (!weights.ok()) {
-      return Fail(absl::InvalidArgumentError(absl::StrCat(path, ": ", weights.status().message())));
-    }
-    request.mutable_face_weights()->Add(weights->begin(), weights->end());
+  if (absl::Status st = ReadFaceWeights(a, request.mutable_face_weights()); !st.ok()) {
+    return Fail(st);
   }
   absl::StatusOr<v1::SmoothResponse> response = client_->Smooth(request);
   if (!response.ok()) return Fail(response.status(), "Smooth");
@@ -1160,13 +1178,8 @@ int Cli::Align(const CommandLine& a) {
   v1::AlignRequest request;
   request.set_basis_id(a.positional()[0]);
   SetWeights(a, "smooth-mu", request.mutable_weights());
-  const std::string estimator = GetString(a, "estimator", "jet");
-  if (estimator != "jet" && estimator != "normal-differences") {
-    throw UsageError("--estimator must be jet or normal-differences");
-  }
+  request.set_estimator(ParseEstimator(a));
   request.set_singularities(a.Has("singularities"));
-  request.set_estimator(estimator == "jet" ? v1::CURVATURE_ESTIMATOR_JET
-                                           : v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES);
   absl::StatusOr<v1::SmoothResponse> response = client_->Align(request);
   if (!response.ok()) return Fail(response.status(), "Align");
   return EmitSmoothed(a, request.basis_id(), true, *response);
@@ -1231,6 +1244,29 @@ int Cli::Design(const CommandLine& a) {
   v1::OpenDesign* o = open.mutable_open();
   o->set_basis_id(a.positional()[0]);
   SetWeights(a, "mu-s", o->mutable_weights());
+  o->set_raw_weights(a.Has("raw-weights"));
+  if (a.Has("align-curvature") && a.Has("data")) {
+    throw UsageError("design takes one data term: --align-curvature or --data FIELD_FILE");
+  }
+  if (a.Has("face-weights") && !a.Has("data")) {
+    throw UsageError("design --face-weights weighs the --data field");
+  }
+  if (a.Has("mu-a") && !a.Has("align-curvature") && !a.Has("data")) {
+    throw UsageError("design --mu-a weighs a data term: give --align-curvature or --data");
+  }
+  if (a.Has("align-curvature")) {
+    v1::CurvatureEstimator estimator = ParseEstimator(a);
+    o->mutable_data()->mutable_curvature()->set_estimator(estimator);
+  } else if (a.Has("data")) {
+    absl::StatusOr<FieldFile> field = ReadFieldFile(GetString(a, "data"));
+    if (!field.ok()) return Fail(field.status());
+    v1::FieldValues* values = o->mutable_data()->mutable_field();
+    values->set_encoding(field->encoding);
+    values->mutable_values()->Add(field->values.begin(), field->values.end());
+    if (absl::Status st = ReadFaceWeights(a, o->mutable_data()->mutable_face_weights()); !st.ok()) {
+      return Fail(st);
+    }
+  }
   o->set_watch_encoding(v1::FIELD_ENCODING_AMBIENT);
   o->set_singularities(a.Has("singularities"));
   for (int32_t f : ParseFaceList(GetString(a, "watch"))) o->add_watch_faces(f);

@@ -362,11 +362,11 @@ absl::StatusOr<v1::DesignRequest> ParseEdit(absl::string_view line, absl::string
     ASSIGN_OR_RETURN(int32_t id, GetInt32(*object, "id", inner_where));
     request.mutable_remove()->set_id(id);
   } else if (kind == "weights") {
-    RETURN_IF_ERROR(CheckKeys(*object, {"mu_s", "mu_b", "mu_c"}, inner_where));
+    RETURN_IF_ERROR(CheckKeys(*object, {"mu_s", "mu_b", "mu_c", "mu_a"}, inner_where));
     // The weights given change; the others keep the session's values.
     if (object->fields().empty()) {
       return absl::InvalidArgumentError(
-          absl::StrCat(inner_where, ": weights needs at least one of mu_s, mu_b, mu_c"));
+          absl::StrCat(inner_where, ": weights needs at least one of mu_s, mu_b, mu_c, mu_a"));
     }
     v1::Weights* w = request.mutable_set_weights();
     if (object->fields().contains("mu_s")) {
@@ -380,6 +380,10 @@ absl::StatusOr<v1::DesignRequest> ParseEdit(absl::string_view line, absl::string
     if (object->fields().contains("mu_c")) {
       ASSIGN_OR_RETURN(double mu_c, GetNumber(*object, "mu_c", inner_where));
       w->set_mu_c(mu_c);
+    }
+    if (object->fields().contains("mu_a")) {
+      ASSIGN_OR_RETURN(double mu_a, GetNumber(*object, "mu_a", inner_where));
+      w->set_mu_a(mu_a);
     }
   } else if (kind == "watch") {
     RETURN_IF_ERROR(CheckKeys(*object, {"faces", "encoding"}, inner_where));

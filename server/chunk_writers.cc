@@ -158,17 +158,7 @@ class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
         request_.chunk_faces(),
         4 * (ValuesPerFace(FieldType::Tensor(), encoding_) + (request_.principal() ? 8 : 0)));
     ShapeOperatorOptions options;
-    switch (request_.estimator()) {
-      case v1::CURVATURE_ESTIMATOR_JET:
-        options.estimator = CurvatureEstimator::kJetFit;
-        break;
-      case v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES:
-        options.estimator = CurvatureEstimator::kNormalDifferences;
-        break;
-      default:
-        return absl::InvalidArgumentError(
-            absl::StrCat("unknown curvature estimator ", static_cast<int>(request_.estimator())));
-    }
+    ASSIGN_OR_RETURN(options.estimator, EstimatorFromProto(request_.estimator()));
     ASSIGN_OR_RETURN(mesh_, service()->registry()->GetMesh(request_.mesh_id()));
     ASSIGN_OR_RETURN(dofs_, ComputeShapeOperator(*mesh_, options));
     if (request_.principal()) {

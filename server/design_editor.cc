@@ -73,8 +73,10 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   if (session_ != nullptr) return absl::FailedPreconditionError("the session is already open");
   ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis, lookup_(open.basis_id()));
   edit_start_ = Clock::now();  // a basis loaded from the store is not part of the edit
-  const EnergyWeights weights = WeightsFromProto(open.weights(), EnergyWeights{});
-  RETURN_IF_ERROR(ValidateWeights(weights));
+  const bool data_term = open.has_data();
+  const EnergyWeights weights = WeightsFromProto(
+      open.weights(), data_term ? kDefaultDataTermSessionWeights : EnergyWeights{});
+  RETURN_IF_ERROR(data_term ? ValidateWeights(weights) : ValidateWeightsWithoutDataTerm(weights));
   if (open.singularities() && basis->basis->type.kind == FieldKind::kTensor) {
     return absl::InvalidArgumentError(
         "singularities are defined for vector and n-field bases, not tensor bases");
@@ -87,6 +89,16 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   DesignSessionOptions options;
   options.energy_cache = basis_->energy_cache;
   options.verify_interval = options_.verify_interval;
+  options.scale_free = !open.raw_weights();
+  if (data_term) {
+    absl::StatusOr<std::shared_ptr<const ReducedSmoother>> data = DataTerm(open.data());
+    if (!data.ok()) {
+      basis_.reset();
+      watch_.clear();
+      return data.status();
+    }
+    options.data_term = std::move(*data);
+  }
   absl::StatusOr<std::unique_ptr<DesignSession>> session =
       DesignSession::Create(basis_->system, weights, options);
   if (!session.ok()) {
@@ -99,6 +111,40 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   singularities_ = open.singularities();
   last_singularities_.clear();
   return absl::OkStatus();
+}
+
+absl::StatusOr<std::shared_ptr<const ReducedSmoother>> DesignEditor::DataTerm(
+    const v1::DataTerm& data) {
+  Eigen::VectorXd X0;
+  Eigen::VectorXd face_weights;
+  switch (data.target_case()) {
+    case v1::DataTerm::kCurvature: {
+      if (data.face_weights_size() > 0) {
+        return absl::InvalidArgumentError(
+            "data.face_weights go with data.field; a curvature target is weighted by its "
+            "anisotropy");
+      }
+      ASSIGN_OR_RETURN(CurvatureEstimator estimator,
+                       EstimatorFromProto(data.curvature().estimator()));
+      ASSIGN_OR_RETURN(AlignmentTarget target, CurvatureAlignmentTarget(*basis_, estimator));
+      X0 = std::move(target.dofs);
+      face_weights = std::move(target.face_weights);
+      break;
+    }
+    case v1::DataTerm::kField: {
+      ASSIGN_OR_RETURN(X0, FieldFromProto(data.field(), *basis_));
+      face_weights =
+          Eigen::Map<const Eigen::VectorXd>(data.face_weights().data(), data.face_weights_size());
+      break;
+    }
+    case v1::DataTerm::TARGET_NOT_SET:
+      return absl::InvalidArgumentError("data needs a target: curvature or field");
+  }
+  ASSIGN_OR_RETURN(
+      ReducedSmoother smoother,
+      ReducedSmoother::Create(basis_->system, X0,
+                              absl::MakeConstSpan(face_weights.data(), face_weights.size())));
+  return std::make_shared<const ReducedSmoother>(std::move(smoother));
 }
 
 absl::Status DesignEditor::Edit(const v1::DesignRequest& r) {
@@ -126,7 +172,6 @@ absl::Status DesignEditor::Edit(const v1::DesignRequest& r) {
       return session_->RemoveConstraint(r.remove().id());
     case v1::DesignRequest::kSetWeights: {
       const EnergyWeights weights = WeightsFromProto(r.set_weights(), session_->weights());
-      RETURN_IF_ERROR(ValidateWeights(weights));
       RETURN_IF_ERROR(session_->SetWeights(weights));
       refactorized_ = session_->last_factorized();
       return absl::OkStatus();

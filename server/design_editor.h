@@ -49,6 +49,8 @@ class DesignEditor {
   const DesignSession* session() const { return session_.get(); }
 
  private:
+  // The smoother of an OpenDesign.data term on basis_.
+  absl::StatusOr<std::shared_ptr<const ReducedSmoother>> DataTerm(const v1::DataTerm& data);
   absl::Status Open(const fieldspace::v1::OpenDesign& open);
   absl::Status Edit(const fieldspace::v1::DesignRequest& request);
   absl::Status SetWatch(absl::Span<const int32_t> faces, int encoding);

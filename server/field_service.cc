@@ -248,7 +248,8 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
                          registry_->GetBasis(request->basis_id()));
         ModelProblem problem;
         problem.weights = WeightsFromProto(request->weights(), EnergyWeights{});
-        RETURN_IF_ERROR(ValidateWeights(problem.weights));
+        problem.scale_free = !request->raw_weights();
+        RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
         if (request->constraints_size() > kMaxConstraints) {
           return absl::ResourceExhaustedError(
               absl::StrCat("at most ", kMaxConstraints, " constraints per request"));
@@ -389,7 +390,7 @@ absl::Status SmoothInto(const ServedBasis& basis, const Eigen::VectorXd& X0,
                         bool scale_free, bool return_field, int field_encoding, bool singularities,
                         const ServiceOptions& service, const std::atomic<bool>* cancel,
                         Clock::time_point start, v1::SmoothResponse* response) {
-  RETURN_IF_ERROR(ValidateWeights(weights));
+  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(weights));
   ASSIGN_OR_RETURN(FieldEncoding encoding, EncodingFromProto(field_encoding));
   if (return_field) {
     const int64_t bytes =
@@ -461,34 +462,13 @@ grpc::ServerUnaryReactor* FieldService::Align(grpc::CallbackServerContext* conte
         const auto start = Clock::now();
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
                          registry_->GetBasis(request->basis_id()));
-        const FieldType& type = basis->basis->type;
-        if (type.kind != FieldKind::kNField || (type.n != 2 && type.n != 4)) {
-          return absl::InvalidArgumentError(absl::StrCat(
-              "Align needs an n-field basis with n = 2 (maximum principal direction) or n = 4 "
-              "(principal cross), not ",
-              type.ToString()));
-        }
-        ShapeOperatorOptions curvature;
-        curvature.estimator = request->estimator() == v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES
-                                  ? CurvatureEstimator::kNormalDifferences
-                                  : CurvatureEstimator::kJetFit;
-        ASSIGN_OR_RETURN(Eigen::VectorXd shape, ComputeShapeOperator(*basis->mesh, curvature));
-        ASSIGN_OR_RETURN(CurvatureAlignedTargets targets,
-                         ComputeCurvatureAlignedTargets(*basis->mesh, shape, type.n));
-        // Anisotropy |k1 - k2| is 1/length: divided by its area-weighted mean it is
-        // dimensionless, like the scale-free weights.
-        const Eigen::VectorXd& area = basis->mesh->face_areas();
-        const double mean = targets.weights.dot(area) / area.sum();
-        if (!(mean > 0)) {
-          return absl::FailedPreconditionError(
-              "the surface has no curvature anisotropy anywhere (umbilic, e.g. a sphere): there "
-              "is no direction to align to");
-        }
-        const Eigen::VectorXd w = targets.weights / mean;
+        ASSIGN_OR_RETURN(CurvatureEstimator estimator, EstimatorFromProto(request->estimator()));
+        ASSIGN_OR_RETURN(AlignmentTarget target, CurvatureAlignmentTarget(*basis, estimator));
         return SmoothInto(
-            *basis, targets.dofs, WeightsFromProto(request->weights(), kDefaultSmoothingWeights),
-            absl::MakeConstSpan(w.data(), w.size()), /*scale_free=*/true, request->return_field(),
-            request->field_encoding(), request->singularities(), options_, cancel, start, response);
+            *basis, target.dofs, WeightsFromProto(request->weights(), kDefaultSmoothingWeights),
+            absl::MakeConstSpan(target.face_weights.data(), target.face_weights.size()),
+            /*scale_free=*/true, request->return_field(), request->field_encoding(),
+            request->singularities(), options_, cancel, start, response);
       });
 }
 

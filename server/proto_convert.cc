@@ -157,10 +157,22 @@ absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& 
   return build;
 }
 
+absl::StatusOr<CurvatureEstimator> EstimatorFromProto(int estimator) {
+  switch (estimator) {
+    case v1::CURVATURE_ESTIMATOR_JET:
+      return CurvatureEstimator::kJetFit;
+    case v1::CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES:
+      return CurvatureEstimator::kNormalDifferences;
+    default:
+      return absl::InvalidArgumentError(absl::StrCat("unknown curvature estimator ", estimator));
+  }
+}
+
 EnergyWeights WeightsFromProto(const v1::Weights& w, const EnergyWeights& defaults) {
   return {.mu_s = w.has_mu_s() ? w.mu_s() : defaults.mu_s,
           .mu_b = w.has_mu_b() ? w.mu_b() : defaults.mu_b,
-          .mu_c = w.has_mu_c() ? w.mu_c() : defaults.mu_c};
+          .mu_c = w.has_mu_c() ? w.mu_c() : defaults.mu_c,
+          .mu_a = w.has_mu_a() ? w.mu_a() : defaults.mu_a};
 }
 
 absl::Status SingularitiesToProto(const ServedBasis& basis, const Eigen::VectorXd& dofs,

@@ -13,6 +13,7 @@
 #include "absl/strings/string_view.h"
 #include "absl/types/span.h"
 #include "core/operators/conversions.h"
+#include "core/operators/curvature.h"
 #include "core/operators/field_type.h"
 #include "core/operators/reference_solvers.h"
 #include "fieldspace/v1/fieldspace.pb.h"
@@ -26,6 +27,8 @@ absl::StatusOr<FieldType> FieldTypeFromProto(const v1::FieldType& p);
 void FieldTypeToProto(const FieldType& t, v1::FieldType* p);
 
 absl::StatusOr<FieldEncoding> EncodingFromProto(int encoding);
+// InvalidArgument for a value the enum does not have.
+absl::StatusOr<CurvatureEstimator> EstimatorFromProto(int estimator);
 v1::FieldEncoding EncodingToProto(FieldEncoding e);
 
 v1::BuildPhase PhaseToProto(BuildStage stage);

@@ -4,6 +4,7 @@
 #include <iterator>
 #include <utility>
 
+#include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
 #include "core/common/status_macros.h"
 
@@ -104,6 +105,34 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
   served->system = std::move(system);
   served->energy_cache = std::make_shared<EnergyFactorCache>();
   return std::shared_ptr<const ServedBasis>(std::move(served));
+}
+
+absl::StatusOr<AlignmentTarget> CurvatureAlignmentTarget(const ServedBasis& basis,
+                                                         CurvatureEstimator estimator) {
+  const FieldType& type = basis.basis->type;
+  if (type.kind != FieldKind::kNField || (type.n != 2 && type.n != 4)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "curvature alignment needs an n-field basis with n = 2 (maximum principal direction) or "
+        "n = 4 (principal cross), not ",
+        type.ToString()));
+  }
+  ShapeOperatorOptions curvature;
+  curvature.estimator = estimator;
+  ASSIGN_OR_RETURN(Eigen::VectorXd shape, ComputeShapeOperator(*basis.mesh, curvature));
+  ASSIGN_OR_RETURN(CurvatureAlignedTargets targets,
+                   ComputeCurvatureAlignedTargets(*basis.mesh, shape, type.n));
+  // Anisotropy |k1 - k2| is 1/length: divided by its area-weighted mean it is dimensionless.
+  const Eigen::VectorXd& area = basis.mesh->face_areas();
+  const double mean = targets.weights.dot(area) / area.sum();
+  if (!(mean > 0)) {
+    return absl::FailedPreconditionError(
+        "the surface has no curvature anisotropy anywhere (umbilic, e.g. a sphere): there is no "
+        "direction to align to");
+  }
+  AlignmentTarget out;
+  out.face_weights = targets.weights / mean;
+  out.dofs = std::move(targets.dofs);
+  return out;
 }
 
 }  // namespace fieldspace::server

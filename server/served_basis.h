@@ -14,6 +14,7 @@
 #include "absl/status/statusor.h"
 #include "core/basis/basis.h"
 #include "core/mesh/triangle_mesh.h"
+#include "core/operators/curvature.h"
 #include "core/operators/field_operator.h"
 #include "core/subspace/design_session.h"
 #include "core/subspace/reduced_system.h"
@@ -71,6 +72,18 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
 absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
     std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context);
+
+// The curvature-aligned target of an n-field basis with n = 2 (maximum principal direction) or
+// n = 4 (principal cross): unit representation vectors per face (`dofs`) and their weights, the
+// anisotropy |k1 - k2| divided by its area-weighted mean (dimensionless, like the scale-free
+// weights). Used by Align and by Design's data term. InvalidArgument for other bases;
+// FailedPrecondition where the surface has no anisotropy anywhere.
+struct AlignmentTarget {
+  Eigen::VectorXd dofs;
+  Eigen::VectorXd face_weights;
+};
+absl::StatusOr<AlignmentTarget> CurvatureAlignmentTarget(const ServedBasis& basis,
+                                                         CurvatureEstimator estimator);
 
 }  // namespace fieldspace::server
 

@@ -550,5 +550,144 @@ TEST_F(ApplicationsTest, SingularitiesErrorsHaveExactCodes) {
   EXPECT_THAT(client_->Singularities(request).status(), StatusIs(absl::StatusCode::kNotFound));
 }
 
+// Scale-free weights (the wire's default): one soft constraint at the default weights pulls the
+// field at its face at least half way to its value, on every test mesh and field kind (with the
+// kernel columns of the torus and the genus-2 surface), and mu_c = 9 at least 90% of the way.
+TEST_F(ApplicationsTest, OneSoftConstraintPullsHalfWayOnEveryTestMesh) {
+  struct Case {
+    const char* name;
+    absl::StatusOr<MeshArrays> mesh;
+    v1::FieldKind kind;
+    int n;
+  };
+  const Case cases[] = {
+      {"sphere", MakeIcosphere(3, 1.0), v1::FIELD_KIND_VECTOR, 1},
+      {"sphere", MakeIcosphere(3, 1.0), v1::FIELD_KIND_NFIELD, 4},
+      {"torus", MakeTorus(1.0, 0.4, 48, 24), v1::FIELD_KIND_VECTOR, 1},
+      {"genus2", MakeGenusSurface(2, 12), v1::FIELD_KIND_NFIELD, 2},
+      {"tube", Tube(32, 20, 4.0), v1::FIELD_KIND_TENSOR, 0},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    ASSERT_TRUE(c.mesh.ok());
+    const std::string basis_id = Build(Upload(c.mesh, c.name), c.kind, c.n, 80);
+    const int p = c.kind == v1::FIELD_KIND_TENSOR ? 3 : 2;
+    const int64_t faces = c.mesh->faces.rows();
+    for (int64_t face : {int64_t{7}, faces / 2, faces - 3}) {
+      std::vector<double> value(p);
+      for (int i = 0; i < p; ++i) value[i] = std::cos(1.3 * i + face);
+      for (double mu_c : {0.0, 1.0, 9.0}) {  // 0: left out (the default 1)
+        v1::SolveRequest request;
+        request.set_basis_id(basis_id);
+        if (mu_c > 0) request.mutable_weights()->set_mu_c(mu_c);
+        request.set_return_field(true);
+        request.set_field_encoding(v1::FIELD_ENCODING_DOF);
+        v1::Constraint* constraint = request.add_constraints();
+        constraint->set_face(static_cast<int32_t>(face));
+        constraint->set_encoding(v1::FIELD_ENCODING_DOF);
+        for (double v : value) constraint->add_value(v);
+        auto response = client_->Solve(request);
+        ASSERT_THAT(response.status(), IsOk());
+        double along = 0, norm2 = 0;
+        for (int i = 0; i < p; ++i) {
+          along += value[i] * response->field().values(p * face + i);
+          norm2 += value[i] * value[i];
+        }
+        const double mu = mu_c > 0 ? mu_c : 1.0;
+        EXPECT_GE(along / norm2, mu / (1 + mu) - 1e-5) << "face " << face << " mu_c " << mu;
+        EXPECT_LE(along / norm2, 1.0 + 1e-5);
+      }
+    }
+  }
+}
+
+// A Design session opened with a curvature data term starts at Align's field, constraints pull on
+// top of it (at least half way from the aligned field at the default weights), a new mu_a
+// refactorizes, and removing the constraint returns to Align's field for that weight.
+TEST_F(ApplicationsTest, DesignAlignedToCurvatureThenConstrained) {
+  // A torus: its maximum principal direction (around the tube) is not parallel, so smoothing
+  // weights change the aligned field (on a cylinder the circles are parallel and every weight
+  // gives the target itself).
+  absl::StatusOr<MeshArrays> torus = MakeTorus(1.0, 0.4, 48, 24);
+  ASSERT_TRUE(torus.ok());
+  const std::string basis_id = Build(Upload(torus, "torus_design"), v1::FIELD_KIND_NFIELD, 2, 100);
+  const auto align = [&](double mu_c) {
+    v1::AlignRequest request;
+    request.set_basis_id(basis_id);
+    request.mutable_weights()->set_mu_c(mu_c);
+    auto response = client_->Align(request);
+    EXPECT_THAT(response.status(), IsOk());
+    return response.ok() ? Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(
+                               response->coefficients().data(), response->coefficients_size()))
+                         : Eigen::VectorXd();
+  };
+  const auto coefficients = [](const v1::DesignUpdate& u) {
+    return Eigen::VectorXd(
+        Eigen::Map<const Eigen::VectorXd>(u.coefficients().data(), u.coefficients_size()));
+  };
+  const int32_t face = 1000;
+  std::unique_ptr<client::DesignStream> stream = client_->Design();
+  v1::OpenDesign open;
+  open.set_basis_id(basis_id);
+  open.mutable_data()->mutable_curvature();
+  open.add_watch_faces(face);
+  open.set_watch_encoding(v1::FIELD_ENCODING_DOF);
+  auto opened = stream->Open(open);
+  ASSERT_THAT(opened.status(), IsOk());
+  EXPECT_TRUE(opened->timings().refactorized());
+  const Eigen::VectorXd aligned = align(1.0);
+  EXPECT_LT((coefficients(*opened) - aligned).norm(), 1e-8 * aligned.norm());
+  const Eigen::Vector2d before(opened->watched().values(0), opened->watched().values(1));
+
+  v1::DesignRequest add;
+  add.set_seq(1);
+  add.mutable_add()->set_id(1);
+  v1::Constraint* c = add.mutable_add()->mutable_constraint();
+  c->set_face(face);
+  c->set_encoding(v1::FIELD_ENCODING_DOF);
+  const Eigen::Vector2d target = before + Eigen::Vector2d(-before.y(), before.x()) + 0.5 * before;
+  c->add_value(target.x());
+  c->add_value(target.y());
+  auto added = stream->Edit(add);
+  ASSERT_THAT(added.status(), IsOk());
+  EXPECT_FALSE(added->timings().refactorized());
+  const Eigen::Vector2d after(added->watched().values(0), added->watched().values(1));
+  const Eigen::Vector2d wanted = target - before;
+  EXPECT_GE((after - before).dot(wanted) / wanted.squaredNorm(), 0.5 - 1e-5);
+
+  v1::DesignRequest weights;
+  weights.set_seq(2);
+  weights.mutable_set_weights()->set_mu_a(0.25);
+  auto reweighted = stream->Edit(weights);
+  ASSERT_THAT(reweighted.status(), IsOk());
+  EXPECT_TRUE(reweighted->timings().refactorized());
+  v1::DesignRequest remove;
+  remove.set_seq(3);
+  remove.mutable_remove()->set_id(1);
+  auto removed = stream->Edit(remove);
+  ASSERT_THAT(removed.status(), IsOk());
+  const Eigen::VectorXd aligned_quarter = align(0.25);
+  EXPECT_LT((coefficients(*removed) - aligned_quarter).norm(), 1e-8 * aligned_quarter.norm());
+  EXPECT_GT((aligned_quarter - aligned).norm(), 1e-3 * aligned.norm());
+  EXPECT_THAT(stream->Close(), IsOk());
+
+  // mu_a anywhere without a data term, and a curvature target on a vector basis, are refused.
+  v1::SolveRequest solve;
+  solve.set_basis_id(basis_id);
+  solve.mutable_weights()->set_mu_a(1.0);
+  EXPECT_THAT(client_->Solve(solve).status(),
+              StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("mu_a")));
+  std::unique_ptr<client::DesignStream> plain = client_->Design();
+  v1::OpenDesign no_data;
+  no_data.set_basis_id(basis_id);
+  no_data.mutable_weights()->set_mu_a(1.0);
+  EXPECT_THAT(plain->Open(no_data).status(), StatusIs(absl::StatusCode::kInvalidArgument));
+  const std::string vector_id = Build(Upload(torus, "torus_design"), v1::FIELD_KIND_VECTOR, 0, 40);
+  std::unique_ptr<client::DesignStream> wrong = client_->Design();
+  open.set_basis_id(vector_id);
+  EXPECT_THAT(wrong->Open(open).status(),
+              StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("n-field")));
+}
+
 }  // namespace
 }  // namespace fieldspace::server

@@ -81,8 +81,12 @@ def main():
         for expected in ('"euler_characteristic":2', '"index_sum":2', '"k_min":',
                          '"factorize_ms":'):
             check(expected in cli_out, "CLI block output lacks %s:\n%s" % (expected, cli_out[-3000:]))
-        check(len([l for l in cli_out.splitlines() if l.startswith('{"seq":')]) == 6,
-              "design printed open + 5 updates")
+        design_lines = [l for l in cli_out.splitlines() if l.startswith('{"seq":')]
+        check(len(design_lines) == 6 + 3,
+              "the two design runs printed open + 5 and open + 2 updates")
+        # The session aligned to curvature: its weights edit (mu_a) refactorizes.
+        check('"edit":"weights"' in design_lines[-1] and '"refactorized":true' in design_lines[-1],
+              "a new mu_a refactorizes: %s" % design_lines[-1])
         for expected in ("fieldspace.v1.FieldSpace", "grpc.health.v1.Health", '"SERVING"',
                          '"numFaces": 1280', "BUILD_PHASE_DONE", '"relativeError"',
                          '"seq": "3"'):

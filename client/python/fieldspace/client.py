@@ -24,6 +24,7 @@ _ESTIMATORS = {"jet": pb.CURVATURE_ESTIMATOR_JET,
                "normal-differences": pb.CURVATURE_ESTIMATOR_NORMAL_DIFFERENCES}
 _SOLVE_WEIGHTS = Weights(1.0, 0.0, 1.0)   # solve and design, as the CLI
 _SMOOTH_WEIGHTS = Weights(0.001, 0.0, 1.0)  # smooth and align, as the CLI
+_DATA_TERM_WEIGHTS = Weights(0.001, 0.0, 1.0, 1.0)  # design with a data term, as the server
 
 
 # The metadata key of the routing key (see Client._metadata_for).
@@ -405,7 +406,7 @@ class Client:
 
     def solve(self, basis, faces=(), values=None, *, weights=None, constraint_weights=None,
               hard=False, encoding=None, return_field=False, field_encoding=fld.AMBIENT,
-              singularities=False, timeout=_DEFAULT):
+              singularities=False, raw_weights=False, timeout=_DEFAULT):
         """The reduced model problem with constraints given as arrays.
 
         Args:
@@ -417,6 +418,9 @@ class Client:
             hard: a bool, or (k,) bools: interpolate exactly instead of penalizing.
             return_field: also return the lifted field (all faces) in ``field_encoding``.
             singularities: also return the solution's singularities (vector and n-fields).
+            raw_weights: the paper's raw weights instead of the scale-free ones (by default a
+                soft constraint alone pulls its face >= mu_c w / (1 + mu_c w) of the way, and
+                mu_b is relative to the total area; docs/conventions.md).
         Returns:
             Solution(coefficients, field, timings, singularities=...).
         """
@@ -425,6 +429,7 @@ class Client:
         request = pb.SolveRequest(basis_id=_id(basis),
                                   weights=Weights.of(weights, _SOLVE_WEIGHTS).proto(),
                                   return_field=return_field, singularities=singularities,
+                                  raw_weights=raw_weights,
                                   field_encoding=fld.encoding_proto(field_encoding, what))
         request.constraints.extend(self._constraints(what, field_type, faces, values,
                                                      constraint_weights, hard, encoding))
@@ -602,11 +607,40 @@ class Client:
 
     # -- design sessions -----------------------------------------------------------------------
 
-    def design(self, basis, weights=None, watch=None, watch_encoding=fld.AMBIENT, timeout=None):
+    def design(self, basis, weights=None, watch=None, watch_encoding=fld.AMBIENT, timeout=None,
+               *, raw_weights=False, align_curvature=False, estimator="jet", data=None,
+               data_face_weights=None):
         """Opens an interactive design session (a Design stream) and returns it; use it as a
         context manager. ``weights`` default (1, 0, 1); ``watch``: faces whose lifted values
-        every update carries. ``timeout``: deadline of the whole session (default none)."""
+        every update carries. ``timeout``: deadline of the whole session (default none).
+        ``raw_weights``: as in solve.
+
+        A data term mu_a (X - X0)^T W M (X - X0) in the session's energy (paper Fig. 16: aligned
+        to curvature, then constraints on top): ``align_curvature=True`` (an n-field basis with
+        n = 2 or 4; X0, W the curvature-aligned target and its anisotropy, ``estimator`` as in
+        curvature) or ``data`` (a field on all faces, as smooth takes it) with optional
+        ``data_face_weights`` (#F). Weights then default to (0.001, 0, 1, 1) (mu_a last);
+        changing mu_a refactorizes like mu_s and mu_b."""
         from .design import DesignSession
-        return DesignSession(self, basis, Weights.of(weights, _SOLVE_WEIGHTS), watch,
-                             watch_encoding, timeout)
+        what = "Design"
+        if align_curvature and data is not None:
+            raise InvalidArgument(what, "one data term: align_curvature or data")
+        if data_face_weights is not None and data is None:
+            raise InvalidArgument(what, "data_face_weights weigh the data field")
+        data_term = None
+        if align_curvature:
+            if estimator not in _ESTIMATORS:
+                raise InvalidArgument(what, "estimator must be 'jet' or 'normal-differences', "
+                                      "not %r" % (estimator,))
+            data_term = pb.DataTerm(
+                curvature=pb.CurvatureTarget(estimator=_ESTIMATORS[estimator]))
+        elif data is not None:
+            data_term = pb.DataTerm(field=self._field_values(what, basis, data, None))
+            if data_face_weights is not None:
+                data_term.face_weights.extend(
+                    np.asarray(data_face_weights, dtype=np.float64).ravel().tolist())
+        default = _DATA_TERM_WEIGHTS if data_term is not None else _SOLVE_WEIGHTS
+        return DesignSession(self, basis, Weights.of(weights, default), watch,
+                             watch_encoding, timeout, raw_weights=raw_weights,
+                             data_term=data_term)
 

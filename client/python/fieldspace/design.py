@@ -58,7 +58,8 @@ class DesignSession:
     ``resumes`` counts how often that happened.
     """
 
-    def __init__(self, client, basis, weights, watch, watch_encoding, timeout):
+    def __init__(self, client, basis, weights, watch, watch_encoding, timeout, *,
+                 raw_weights=False, data_term=None):
         self._client = client
         self.basis_id = basis if isinstance(basis, str) else basis.id
         self.field_type, self.mesh_id = client._basis(self.basis_id)
@@ -66,8 +67,13 @@ class DesignSession:
         self._watch = np.zeros(0, dtype=np.int64) if watch is None else \
             np.asarray(watch, dtype=np.int64).ravel()
         self._watch_encoding = watch_encoding
-        open_message = pb.OpenDesign(basis_id=self.basis_id, weights=weights.proto(),
-                                     watch_encoding=fld.encoding_proto(watch_encoding, "Design"))
+        self._data_term = data_term is not None
+        open_message = pb.OpenDesign(basis_id=self.basis_id,
+                                     weights=weights.proto(self._data_term),
+                                     watch_encoding=fld.encoding_proto(watch_encoding, "Design"),
+                                     raw_weights=raw_weights)
+        if data_term is not None:
+            open_message.data.CopyFrom(data_term)
         open_message.watch_faces.extend(self._watch.tolist())
         self._timeout = timeout
         self._seq = 0
@@ -122,10 +128,11 @@ class DesignSession:
         return update
 
     def set_weights(self, weights=None, **kwargs):
-        """New weights: a Weights / tuple / dict, or keywords (mu_s=, mu_b=, mu_c=) changing only
-        those. Changing mu_s or mu_b refactorizes."""
+        """New weights: a Weights / tuple / dict, or keywords (mu_s=, mu_b=, mu_c=, mu_a=)
+        changing only those. Changing mu_s, mu_b or (with a data term) mu_a refactorizes."""
         new = Weights.of(weights, self.weights)._replace(**kwargs)
-        update = self._send("weights", pb.DesignRequest(set_weights=new.proto()), None)
+        update = self._send("weights",
+                            pb.DesignRequest(set_weights=new.proto(self._data_term)), None)
         self.weights = new
         return update
 
@@ -197,7 +204,7 @@ class DesignSession:
         elif kind == "weights":
             # Weights an edit leaves out keep the session's values (where the proto tracks their
             # presence; otherwise every value is sent).
-            for name in ("mu_s", "mu_b", "mu_c"):
+            for name in ("mu_s", "mu_b", "mu_c", "mu_a"):
                 try:
                     present = request.set_weights.HasField(name)
                 except ValueError:

@@ -28,23 +28,31 @@ def phase_name(phase):
 
 
 class Weights(NamedTuple):
-    """Weights of the model problem: mu_s X^T S X + mu_b X^T B X + mu_c |C X - c|^2."""
+    """Weights of the model problem: mu_s X^T S X + mu_b X^T B X + mu_c |C X - c|^2, plus
+    mu_a (X - X0)^T W M (X - X0) in a design session opened with a data term."""
 
     mu_s: float = 1.0
     mu_b: float = 0.0
     mu_c: float = 1.0
+    mu_a: float = 0.0
 
     @classmethod
     def of(cls, weights, default):
-        """Weights from None (the default), a Weights, a (mu_s, mu_b, mu_c) tuple or a dict."""
+        """Weights from None (the default), a Weights, a (mu_s, mu_b, mu_c[, mu_a]) tuple or a
+        dict."""
         if weights is None:
             return default
         if isinstance(weights, dict):
             return default._replace(**weights)
         return cls(*weights)
 
-    def proto(self):
-        return pb.Weights(mu_s=float(self.mu_s), mu_b=float(self.mu_b), mu_c=float(self.mu_c))
+    def proto(self, data_term=False):
+        """The wire message; mu_a only for a session with a data term (the server refuses it
+        elsewhere)."""
+        w = pb.Weights(mu_s=float(self.mu_s), mu_b=float(self.mu_b), mu_c=float(self.mu_c))
+        if data_term:
+            w.mu_a = float(self.mu_a)
+        return w
 
 
 @dataclass(frozen=True)
