@@ -309,6 +309,39 @@ class SolveAndDesignTest(unittest.TestCase):
         target = np.array([0, 0, 1.0]) - n600[2] * n600
         np.testing.assert_allclose(solved.field[600], target, atol=1e-5)
 
+    def test_scale_free_and_raw_weights(self):
+        # One soft constraint at the default (scale-free) weights pulls its face at least half
+        # way; raw weights (the paper's) pull less on this basis, and mu_b is area-relative.
+        value = np.array([[0.0, 0.0, 1.0]])
+        n = normals_of(SV, SF)[77]
+        target = value[0] - n.dot(value[0]) * n
+        pulls = {}
+        for raw in (False, True):
+            r = CLIENT.solve(VECTOR, [77], value, raw_weights=raw, return_field=True)
+            pulls[raw] = float(r.field[77].dot(target) / target.dot(target))
+        self.assertGreaterEqual(pulls[False], 0.5 - 1e-5)
+        self.assertLess(pulls[True], pulls[False])
+        with self.assertRaises(fs.InvalidArgument):  # mu_a: only with a data term
+            CLIENT.solve(VECTOR, [77], value, weights=fs.Weights(1, 0, 1, 1))
+
+    def test_design_with_a_curvature_data_term(self):
+        V, F = obj_arrays(torus_obj(48, 16)[0])
+        torus = CLIENT.upload(V, F, name="torus")
+        lines = CLIENT.build(torus.id, "nfield", 60, n=2, progress=False)
+        aligned = CLIENT.align(lines)
+        with CLIENT.design(lines, align_curvature=True, watch=[100]) as s:
+            self.assertEqual(s.weights, fs.Weights(0.001, 0.0, 1.0, 1.0))
+            np.testing.assert_allclose(s.coefficients, aligned.coefficients, rtol=0,
+                                       atol=1e-8 * np.linalg.norm(aligned.coefficients))
+            s.add(100, [0.0, 0.0, 1.0])
+            self.assertFalse(s.last.refactorized)
+            w = s.set_weights(mu_a=0.25)
+            self.assertTrue(w.refactorized)
+            self.assertEqual(s.weights.mu_a, 0.25)
+        with self.assertRaises(fs.InvalidArgument):  # a curvature target needs n = 2 or 4
+            with CLIENT.design(VECTOR, align_curvature=True):
+                pass
+
     def test_dof_constraints_equal_ambient_ones(self):
         ambient = CLIENT.solve(VECTOR, [5], [[1.0, 0.0, 0.0]])
         dofs = CLIENT.lift(VECTOR, ambient.coefficients, faces=[5], encoding="dof")

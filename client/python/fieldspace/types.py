@@ -47,10 +47,10 @@ class Weights(NamedTuple):
         return cls(*weights)
 
     def proto(self, data_term=False):
-        """The wire message; mu_a only for a session with a data term (the server refuses it
-        elsewhere)."""
+        """The wire message; mu_a for a session with a data term, and wherever it is not 0 (the
+        server refuses it where there is no data term, rather than ignoring it)."""
         w = pb.Weights(mu_s=float(self.mu_s), mu_b=float(self.mu_b), mu_c=float(self.mu_c))
-        if data_term:
+        if data_term or self.mu_a != 0:
             w.mu_a = float(self.mu_a)
         return w
 
