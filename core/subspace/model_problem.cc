@@ -10,6 +10,7 @@
 #include "core/common/status_macros.h"
 #include "core/subspace/kkt_solver.h"
 #include "oneapi/tbb/blocked_range.h"
+#include "oneapi/tbb/enumerable_thread_specific.h"
 #include "oneapi/tbb/parallel_for.h"
 
 namespace fieldspace {
@@ -78,17 +79,19 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   const bool any_soft = std::any_of(problem.constraints.begin(), problem.constraints.end(),
                                     [](const FieldConstraint& c) { return !c.hard(); });
   if (any_soft && w.mu_c > 0) {
+    const size_t n = problem.constraints.size();
     // Scale-free: each soft weight divided by its face's stiffness under the energy alone.
-    std::vector<double> stiffness(problem.constraints.size(), 1.0);
+    std::vector<double> stiffness(n, 1.0);
     if (problem.scale_free) {
       double tau0 = 0;
       ASSIGN_OR_RETURN(SupernodalFactor energy,
                        FactorizeRegularized(system.pattern_symbolic(),
                                             ShiftKernelColumns(system, A), options, &tau0));
       if (IsCancelled(options.cancel)) return cancelled_error;
-      std::vector<absl::Status> errors(problem.constraints.size());
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, problem.constraints.size(), 16),
+      std::vector<absl::Status> errors(n);
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64),
                         [&](const tbb::blocked_range<size_t>& range) {
+                          if (IsCancelled(options.cancel)) return;
                           for (size_t i = range.begin(); i != range.end(); ++i) {
                             const FieldConstraint& c = problem.constraints[i];
                             if (c.hard()) continue;
@@ -101,35 +104,68 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
                             }
                           }
                         });
-      for (size_t i = 0; i < errors.size(); ++i) {
+      if (IsCancelled(options.cancel)) return cancelled_error;
+      for (size_t i = 0; i < n; ++i) {
         if (!errors[i].ok()) {
-          return absl::Status(errors[i].code(),
-                              absl::StrCat("constraint on face ", problem.constraints[i].face, ": ",
-                                           errors[i].message()));
+          return absl::Status(errors[i].code(), absl::StrCat("constraint on face ",
+                                                             problem.constraints[i].face, ": ",
+                                                             errors[i].message()));
         }
       }
     }
-    std::vector<Eigen::Triplet<double>> triplets;
-    for (size_t i = 0; i < problem.constraints.size(); ++i) {
-      const FieldConstraint& c = problem.constraints[i];
-      if (c.hard()) continue;
-      const double mu = w.mu_c * c.weight / stiffness[i];
-      const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
-      for (size_t comp = 0; comp < rows.size(); ++comp) {
-        const SparseRow& row = rows[comp];
-        for (size_t q = 0; q < row.cols.size(); ++q) {
-          b[row.cols[q]] += mu * row.vals[q] * c.value[comp];
-          for (size_t s = 0; s < row.cols.size(); ++s) {
-            triplets.emplace_back(row.cols[s], row.cols[q], mu * row.vals[s] * row.vals[q]);
+    // The soft terms mu U_f^T U_f go straight into A's values: every pair of columns nonzero at a
+    // common face is an entry of U^T M U, so of the shared pattern. Per thread one value array and
+    // one right-hand side (O(nnz(A) + d) memory, whatever the number of constraints), summed at
+    // the end; cancellation is checked per block of constraints.
+    struct Partial {
+      std::vector<double> values;
+      Eigen::VectorXd b;
+      bool outside = false;  // an entry outside the pattern (cannot happen; checked anyway)
+    };
+    const int64_t nnz = A.nonZeros();
+    tbb::enumerable_thread_specific<Partial> partials([&] {
+      return Partial{std::vector<double>(nnz, 0.0), Eigen::VectorXd::Zero(d), false};
+    });
+    const int32_t* outer = A.outerIndexPtr();
+    const int32_t* inner = A.innerIndexPtr();
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& range) {
+          if (IsCancelled(options.cancel)) return;
+          Partial& part = partials.local();
+          for (size_t i = range.begin(); i != range.end(); ++i) {
+            const FieldConstraint& c = problem.constraints[i];
+            if (c.hard()) continue;
+            const double mu = w.mu_c * c.weight / stiffness[i];
+            const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
+            for (size_t comp = 0; comp < rows.size(); ++comp) {
+              const SparseRow& row = rows[comp];
+              for (size_t q = 0; q < row.cols.size(); ++q) {
+                const int32_t col = row.cols[q];
+                part.b[col] += mu * row.vals[q] * c.value[comp];
+                const int32_t* begin = inner + outer[col];
+                const int32_t* end = inner + outer[col + 1];
+                for (size_t t = 0; t < row.cols.size(); ++t) {
+                  const int32_t* at = std::lower_bound(begin, end, row.cols[t]);
+                  if (at == end || *at != row.cols[t]) {
+                    part.outside = true;
+                    continue;
+                  }
+                  part.values[at - inner] += mu * row.vals[t] * row.vals[q];
+                }
+              }
+            }
           }
-        }
+        });
+    if (IsCancelled(options.cancel)) return cancelled_error;
+    double* a = A.valuePtr();
+    for (const Partial& part : partials) {
+      if (part.outside) {
+        return absl::InternalError(
+            "a soft constraint's entries fall outside the reduced system's pattern");
       }
+      for (int64_t q = 0; q < nnz; ++q) a[q] += part.values[q];
+      b += part.b;
     }
-    Eigen::SparseMatrix<double> C(d, d);
-    C.setFromTriplets(triplets.begin(), triplets.end());
-    Eigen::SparseMatrix<double> sum = A + C;
-    sum.makeCompressed();
-    A = std::move(sum);
   }
   std::shared_ptr<const SupernodalSymbolic> symbolic = system.pattern_symbolic();
   if (!symbolic->SamePattern(A)) {
