@@ -6,6 +6,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 #include <string>
 #include <thread>
 #include <utility>
@@ -25,6 +26,7 @@
 #include "server/compute_pool.h"
 #include "server/field_service.h"
 #include "server/registry.h"
+#include "server/status_util.h"
 #include "server/store.h"
 
 namespace fieldspace::server {
@@ -113,6 +115,16 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
 
   // The lock comes first: Store::Open removes temporary files, which would be another daemon's
   // saves in progress.
+  // Clients see "<store>" where messages would name the store directory.
+  RedactPathOnTheWire(options.store_dir, "<store>");
+  {
+    std::error_code ec;
+    const std::filesystem::path absolute = std::filesystem::absolute(options.store_dir, ec);
+    if (!ec) RedactPathOnTheWire(absolute.lexically_normal().string(), "<store>");
+    const std::filesystem::path canonical =
+        std::filesystem::weakly_canonical(options.store_dir, ec);
+    if (!ec) RedactPathOnTheWire(canonical.string(), "<store>");
+  }
   ASSIGN_OR_RETURN(StoreLock lock, StoreLock::Acquire(options.store_dir, options.store_lock));
   s->store_lock_.emplace(std::move(lock));
   StoreOptions store_options;

@@ -1,8 +1,45 @@
 #include "server/status_util.h"
 
+#include <algorithm>
+#include <mutex>
 #include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_replace.h"
 
 namespace fieldspace::server {
+
+namespace {
+
+std::mutex redaction_mu;
+std::vector<std::pair<std::string, std::string>>& Redactions() {
+  static auto* redactions = new std::vector<std::pair<std::string, std::string>>();
+  return *redactions;
+}
+
+std::string Redacted(std::string message) {
+  std::lock_guard<std::mutex> lock(redaction_mu);
+  // Longest first, so that a path inside another registered one is not half replaced.
+  for (const auto& [path, shown] : Redactions()) {
+    if (message.find(path) != std::string::npos) {
+      message = absl::StrReplaceAll(message, {{path, shown}});
+    }
+  }
+  return message;
+}
+
+}  // namespace
+
+void RedactPathOnTheWire(const std::string& path, const std::string& shown) {
+  if (path.empty()) return;
+  std::lock_guard<std::mutex> lock(redaction_mu);
+  auto& r = Redactions();
+  if (std::find(r.begin(), r.end(), std::make_pair(path, shown)) != r.end()) return;
+  r.emplace_back(path, shown);
+  std::stable_sort(r.begin(), r.end(),
+                   [](const auto& a, const auto& b) { return a.first.size() > b.first.size(); });
+}
 
 grpc::Status ToGrpcStatus(const absl::Status& status) {
   if (status.ok()) return grpc::Status::OK;
@@ -14,7 +51,7 @@ grpc::Status ToGrpcStatus(const absl::Status& status) {
     message = "internal error (unclassified): " + message;
   }
   if (message.empty()) message = absl::StatusCodeToString(status.code());
-  return grpc::Status(code, message);
+  return grpc::Status(code, Redacted(std::move(message)));
 }
 
 absl::Status FromGrpcStatus(const grpc::Status& status) {

@@ -73,9 +73,13 @@ absl::StatusOr<LocalEigenResult> SolveLanczos(LocalOperator& op, int32_t m, doub
   lanczos.context = "local eigenproblem";
   absl::StatusOr<LanczosResult> run = ShiftInvertEigenpairs(n, inverse, -op.shift(), lanczos);
   if (absl::IsResourceExhausted(run.status())) {
-    // This is the fallback: when it does not converge either, nothing did.
-    return absl::InternalError(absl::StrCat(
-        "local eigenproblem: Spectra's Lanczos did not converge: ", run.status().message()));
+    // This is the fallback: when it does not converge either, nothing did. Not a server fault:
+    // the parameters ask for more than this region's eigenproblem gives (seen: n = 64 at d = 10,
+    // where each region is a large part of the mesh and its spectrum is dense).
+    return absl::FailedPreconditionError(absl::StrCat(
+        "local eigenproblem of a region of ", n,
+        " DOFs did not converge (LOBPCG, then Spectra's Lanczos): ", run.status().message(),
+        "; a larger dimension d (smaller regions) or a smaller n helps"));
   }
   if (!run.ok()) return run.status();
   LocalEigenResult result;

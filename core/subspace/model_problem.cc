@@ -107,9 +107,9 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
       if (IsCancelled(options.cancel)) return cancelled_error;
       for (size_t i = 0; i < n; ++i) {
         if (!errors[i].ok()) {
-          return absl::Status(errors[i].code(), absl::StrCat("constraint on face ",
-                                                             problem.constraints[i].face, ": ",
-                                                             errors[i].message()));
+          return absl::Status(errors[i].code(),
+                              absl::StrCat("constraint on face ", problem.constraints[i].face, ": ",
+                                           errors[i].message()));
         }
       }
     }
@@ -128,34 +128,34 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
     });
     const int32_t* outer = A.outerIndexPtr();
     const int32_t* inner = A.innerIndexPtr();
-    tbb::parallel_for(
-        tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& range) {
-          if (IsCancelled(options.cancel)) return;
-          Partial& part = partials.local();
-          for (size_t i = range.begin(); i != range.end(); ++i) {
-            const FieldConstraint& c = problem.constraints[i];
-            if (c.hard()) continue;
-            const double mu = w.mu_c * c.weight / stiffness[i];
-            const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
-            for (size_t comp = 0; comp < rows.size(); ++comp) {
-              const SparseRow& row = rows[comp];
-              for (size_t q = 0; q < row.cols.size(); ++q) {
-                const int32_t col = row.cols[q];
-                part.b[col] += mu * row.vals[q] * c.value[comp];
-                const int32_t* begin = inner + outer[col];
-                const int32_t* end = inner + outer[col + 1];
-                for (size_t t = 0; t < row.cols.size(); ++t) {
-                  const int32_t* at = std::lower_bound(begin, end, row.cols[t]);
-                  if (at == end || *at != row.cols[t]) {
-                    part.outside = true;
-                    continue;
-                  }
-                  part.values[at - inner] += mu * row.vals[t] * row.vals[q];
-                }
-              }
-            }
-          }
-        });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256),
+                      [&](const tbb::blocked_range<size_t>& range) {
+                        if (IsCancelled(options.cancel)) return;
+                        Partial& part = partials.local();
+                        for (size_t i = range.begin(); i != range.end(); ++i) {
+                          const FieldConstraint& c = problem.constraints[i];
+                          if (c.hard()) continue;
+                          const double mu = w.mu_c * c.weight / stiffness[i];
+                          const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
+                          for (size_t comp = 0; comp < rows.size(); ++comp) {
+                            const SparseRow& row = rows[comp];
+                            for (size_t q = 0; q < row.cols.size(); ++q) {
+                              const int32_t col = row.cols[q];
+                              part.b[col] += mu * row.vals[q] * c.value[comp];
+                              const int32_t* begin = inner + outer[col];
+                              const int32_t* end = inner + outer[col + 1];
+                              for (size_t t = 0; t < row.cols.size(); ++t) {
+                                const int32_t* at = std::lower_bound(begin, end, row.cols[t]);
+                                if (at == end || *at != row.cols[t]) {
+                                  part.outside = true;
+                                  continue;
+                                }
+                                part.values[at - inner] += mu * row.vals[t] * row.vals[q];
+                              }
+                            }
+                          }
+                        }
+                      });
     if (IsCancelled(options.cancel)) return cancelled_error;
     double* a = A.valuePtr();
     for (const Partial& part : partials) {

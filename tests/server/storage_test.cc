@@ -11,6 +11,7 @@
 #include <random>
 #include <thread>
 
+#include "absl/strings/str_cat.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/compute_pool.h"
@@ -338,6 +339,33 @@ TEST(StatusUtilTest, CodesMapOneToOneAndUnknownNeverLeaves) {
   EXPECT_EQ(ToGrpcStatus(absl::UnknownError("?")).error_code(), grpc::StatusCode::INTERNAL);
   EXPECT_THAT(FromGrpcStatus(grpc::Status(grpc::StatusCode::ABORTED, "a")),
               StatusIs(absl::StatusCode::kAborted));
+}
+
+// Clients never see where the server keeps its files: a started server registers its store
+// directory (as given, absolute and canonical) and every status on the wire names it "<store>".
+TEST(StatusUtilTest, StoreDirectoryIsRedactedOnTheWire) {
+  const fs::path dir = fs::temp_directory_path() / absl::StrCat("fs_redact_", ::getpid());
+  fs::remove_all(dir);
+  const std::string file = (dir / "meshes" / "m-0123456789abcdef.fsmesh").string();
+  const grpc::Status before =
+      ToGrpcStatus(absl::DataLossError(file + ": header checksum mismatch"));
+  EXPECT_NE(before.error_message().find(dir.string()), std::string::npos);  // not yet registered
+  FieldServerOptions options;
+  options.store_dir = dir.string();
+  options.listen = "127.0.0.1:0";
+  auto server = FieldServer::Start(options);
+  ASSERT_TRUE(server.ok()) << server.status();
+  const grpc::Status after = ToGrpcStatus(absl::DataLossError(file + ": header checksum mismatch"));
+  EXPECT_EQ(after.error_code(), grpc::StatusCode::DATA_LOSS);
+  EXPECT_EQ(after.error_message(),
+            "<store>/meshes/m-0123456789abcdef.fsmesh: header checksum mismatch");
+  // The same path written another way (relative to the working directory) is redacted too.
+  const fs::path canonical = fs::weakly_canonical(dir);
+  EXPECT_EQ(
+      ToGrpcStatus(absl::NotFoundError("opening " + canonical.string() + "/LOCK")).error_message(),
+      "opening <store>/LOCK");
+  (*server)->Shutdown(std::chrono::seconds(5));
+  fs::remove_all(dir);
 }
 
 TEST(FieldServerTest, LoopbackDetection) {
