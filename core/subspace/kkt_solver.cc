@@ -24,8 +24,7 @@ std::vector<SparseRow> BasisRowsOfFace(const ReducedSystem& system, int32_t face
 }
 
 absl::StatusOr<double> FaceStiffness(const ReducedSystem& system, const SupernodalFactor& factor,
-                                     const std::vector<SparseRow>& rows,
-                                     bool skip_kernel_columns) {
+                                     const std::vector<SparseRow>& rows, bool skip_kernel_columns) {
   const int64_t d = system.dimension();
   const int64_t first_kernel =
       skip_kernel_columns ? d - std::max<int32_t>(0, system.basis().kernel_columns) : d;

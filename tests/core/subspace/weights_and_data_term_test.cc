@@ -286,8 +286,8 @@ TEST(DataTermSessionTest, ScaleFreeDataWeightIsDividedByTheArea) {
   const EnergyWeights w{.mu_s = 0.001, .mu_b = 0.0, .mu_c = 1.0, .mu_a = 1.0};
   auto session = DesignSession::Create(f.system, w, options);
   ASSERT_TRUE(session.ok()) << session.status();
-  const Eigen::VectorXd expected =
-      DenseDataTermSolution(f, X0, Eigen::VectorXd::Ones(f.system->num_faces()), w, 1.0 / f.area, {});
+  const Eigen::VectorXd expected = DenseDataTermSolution(
+      f, X0, Eigen::VectorXd::Ones(f.system->num_faces()), w, 1.0 / f.area, {});
   EXPECT_LT(((*session)->coefficients() - expected).norm(), 1e-8 * expected.norm());
   // And equals the scale-free Smooth of the same field and weights.
   SmoothingOptions smoothing;
