@@ -126,10 +126,8 @@ absl::StatusOr<std::shared_ptr<const ReducedSmoother>> DesignEditor::DataTerm(
       }
       ASSIGN_OR_RETURN(CurvatureEstimator estimator,
                        EstimatorFromProto(data.curvature().estimator()));
-      ASSIGN_OR_RETURN(AlignmentTarget target, CurvatureAlignmentTarget(*basis_, estimator));
-      X0 = std::move(target.dofs);
-      face_weights = std::move(target.face_weights);
-      break;
+      // Shared by the sessions of this basis (and with it their energy factorizations).
+      return CurvatureAlignmentDataTerm(*basis_, estimator);
     }
     case v1::DataTerm::kField: {
       ASSIGN_OR_RETURN(X0, FieldFromProto(data.field(), *basis_));

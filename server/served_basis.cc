@@ -104,6 +104,7 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
   served->basis = std::move(basis);
   served->system = std::move(system);
   served->energy_cache = std::make_shared<EnergyFactorCache>();
+  served->alignment_cache = std::make_shared<AlignmentCache>();
   return std::shared_ptr<const ServedBasis>(std::move(served));
 }
 
@@ -133,6 +134,27 @@ absl::StatusOr<AlignmentTarget> CurvatureAlignmentTarget(const ServedBasis& basi
   out.face_weights = targets.weights / mean;
   out.dofs = std::move(targets.dofs);
   return out;
+}
+
+absl::StatusOr<std::shared_ptr<const ReducedSmoother>> CurvatureAlignmentDataTerm(
+    const ServedBasis& basis, CurvatureEstimator estimator, bool* computed) {
+  if (computed != nullptr) *computed = false;
+  if (basis.alignment_cache == nullptr) {
+    return absl::InternalError("served basis without an alignment cache");
+  }
+  AlignmentCache& cache = *basis.alignment_cache;
+  const int slot = estimator == CurvatureEstimator::kJetFit ? 0 : 1;
+  std::lock_guard<std::mutex> lock(cache.mu);
+  if (std::shared_ptr<const ReducedSmoother> held = cache.by_estimator[slot].lock()) return held;
+  ASSIGN_OR_RETURN(AlignmentTarget target, CurvatureAlignmentTarget(basis, estimator));
+  ASSIGN_OR_RETURN(ReducedSmoother smoother,
+                   ReducedSmoother::Create(basis.system, target.dofs,
+                                           absl::MakeConstSpan(target.face_weights.data(),
+                                                               target.face_weights.size())));
+  auto shared = std::make_shared<const ReducedSmoother>(std::move(smoother));
+  cache.by_estimator[slot] = shared;
+  if (computed != nullptr) *computed = true;
+  return shared;
 }
 
 }  // namespace fieldspace::server

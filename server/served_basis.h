@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
@@ -49,6 +50,9 @@ struct ServedBasis {
   std::shared_ptr<const ReducedSystem> system;      // U^T S U, U^T B U, U^T M U, LiftPlan, ...
   std::shared_ptr<EnergyFactorCache> energy_cache;  // shared by this basis's design sessions
   int64_t memory_bytes = 0;  // basis + system, as core counts them (for the memory budget)
+  // The curvature-aligned data terms of design sessions, per estimator, shared while any session
+  // holds one (so that sessions with the same weights also share their energy factorization).
+  std::shared_ptr<struct AlignmentCache> alignment_cache;
 };
 
 struct BuildContext {
@@ -84,6 +88,17 @@ struct AlignmentTarget {
 };
 absl::StatusOr<AlignmentTarget> CurvatureAlignmentTarget(const ServedBasis& basis,
                                                          CurvatureEstimator estimator);
+
+// The data term (a ReducedSmoother of the basis's system) of CurvatureAlignmentTarget, computed
+// once per estimator while any caller holds it (ServedBasis::alignment_cache); thread-safe.
+// `computed` (optional): whether this call computed it.
+absl::StatusOr<std::shared_ptr<const ReducedSmoother>> CurvatureAlignmentDataTerm(
+    const ServedBasis& basis, CurvatureEstimator estimator, bool* computed = nullptr);
+
+struct AlignmentCache {
+  std::mutex mu;  // held while a data term is computed: concurrent opens wait for one
+  std::weak_ptr<const ReducedSmoother> by_estimator[2];
+};
 
 }  // namespace fieldspace::server
 

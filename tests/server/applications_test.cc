@@ -601,7 +601,8 @@ TEST_F(ApplicationsTest, OneSoftConstraintPullsHalfWayOnEveryTestMesh) {
   }
 }
 
-// A Design session opened with a curvature data term starts at Align's field, constraints pull on
+// A Design session opened with a curvature data term starts at Align's field (a second session
+// opened meanwhile shares its data term and factorization), constraints pull on
 // top of it (at least half way from the aligned field at the default weights), a new mu_a
 // refactorizes, and removing the constraint returns to Align's field for that weight.
 TEST_F(ApplicationsTest, DesignAlignedToCurvatureThenConstrained) {
@@ -638,6 +639,15 @@ TEST_F(ApplicationsTest, DesignAlignedToCurvatureThenConstrained) {
   const Eigen::VectorXd aligned = align(1.0);
   EXPECT_LT((coefficients(*opened) - aligned).norm(), 1e-8 * aligned.norm());
   const Eigen::Vector2d before(opened->watched().values(0), opened->watched().values(1));
+  {
+    // A second designer on the same basis shares the data term and its factorization.
+    std::unique_ptr<client::DesignStream> second = client_->Design();
+    auto reopened = second->Open(open);
+    ASSERT_THAT(reopened.status(), IsOk());
+    EXPECT_FALSE(reopened->timings().refactorized());
+    EXPECT_EQ(coefficients(*reopened), coefficients(*opened));
+    EXPECT_THAT(second->Close(), IsOk());
+  }
 
   v1::DesignRequest add;
   add.set_seq(1);
