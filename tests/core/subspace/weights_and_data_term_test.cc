@@ -63,7 +63,7 @@ struct Fixture {
   }
 };
 
-// One soft constraint alone, with scale-free weights: along the least stiff direction of its
+// One soft constraint alone, with scale-free weights: along the stiffest direction of its
 // face (the eigenvector of the smallest eigenvalue of G = U_f A^-1 U_f^T, computed densely here)
 // it pulls exactly mu / (1 + mu) of the way, and at least that much along any direction.
 TEST(ScaleFreeWeightsTest, OneSoftConstraintPullsItsFaceAtLeastMuOverOnePlusMu) {
