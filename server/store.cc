@@ -317,6 +317,23 @@ bool ValidId(std::string_view id, char prefix) {
   return true;
 }
 
+// The container of `id` at `path` with its record decoded: NotFound for an id that is not one of
+// `prefix`'s, DataLoss for metadata that does not decode or names another id.
+template <typename Record>
+absl::StatusOr<OpenedFile> OpenRecordFile(const std::string& id, char prefix,
+                                          const std::string& path, const char (&magic)[8],
+                                          bool (*decode)(std::string_view, Record*),
+                                          Record* record) {
+  if (!ValidId(id, prefix)) {
+    return absl::NotFoundError(absl::StrCat(prefix == 'm' ? "no mesh " : "no basis ", id));
+  }
+  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, magic));
+  if (!decode(f.meta, record) || record->id != id) {
+    return absl::DataLossError(path + ": corrupt metadata");
+  }
+  return f;
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir,
@@ -413,13 +430,10 @@ absl::Status Store::SaveMesh(const MeshRecord& record, const VertexMatrix& V,
 }
 
 absl::StatusOr<MeshArrays> Store::LoadMesh(const std::string& id) const {
-  if (!ValidId(id, 'm')) return absl::NotFoundError("no mesh " + id);
   const std::string path = MeshPath(id);
-  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kMeshMagic));
   MeshRecord record;
-  if (!DecodeMeshRecord(f.meta, &record) || record.id != id) {
-    return absl::DataLossError(path + ": corrupt metadata");
-  }
+  ASSIGN_OR_RETURN(OpenedFile f,
+                   OpenRecordFile(id, 'm', path, kMeshMagic, DecodeMeshRecord, &record));
   const uint64_t expected = uint64_t{24} * static_cast<uint64_t>(record.num_vertices) +
                             uint64_t{12} * static_cast<uint64_t>(record.num_faces);
   if (f.header.payload_len != expected) {
@@ -451,37 +465,26 @@ absl::Status Store::SaveBasis(const BasisRecord& record,
 }
 
 absl::StatusOr<Store::LoadedBasisFile> Store::LoadBasis(const std::string& id) const {
-  if (!ValidId(id, 'b')) return absl::NotFoundError("no basis " + id);
   const std::string path = BasisPath(id);
-  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kBasisMagic));
   LoadedBasisFile out;
-  if (!DecodeBasisRecord(f.meta, &out.record) || out.record.id != id) {
-    return absl::DataLossError(path + ": corrupt metadata");
-  }
+  ASSIGN_OR_RETURN(OpenedFile f,
+                   OpenRecordFile(id, 'b', path, kBasisMagic, DecodeBasisRecord, &out.record));
   out.payload.resize(f.header.payload_len);
   RETURN_IF_ERROR(ReadPayload(f, {{out.payload.data(), out.payload.size()}}, path));
   return out;
 }
 
 absl::StatusOr<MeshRecord> Store::ReadMeshRecord(const std::string& id) const {
-  if (!ValidId(id, 'm')) return absl::NotFoundError("no mesh " + id);
-  const std::string path = MeshPath(id);
-  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kMeshMagic));
   MeshRecord record;
-  if (!DecodeMeshRecord(f.meta, &record) || record.id != id) {
-    return absl::DataLossError(path + ": corrupt metadata");
-  }
+  RETURN_IF_ERROR(
+      OpenRecordFile(id, 'm', MeshPath(id), kMeshMagic, DecodeMeshRecord, &record).status());
   return record;
 }
 
 absl::StatusOr<BasisRecord> Store::ReadBasisRecord(const std::string& id) const {
-  if (!ValidId(id, 'b')) return absl::NotFoundError("no basis " + id);
-  const std::string path = BasisPath(id);
-  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kBasisMagic));
   BasisRecord record;
-  if (!DecodeBasisRecord(f.meta, &record) || record.id != id) {
-    return absl::DataLossError(path + ": corrupt metadata");
-  }
+  RETURN_IF_ERROR(
+      OpenRecordFile(id, 'b', BasisPath(id), kBasisMagic, DecodeBasisRecord, &record).status());
   return record;
 }
 
