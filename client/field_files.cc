@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 #include <sstream>
+#include <utility>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
@@ -369,21 +370,14 @@ absl::StatusOr<v1::DesignRequest> ParseEdit(absl::string_view line, absl::string
           absl::StrCat(inner_where, ": weights needs at least one of mu_s, mu_b, mu_c, mu_a"));
     }
     v1::Weights* w = request.mutable_set_weights();
-    if (object->fields().contains("mu_s")) {
-      ASSIGN_OR_RETURN(double mu_s, GetNumber(*object, "mu_s", inner_where));
-      w->set_mu_s(mu_s);
-    }
-    if (object->fields().contains("mu_b")) {
-      ASSIGN_OR_RETURN(double mu_b, GetNumber(*object, "mu_b", inner_where));
-      w->set_mu_b(mu_b);
-    }
-    if (object->fields().contains("mu_c")) {
-      ASSIGN_OR_RETURN(double mu_c, GetNumber(*object, "mu_c", inner_where));
-      w->set_mu_c(mu_c);
-    }
-    if (object->fields().contains("mu_a")) {
-      ASSIGN_OR_RETURN(double mu_a, GetNumber(*object, "mu_a", inner_where));
-      w->set_mu_a(mu_a);
+    using Setter = void (v1::Weights::*)(double);
+    for (const auto& [key, set] : {std::pair<const char*, Setter>{"mu_s", &v1::Weights::set_mu_s},
+                                   {"mu_b", &v1::Weights::set_mu_b},
+                                   {"mu_c", &v1::Weights::set_mu_c},
+                                   {"mu_a", &v1::Weights::set_mu_a}}) {
+      if (!object->fields().contains(key)) continue;
+      ASSIGN_OR_RETURN(double value, GetNumber(*object, key, inner_where));
+      (w->*set)(value);
     }
   } else if (kind == "watch") {
     RETURN_IF_ERROR(CheckKeys(*object, {"faces", "encoding"}, inner_where));
