@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <utility>
 #include <vector>
 
@@ -80,38 +81,13 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
                                     [](const FieldConstraint& c) { return !c.hard(); });
   if (any_soft && w.mu_c > 0) {
     const size_t n = problem.constraints.size();
-    // Scale-free: each soft weight divided by its face's stiffness under the energy alone.
-    std::vector<double> stiffness(n, 1.0);
+    // Scale-free: each soft weight is divided by its face's stiffness under the energy alone.
+    std::optional<SupernodalFactor> energy;
     if (problem.scale_free) {
       double tau0 = 0;
-      ASSIGN_OR_RETURN(SupernodalFactor energy,
-                       FactorizeRegularized(system.pattern_symbolic(),
-                                            ShiftKernelColumns(system, A), options, &tau0));
+      ASSIGN_OR_RETURN(energy, FactorizeRegularized(system.pattern_symbolic(),
+                                                    ShiftKernelColumns(system, A), options, &tau0));
       if (IsCancelled(options.cancel)) return cancelled_error;
-      std::vector<absl::Status> errors(n);
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64),
-                        [&](const tbb::blocked_range<size_t>& range) {
-                          if (IsCancelled(options.cancel)) return;
-                          for (size_t i = range.begin(); i != range.end(); ++i) {
-                            const FieldConstraint& c = problem.constraints[i];
-                            if (c.hard()) continue;
-                            absl::StatusOr<double> g =
-                                FaceStiffness(system, energy, BasisRowsOfFace(system, c.face));
-                            if (g.ok()) {
-                              stiffness[i] = *g;
-                            } else {
-                              errors[i] = g.status();
-                            }
-                          }
-                        });
-      if (IsCancelled(options.cancel)) return cancelled_error;
-      for (size_t i = 0; i < n; ++i) {
-        if (!errors[i].ok()) {
-          return absl::Status(errors[i].code(),
-                              absl::StrCat("constraint on face ", problem.constraints[i].face, ": ",
-                                           errors[i].message()));
-        }
-      }
     }
     // The soft terms mu U_f^T U_f go straight into A's values: every pair of columns nonzero at a
     // common face is an entry of U^T M U, so of the shared pattern. Per thread one value array and
@@ -121,41 +97,54 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
       std::vector<double> values;
       Eigen::VectorXd b;
       bool outside = false;  // an entry outside the pattern (cannot happen; checked anyway)
+      absl::Status error;    // the first FaceStiffness failure of this thread
     };
     const int64_t nnz = A.nonZeros();
     tbb::enumerable_thread_specific<Partial> partials([&] {
-      return Partial{std::vector<double>(nnz, 0.0), Eigen::VectorXd::Zero(d), false};
+      return Partial{std::vector<double>(nnz, 0.0), Eigen::VectorXd::Zero(d), false, {}};
     });
     const int32_t* outer = A.outerIndexPtr();
     const int32_t* inner = A.innerIndexPtr();
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256),
-                      [&](const tbb::blocked_range<size_t>& range) {
-                        if (IsCancelled(options.cancel)) return;
-                        Partial& part = partials.local();
-                        for (size_t i = range.begin(); i != range.end(); ++i) {
-                          const FieldConstraint& c = problem.constraints[i];
-                          if (c.hard()) continue;
-                          const double mu = w.mu_c * c.weight / stiffness[i];
-                          const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
-                          for (size_t comp = 0; comp < rows.size(); ++comp) {
-                            const SparseRow& row = rows[comp];
-                            for (size_t q = 0; q < row.cols.size(); ++q) {
-                              const int32_t col = row.cols[q];
-                              part.b[col] += mu * row.vals[q] * c.value[comp];
-                              const int32_t* begin = inner + outer[col];
-                              const int32_t* end = inner + outer[col + 1];
-                              for (size_t t = 0; t < row.cols.size(); ++t) {
-                                const int32_t* at = std::lower_bound(begin, end, row.cols[t]);
-                                if (at == end || *at != row.cols[t]) {
-                                  part.outside = true;
-                                  continue;
-                                }
-                                part.values[at - inner] += mu * row.vals[t] * row.vals[q];
-                              }
-                            }
-                          }
-                        }
-                      });
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& range) {
+          if (IsCancelled(options.cancel)) return;
+          Partial& part = partials.local();
+          for (size_t i = range.begin(); i != range.end() && part.error.ok(); ++i) {
+            const FieldConstraint& c = problem.constraints[i];
+            if (c.hard()) continue;
+            const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
+            double stiffness = 1.0;
+            if (energy.has_value()) {
+              absl::StatusOr<double> g = FaceStiffness(system, *energy, rows);
+              if (!g.ok()) {
+                part.error = absl::Status(
+                    g.status().code(),
+                    absl::StrCat("constraint on face ", c.face, ": ", g.status().message()));
+                break;
+              }
+              stiffness = *g;
+            }
+            const double mu = w.mu_c * c.weight / stiffness;
+            for (size_t comp = 0; comp < rows.size(); ++comp) {
+              const SparseRow& row = rows[comp];
+              for (size_t q = 0; q < row.cols.size(); ++q) {
+                const int32_t col = row.cols[q];
+                part.b[col] += mu * row.vals[q] * c.value[comp];
+                const int32_t* begin = inner + outer[col];
+                const int32_t* end = inner + outer[col + 1];
+                for (size_t t = 0; t < row.cols.size(); ++t) {
+                  const int32_t* at = std::lower_bound(begin, end, row.cols[t]);
+                  if (at == end || *at != row.cols[t]) {
+                    part.outside = true;
+                    continue;
+                  }
+                  part.values[at - inner] += mu * row.vals[t] * row.vals[q];
+                }
+              }
+            }
+          }
+        });
+    for (const Partial& part : partials) RETURN_IF_ERROR(part.error);
     if (IsCancelled(options.cancel)) return cancelled_error;
     double* a = A.valuePtr();
     for (const Partial& part : partials) {
