@@ -1,6 +1,7 @@
 #ifndef FIELDSPACE_SERVER_RECORDS_H_
 #define FIELDSPACE_SERVER_RECORDS_H_
 
+#include <chrono>
 #include <cstdint>
 #include <string>
 
@@ -8,8 +9,16 @@
 
 namespace fieldspace::server {
 
+// Milliseconds since the Unix epoch (the records' created_unix_ms).
+inline int64_t NowUnixMs() {
+  return std::chrono::duration_cast<std::chrono::milliseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
 // What the server knows about a stored mesh without loading it (kept in memory for every mesh;
 // persisted in the header of the mesh's store file).
+
 struct MeshRecord {
   std::string id;  // "m-" + 16 hex digits, hash of the canonical vertex/face arrays
   std::string name;
