@@ -81,6 +81,11 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
     return absl::InvalidArgumentError(
         "singularities are defined for vector and n-field bases, not tensor bases");
   }
+  WorkGrant grant;
+  if (options_.admit_work) {
+    ASSIGN_OR_RETURN(
+        grant, options_.admit_work(DesignSessionOpenBytes(*basis->system), "this design session"));
+  }
   basis_ = std::move(basis);
   if (absl::Status st = SetWatch(open.watch_faces(), open.watch_encoding()); !st.ok()) {
     basis_.reset();
@@ -107,6 +112,7 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
     return session.status();
   }
   session_ = std::move(*session);
+  grant_ = std::move(grant);
   refactorized_ = session_->last_factorized();
   singularities_ = open.singularities();
   last_singularities_.clear();

@@ -14,6 +14,7 @@
 #include "core/subspace/design_session.h"
 #include "fieldspace/v1/fieldspace.pb.h"
 #include "server/served_basis.h"
+#include "server/work_grant.h"
 
 namespace fieldspace::server {
 
@@ -23,6 +24,9 @@ struct DesignEditorOptions {
   // Watched faces must fit in half of a message of this size.
   int64_t max_message_bytes = int64_t{64} << 20;
   int32_t max_constraints = 1 << 20;
+  // Admits an opening session's memory (DesignSessionOpenBytes) for the session's lifetime; none
+  // when empty.
+  AdmitWorkFn admit_work;
 };
 
 // What a Design stream does with its messages, without gRPC: the first request opens a
@@ -62,6 +66,7 @@ class DesignEditor {
   DesignEditorOptions options_;
   std::shared_ptr<const ServedBasis> basis_;
   std::unique_ptr<DesignSession> session_;
+  WorkGrant grant_;  // the session's admitted memory
   std::vector<int32_t> watch_;
   FieldEncoding watch_encoding_ = FieldEncoding::kDof;
   bool refactorized_ = false;                                 // by the request being applied

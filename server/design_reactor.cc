@@ -22,10 +22,13 @@ absl::Status DrainedSession() {
       "constraints and weights");
 }
 
-DesignEditorOptions EditorOptions(const ServiceOptions& service) {
+DesignEditorOptions EditorOptions(FieldService* service) {
   DesignEditorOptions options;
-  options.verify_interval = service.design_verify_interval;
-  options.max_message_bytes = service.max_message_bytes;
+  options.verify_interval = service->options().design_verify_interval;
+  options.max_message_bytes = service->options().max_message_bytes;
+  options.admit_work = [registry = service->registry()](int64_t bytes, absl::string_view what) {
+    return registry->AdmitWork(bytes, what);
+  };
   return options;
 }
 
@@ -39,7 +42,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
         context_(context),
         editor_([registry =
                      service->registry()](const std::string& id) { return registry->GetBasis(id); },
-                EditorOptions(service->options())) {
+                EditorOptions(service)) {
     if (absl::Status admit = service->Admit(context); !admit.ok()) {
       finish_sent_ = true;
       FinishWith(this, (admit));

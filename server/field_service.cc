@@ -8,6 +8,7 @@
 #include <map>
 #include <numeric>
 #include <optional>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -30,6 +31,11 @@ namespace fieldspace::server {
 namespace {
 
 constexpr int32_t kMaxConstraints = 1 << 20;
+
+// Threads of oneTBB's default arena, which core's parallel loops use.
+int32_t HardwareThreads() {
+  return static_cast<int32_t>(std::max(1u, std::thread::hardware_concurrency()));
+}
 
 }  // namespace
 
@@ -254,6 +260,14 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
           return absl::ResourceExhaustedError(
               absl::StrCat("at most ", kMaxConstraints, " constraints per request"));
         }
+        int64_t hard = 0;
+        for (const v1::Constraint& c : request->constraints()) hard += c.hard() ? 1 : 0;
+        int64_t work = SolveWorkingBytes(*basis->system, request->constraints_size() - hard, hard,
+                                         problem.scale_free, HardwareThreads());
+        if (request->return_field()) {
+          work += int64_t{12} * basis->basis->type.dofs_per_face() * basis->mesh->num_faces();
+        }
+        ASSIGN_OR_RETURN(WorkGrant grant, registry_->AdmitWork(work, "this Solve"));
         problem.constraints.reserve(request->constraints_size());
         for (int i = 0; i < request->constraints_size(); ++i) {
           ASSIGN_OR_RETURN(FieldConstraint c, ConstraintFromProto(*basis, request->constraints(i),
@@ -327,6 +341,9 @@ grpc::ServerUnaryReactor* FieldService::Eigenfields(grpc::CallbackServerContext*
         ReducedEigenOptions options;
         options.count = request->count();
         options.cancel = cancel;
+        ASSIGN_OR_RETURN(WorkGrant grant,
+                         registry_->AdmitWork(ReducedEigenWorkingBytes(*basis->system, options),
+                                              "this Eigenfields call"));
         ASSIGN_OR_RETURN(ReducedEigenResult result, ReducedEigenpairs(*basis->system, options));
         response->mutable_eigenvalues()->Add(result.values.data(),
                                              result.values.data() + result.values.size());

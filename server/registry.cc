@@ -229,7 +229,7 @@ int64_t Registry::memory_in_use() const {
 }
 
 void Registry::EvictLocked() {
-  while (memory_in_use_ > options_.memory_budget_bytes) {
+  while (memory_in_use_ + work_in_use_ > options_.memory_budget_bytes) {
     // Least recently used idle artifact: bases first among equals, as a loaded basis pins its
     // mesh (so the mesh becomes idle only after its bases went).
     uint64_t best = UINT64_MAX;
@@ -260,6 +260,45 @@ void Registry::EvictLocked() {
       return;  // everything in memory is in use: the budget is soft
     }
   }
+}
+
+absl::StatusOr<WorkGrant> Registry::AdmitWork(int64_t bytes, absl::string_view what) {
+  std::lock_guard<std::mutex> lock(mu_);
+  return AdmitWorkLocked(bytes, what);
+}
+
+absl::StatusOr<WorkGrant> Registry::AdmitWorkLocked(int64_t bytes, absl::string_view what) {
+  bytes = std::max<int64_t>(bytes, 0);
+  const int64_t budget = options_.memory_budget_bytes;
+  auto mib = [](int64_t b) { return (b + (int64_t{1} << 20) - 1) >> 20; };
+  if (bytes > kSmallWorkBytes && bytes > budget) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat(what, " needs about ", mib(bytes),
+                     " MiB of working memory, more than the whole memory "
+                     "budget of ",
+                     mib(budget), " MiB (--memory-budget-mb)"));
+  }
+  work_in_use_ += bytes;
+  EvictLocked();
+  if (bytes > kSmallWorkBytes && memory_in_use_ + work_in_use_ > budget) {
+    work_in_use_ -= bytes;
+    return absl::ResourceExhaustedError(absl::StrCat(
+        what, " needs about ", mib(bytes), " MiB of working memory; of the memory budget of ",
+        mib(budget), " MiB (--memory-budget-mb), ", mib(memory_in_use_),
+        " MiB are held by meshes and bases in use and ", mib(work_in_use_),
+        " MiB by other requests. Retry when they are done, or raise the budget"));
+  }
+  return WorkGrant(this, bytes);
+}
+
+int64_t Registry::work_in_use() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return work_in_use_;
+}
+
+void Registry::ReleaseWork(int64_t bytes) {
+  std::lock_guard<std::mutex> lock(mu_);
+  work_in_use_ -= bytes;
 }
 
 absl::StatusOr<MeshRecord> Registry::AddMesh(MeshArrays arrays, const std::string& name,

@@ -21,12 +21,15 @@
 #include "server/records.h"
 #include "server/served_basis.h"
 #include "server/store.h"
+#include "server/work_grant.h"
 
 namespace fieldspace::server {
 
 struct RegistryOptions {
-  // Soft limit on memory held by loaded meshes and bases; idle ones (no request or session holds
-  // them) are evicted least recently used first and reload from the store on demand.
+  // Memory for loaded meshes and bases and for the working memory of requests (AdmitWork). Idle
+  // artifacts (no request or session holds them) are evicted least recently used first and reload
+  // from the store on demand; loading an artifact in use may exceed it (a soft limit), admitting
+  // work may not.
   int64_t memory_budget_bytes = int64_t{4} << 30;
   int32_t build_threads = 0;     // passed to the basis construction; 0: all
   int32_t max_dimension = 8192;  // larger d is ResourceExhausted (dense reduced matrices are d x d)
@@ -104,7 +107,7 @@ struct BasisStatus {
 // All server state: meshes, bases, running builds. The RPC layer is stateless and asks the
 // registry for handles (shared_ptr<const T>) that it holds only for one request or session.
 // Thread-safe.
-class Registry {
+class Registry final : public WorkAccount {
  public:
   // Reads the store's index (headers only; payloads load lazily).
   static absl::StatusOr<std::unique_ptr<Registry>> Create(Store* store, ComputePool* pool,
@@ -146,6 +149,16 @@ class Registry {
   void CancelAllBuilds(std::chrono::milliseconds timeout);
 
   int64_t memory_in_use() const;
+
+  // --- Working memory of requests.
+  // Admits `bytes` for `what` ("this Solve"): idle artifacts are evicted to make room, and
+  // ResourceExhausted (naming `what`, the bytes and --memory-budget-mb) when the artifacts in use
+  // and the work already admitted leave less. Requests under kSmallWorkBytes are always admitted
+  // (and counted): the daemon's own baseline is larger.
+  static constexpr int64_t kSmallWorkBytes = int64_t{4} << 20;
+  absl::StatusOr<WorkGrant> AdmitWork(int64_t bytes, absl::string_view what);
+  int64_t work_in_use() const;
+  void ReleaseWork(int64_t bytes) override;
   // How many basis builds this registry ran to the end (not joined, not found built elsewhere).
   int64_t builds_run() const { return builds_run_.load(); }
   // "HOST/PID/DAEMON_ID" as written into lease files.
@@ -193,10 +206,12 @@ class Registry {
   // until another daemon stored the basis (nullptr, `*built` set).
   absl::StatusOr<std::unique_ptr<Lease>> AwaitBuildLease(BuildJob& job, BasisRecord* built);
 
-  void RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request);
+  // `grant`: the build's admitted working memory, released when the basis is published.
+  void RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request, WorkGrant grant);
   absl::StatusOr<std::shared_ptr<const ServedBasis>> LoadBasis(const std::string& id);
-  // Drops idle loaded artifacts until memory_in_use_ <= budget. Requires mu_.
+  // Drops idle loaded artifacts until memory_in_use_ + work_in_use_ <= budget. Requires mu_.
   void EvictLocked();
+  absl::StatusOr<WorkGrant> AdmitWorkLocked(int64_t bytes, absl::string_view what);
 
   Store* const store_;
   ComputePool* const pool_;
@@ -211,7 +226,8 @@ class Registry {
   std::atomic<bool> shutting_down_{false};
   std::atomic<int64_t> builds_run_{0};
   mutable int64_t memory_in_use_ = 0;
-  uint64_t clock_ = 0;  // LRU clock
+  int64_t work_in_use_ = 0;  // admitted working memory of requests
+  uint64_t clock_ = 0;       // LRU clock
 };
 
 }  // namespace fieldspace::server

@@ -111,17 +111,24 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
     out.joined = true;
     return out;
   }
+  ASSIGN_OR_RETURN(
+      WorkGrant grant,
+      AdmitWorkLocked(EstimateBuildPeakBytes(mesh.num_faces, key.field, key.dimension, key.sigma),
+                      "this basis build"));
   auto job = std::make_shared<BuildJob>(pending);
   const bool submitted = pool_->Submit(
-      ComputePool::Lane::kBuild,
-      [this, job, request = std::move(request)]() mutable { RunBuild(job, std::move(request)); });
+      ComputePool::Lane::kBuild, [this, job, request = std::move(request),
+                                  grant = std::make_shared<WorkGrant>(std::move(grant))]() mutable {
+        RunBuild(job, std::move(request), std::move(*grant));
+      });
   if (!submitted) return absl::UnavailableError("server is shutting down");
   builds_[pending.id] = job;
   out.job = std::move(job);
   return out;
 }
 
-void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request) {
+void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request,
+                        WorkGrant grant) {
   const auto start = std::chrono::steady_clock::now();
   BasisRecord record = job->pending_record();
   BuildContext context;
@@ -185,6 +192,7 @@ void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest reque
         "the server shut down before the build finished; request it again after the restart");
   }
   if (elsewhere) record = *elsewhere;
+  grant = WorkGrant();  // the working memory is free; the basis is counted as loaded from now on
   if (options_.shared_store) SyncMesh(record.key.mesh_id);
   bool orphaned = false;
   {

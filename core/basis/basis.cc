@@ -590,4 +590,13 @@ int64_t Basis::MemoryBytes() const {
          params.face_weights.size() * static_cast<int64_t>(sizeof(double));
 }
 
+int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
+                               double sigma) {
+  const double k = static_cast<double>(num_faces) * type.dofs_per_face();
+  // Vector builds hold the factored Hodge form beside S, hence more bytes per nonzero of U.
+  const double bytes_per_nonzero = type.kind == FieldKind::kVector ? 26.0 : 19.0;
+  const double d = dimension;
+  return static_cast<int64_t>(bytes_per_nonzero * sigma * k + 8.0 * d * d);
+}
+
 }  // namespace fieldspace

@@ -122,6 +122,14 @@ struct Basis {
 // weights, fields_per_region < 1, more components than regions, operator/mesh size mismatch),
 // Cancelled when options.cancel fires, ResourceExhausted when U would exceed
 // options.max_basis_bytes or 2^31 - 1 nonzeros.
+// An estimate of the peak bytes a basis build takes for a mesh of `num_faces` faces: the
+// operator, U, the reduced system's assembly and the threads' local problems, from the rule of
+// thumb of sigma nonzeros per row of U, calibrated on measured peaks (bench/RESULTS.md, basis
+// construction: 940-1020 bytes per DOF for vector fields, 720-730 for n-fields and tensors at
+// sigma 40), plus the d x d reduced matrices. For admission against a memory budget.
+int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
+                               double sigma);
+
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options);
 

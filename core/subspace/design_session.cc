@@ -386,4 +386,8 @@ ModelProblem DesignSession::problem() const {
   return problem;
 }
 
+int64_t DesignSessionOpenBytes(const ReducedSystem& system) {
+  return 2 * system.stats().factor_nonzeros * 8 + 16 * int64_t{system.dimension()} * 8;
+}
+
 }  // namespace fieldspace

@@ -217,6 +217,11 @@ class DesignSession {
   int32_t solves_since_check_ = 0;
 };
 
+// An estimate of the bytes an open DesignSession on `system` holds before its first constraint
+// (its own factorization and panels when its weights are not shared, and its working vectors);
+// each constraint adds about d x dofs-per-face doubles. For admission against a memory budget.
+int64_t DesignSessionOpenBytes(const ReducedSystem& system);
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_SUBSPACE_DESIGN_SESSION_H_

@@ -181,4 +181,22 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   return solution;
 }
 
+int64_t SolveWorkingBytes(const ReducedSystem& system, int64_t soft, int64_t hard, bool scale_free,
+                          int32_t threads) {
+  const int64_t d = system.dimension();
+  const int64_t p = system.dofs_per_face();
+  const int64_t nnz = system.stats().pattern_nonzeros;
+  const int64_t factor = system.stats().factor_nonzeros;
+  // A, its kernel-shifted copy and the supernodal panels of A; the factor (twice when scale-free:
+  // the energy's own factorization for the stiffnesses).
+  int64_t bytes = 2 * nnz * 12 + factor * 8 + factor * 8 * (scale_free ? 2 : 1);
+  if (soft > 0) bytes += std::max<int64_t>(threads, 1) * (nnz + d) * 8;  // per-thread sums
+  // Hard constraint rows: A^-1 G^T (d x h) and the h x h Schur complement, with its factor.
+  const int64_t h = hard * p;
+  bytes += h * d * 8 + 2 * h * h * 8;
+  // Each FieldConstraint: face, kind, weight and a heap vector of p doubles (with its header).
+  bytes += (soft + hard) * (static_cast<int64_t>(sizeof(FieldConstraint)) + 8 * p + 16);
+  return bytes + 4 * d * 8;
+}
+
 }  // namespace fieldspace

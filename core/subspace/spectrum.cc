@@ -92,6 +92,13 @@ absl::StatusOr<ReducedEigenResult> SparseEigenpairs(const ReducedSystem& system,
   return result;
 }
 
+ReducedEigenMethod ChosenMethod(int64_t d, const ReducedEigenOptions& options) {
+  if (options.method != ReducedEigenMethod::kAuto) return options.method;
+  const bool dense = d <= options.dense_max_dimension || options.count > d / 6 ||
+                     std::max<int64_t>(2 * options.count + 1, options.count + 32) >= d;
+  return dense ? ReducedEigenMethod::kDense : ReducedEigenMethod::kSparse;
+}
+
 }  // namespace
 
 absl::StatusOr<ReducedEigenResult> ReducedEigenpairs(const ReducedSystem& system,
@@ -105,14 +112,23 @@ absl::StatusOr<ReducedEigenResult> ReducedEigenpairs(const ReducedSystem& system
       options.max_iterations < 1) {
     return absl::InvalidArgumentError("ReducedEigenpairs: invalid options");
   }
-  ReducedEigenMethod method = options.method;
-  if (method == ReducedEigenMethod::kAuto) {
-    const bool dense = d <= options.dense_max_dimension || options.count > d / 6 ||
-                       std::max<int64_t>(2 * options.count + 1, options.count + 32) >= d;
-    method = dense ? ReducedEigenMethod::kDense : ReducedEigenMethod::kSparse;
+  if (ChosenMethod(d, options) == ReducedEigenMethod::kDense) {
+    return DenseEigenpairs(system, options);
   }
-  if (method == ReducedEigenMethod::kDense) return DenseEigenpairs(system, options);
   return SparseEigenpairs(system, options);
+}
+
+int64_t ReducedEigenWorkingBytes(const ReducedSystem& system, const ReducedEigenOptions& options) {
+  const int64_t d = system.dimension();
+  const int64_t k = std::clamp<int64_t>(options.count, 1, std::max<int64_t>(d, 1));
+  if (ChosenMethod(d, options) == ReducedEigenMethod::kDense) {
+    // The dense stiffness and mass, the eigenvectors and the solver's workspace: d x d each.
+    return 4 * d * d * 8 + 2 * d * k * 8;
+  }
+  const int64_t ncv =
+      options.subspace_size > 0 ? options.subspace_size : std::min(d, std::max(2 * k + 1, k + 32));
+  // The shift-invert factorization (factor and panels), the Lanczos basis and the eigenvectors.
+  return 2 * system.stats().factor_nonzeros * 8 + (ncv + 2 * k) * d * 8;
 }
 
 absl::StatusOr<Basis> BuildEigenBasis(const FieldOperator& op, int32_t count) {

@@ -48,6 +48,9 @@ struct ReducedEigenResult {
 // Internal for an unexpected solver failure.
 absl::StatusOr<ReducedEigenResult> ReducedEigenpairs(const ReducedSystem& system,
                                                      const ReducedEigenOptions& options = {});
+// An upper estimate of the bytes ReducedEigenpairs allocates with `options` (the method it would
+// choose), for admission against a memory budget.
+int64_t ReducedEigenWorkingBytes(const ReducedSystem& system, const ReducedEigenOptions& options);
 
 // The global eigenbasis of paper section 7 (the alternative the local basis is compared with):
 // U = the lowest `count` full-space eigenfields of op (S x = lambda M x), M-orthonormal, stored

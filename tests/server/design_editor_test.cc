@@ -253,5 +253,44 @@ TEST_F(DesignEditorTest, SingularityChangesTrackTheField) {
   EXPECT_FALSE(u.has_singularities());
 }
 
+// Issue 15, B10: an opening session's memory is admitted (DesignEditorOptions::admit_work) and
+// held for the session's lifetime; a refusal leaves no session open.
+TEST_F(DesignEditorTest, SessionMemoryIsAdmittedForTheSessionsLifetime) {
+  struct Account : WorkAccount {
+    void ReleaseWork(int64_t bytes) override { held -= bytes; }
+    int64_t held = 0;
+  } account;
+  bool refuse = false;
+  DesignEditorOptions options;
+  options.admit_work = [&](int64_t bytes, absl::string_view what) -> absl::StatusOr<WorkGrant> {
+    if (refuse) return absl::ResourceExhaustedError(absl::StrCat(what, " refused"));
+    account.held += bytes;
+    return WorkGrant(&account, bytes);
+  };
+  const auto lookup =
+      [](const std::string&) -> absl::StatusOr<std::shared_ptr<const ServedBasis>> {
+    return *basis_;
+  };
+  const int64_t expected = DesignSessionOpenBytes(*(*basis_)->system);
+  EXPECT_GT(expected, 8 * (*basis_)->system->dimension());
+  {
+    DesignEditor editor(lookup, options);
+    v1::DesignUpdate u;
+    ASSERT_TRUE(editor.Apply(Open(1, 0, 1), &u).ok());
+    EXPECT_EQ(account.held, expected);
+    ASSERT_TRUE(editor.Apply(Add(1, 20, 1.0, 0.0, false), &u).ok());
+    EXPECT_EQ(account.held, expected);
+  }
+  EXPECT_EQ(account.held, 0);  // released with the session
+  refuse = true;
+  DesignEditor refused(lookup, options);
+  v1::DesignUpdate u;
+  const absl::Status st = refused.Apply(Open(1, 0, 1), &u);
+  EXPECT_EQ(st.code(), absl::StatusCode::kResourceExhausted) << st;
+  EXPECT_THAT(st.message(), ::testing::HasSubstr("this design session"));
+  EXPECT_FALSE(refused.is_open());
+  EXPECT_EQ(account.held, 0);
+}
+
 }  // namespace
 }  // namespace fieldspace::server

@@ -17,6 +17,7 @@
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
 #include "server/field_server.h"
+#include "server/registry.h"
 
 namespace fieldspace::server {
 namespace {
@@ -290,6 +291,55 @@ TEST_F(HostileInputTest, ExpiredSolveFreesItsThread) {
     EXPECT_TRUE(status.ok()) << "round " << round << ": " << status.error_message()
                              << " (the full Solve took " << full_s << " s)";
   }
+}
+
+// B2, B10: every request's working memory is admitted against --memory-budget-mb up front
+// (RESOURCE_EXHAUSTED naming the flag); before, a Solve or a build took whatever it needed.
+TEST_F(HostileInputTest, SolvesAndBuildsBeyondTheMemoryBudgetAreRefusedUpFront) {
+  FieldServerOptions options;
+  options.memory_budget_mb = 24;
+  Start(options);
+  auto ico4 = MakeIcosphere(4, 1.0);  // 5,120 faces: a vector build is estimated at ~11 MB
+  auto ico5 = MakeIcosphere(5, 1.0);  // 20,480 faces: ~43 MB, beyond the budget
+  ASSERT_TRUE(ico4.ok() && ico5.ok());
+  {
+    grpc::ClientContext context;
+    v1::BuildBasisRequest request;
+    request.set_mesh_id(UploadRaw(*ico5, "ico5"));
+    request.mutable_field()->set_kind(v1::FIELD_KIND_VECTOR);
+    request.set_dimension(100);
+    auto reader = stub_->BuildBasis(&context, request);
+    v1::BuildBasisProgress progress;
+    while (reader->Read(&progress)) {
+    }
+    const grpc::Status status = reader->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+    EXPECT_NE(status.error_message().find("--memory-budget-mb"), std::string::npos)
+        << status.error_message();
+  }
+  const std::string basis_id = Build(UploadRaw(*ico4, "ico4"), v1::FIELD_KIND_VECTOR, 100);
+  ASSERT_FALSE(basis_id.empty());
+  const auto solve = [&](int constraints) {
+    v1::SolveRequest request;
+    request.set_basis_id(basis_id);
+    for (int i = 0; i < constraints; ++i) {
+      v1::Constraint* c = request.add_constraints();
+      c->set_face(i % 5120);
+      c->add_value(std::cos(i));
+      c->add_value(std::sin(i));
+    }
+    grpc::ClientContext context;
+    v1::SolveResponse response;
+    return stub_->Solve(&context, request, &response);
+  };
+  EXPECT_TRUE(solve(1 << 14).ok());
+  // 2^19 constraints hold ~38 MB as the core's constraint list alone.
+  const grpc::Status refused = solve(1 << 19);
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << refused.error_message();
+  EXPECT_NE(refused.error_message().find("this Solve"), std::string::npos)
+      << refused.error_message();
+  EXPECT_EQ(server_->registry()->work_in_use(), 0);  // every grant was given back
+  EXPECT_TRUE(solve(16).ok());
 }
 
 }  // namespace
