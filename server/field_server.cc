@@ -10,6 +10,7 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -25,6 +26,7 @@
 #include "oneapi/tbb/global_control.h"
 #include "server/compute_pool.h"
 #include "server/field_service.h"
+#include "server/parse_failure_interceptor.h"
 #include "server/registry.h"
 #include "server/status_util.h"
 #include "server/store.h"
@@ -166,6 +168,12 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
   builder.RegisterService(s->service_.get());
+  {
+    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
+        interceptors;
+    interceptors.push_back(NewParseFailureInterceptorFactory());
+    builder.experimental().SetInterceptorCreators(std::move(interceptors));
+  }
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_mb << 20));
   builder.SetMaxSendMessageSize(static_cast<int>(options.max_message_mb << 20));
   s->server_ = builder.BuildAndStart();

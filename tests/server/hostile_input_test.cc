@@ -435,5 +435,44 @@ TEST_F(HostileInputTest, DesignWithAnUnparseableMessageIsInvalidArgument) {
   EXPECT_EQ(update.basis_id(), basis_id);
 }
 
+// B6: a unary or server-streaming request that did not parse got UNIMPLEMENTED with no message
+// (gRPC's answer for it in the callback API), as if the method did not exist.
+TEST_F(HostileInputTest, UnparseableRequestsAreInvalidArgumentUnknownMethodsUnimplemented) {
+  Start(FieldServerOptions());
+  const std::vector<std::pair<std::string, std::string>> methods = {
+      {"GetMesh", "GetMeshRequest"},
+      {"ListMeshes", "ListMeshesRequest"},
+      {"Solve", "SolveRequest"},
+      {"GetMeshGeometry", "GetMeshGeometryRequest"},  // server streaming
+      {"Lift", "LiftRequest"},                        // server streaming
+      {"BuildBasis", "BuildBasisRequest"},            // server streaming
+  };
+  for (const auto& [method, type] : methods) {
+    const RawCall call = CallRaw(absl::StrCat("/fieldspace.v1.FieldSpace/", method), {kGarbage});
+    EXPECT_EQ(call.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << method;
+    EXPECT_EQ(call.status.error_message(),
+              absl::StrCat("request is not a valid fieldspace.v1.", type))
+        << method;
+    EXPECT_TRUE(call.responses.empty()) << method;
+  }
+  // A request that parses is answered as before: an empty ListMeshesRequest lists no meshes, and
+  // GetMesh of an unknown id keeps its NOT_FOUND.
+  const RawCall listed = CallRaw("/fieldspace.v1.FieldSpace/ListMeshes", {""});
+  EXPECT_TRUE(listed.status.ok()) << listed.status.error_message();
+  EXPECT_EQ(listed.responses.size(), 1u);
+  v1::GetMeshRequest get;
+  get.set_mesh_id("m-0000000000000000");
+  EXPECT_EQ(
+      CallRaw("/fieldspace.v1.FieldSpace/GetMesh", {get.SerializeAsString()}).status.error_code(),
+      grpc::StatusCode::NOT_FOUND);
+  // Methods that do not exist stay UNIMPLEMENTED, garbage or not.
+  for (const std::string& method :
+       {"/fieldspace.v1.FieldSpace/NoSuchMethod", "/fieldspace.v1.NoSuchService/GetMesh"}) {
+    EXPECT_EQ(CallRaw(method, {kGarbage}).status.error_code(), grpc::StatusCode::UNIMPLEMENTED)
+        << method;
+    EXPECT_EQ(CallRaw(method, {""}).status.error_code(), grpc::StatusCode::UNIMPLEMENTED) << method;
+  }
+}
+
 }  // namespace
 }  // namespace fieldspace::server
