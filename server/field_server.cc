@@ -27,6 +27,7 @@
 #include "server/compute_pool.h"
 #include "server/field_service.h"
 #include "server/parse_failure_interceptor.h"
+#include "server/reflection_v1.h"
 #include "server/registry.h"
 #include "server/status_util.h"
 #include "server/store.h"
@@ -163,6 +164,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
 
   grpc::ServerBuilder builder;
+  builder.SetOption(ReflectionV1Option());  // v1alpha comes from the plugin above
   // gRPC sets SO_REUSEPORT by default: a second daemon on the same port would then start
   // silently and take half of the connections.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);

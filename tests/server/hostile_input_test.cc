@@ -16,6 +16,8 @@
 #include "absl/strings/str_format.h"
 #include "core/mesh/shapes.h"
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
+#include "google/protobuf/descriptor.pb.h"
+#include "grpc/reflection/v1/reflection.pb.h"
 #include "grpcpp/generic/generic_stub.h"
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
@@ -471,6 +473,75 @@ TEST_F(HostileInputTest, UnparseableRequestsAreInvalidArgumentUnknownMethodsUnim
     EXPECT_EQ(CallRaw(method, {kGarbage}).status.error_code(), grpc::StatusCode::UNIMPLEMENTED)
         << method;
     EXPECT_EQ(CallRaw(method, {""}).status.error_code(), grpc::StatusCode::UNIMPLEMENTED) << method;
+  }
+}
+
+// B9: server reflection v1 was UNIMPLEMENTED (gRPC 1.51 serves only v1alpha), and buf curl and
+// newer grpcurl ask v1 first. v1 must describe the server as v1alpha does (the two protocols are
+// the same messages under two package names, so the same request bytes serve both).
+TEST_F(HostileInputTest, ReflectionV1AnswersAsV1Alpha) {
+  Start(FieldServerOptions());
+  namespace refl = ::grpc::reflection::v1;
+  const auto ask = [&](const std::string& version, const refl::ServerReflectionRequest& request) {
+    const RawCall call = CallRaw(
+        absl::StrCat("/grpc.reflection.", version, ".ServerReflection/ServerReflectionInfo"),
+        {request.SerializeAsString()});
+    EXPECT_TRUE(call.status.ok()) << version << ": " << call.status.error_message();
+    refl::ServerReflectionResponse response;
+    EXPECT_EQ(call.responses.size(), 1u) << version;
+    if (call.responses.size() == 1) EXPECT_TRUE(response.ParseFromString(call.responses[0]));
+    return response;
+  };
+
+  refl::ServerReflectionRequest list;
+  list.set_list_services("");
+  const refl::ServerReflectionResponse services = ask("v1", list);
+  std::vector<std::string> names;
+  for (const refl::ServiceResponse& s : services.list_services_response().service()) {
+    names.push_back(s.name());
+  }
+  for (const char* name :
+       {"fieldspace.v1.FieldSpace", "grpc.health.v1.Health",
+        "grpc.reflection.v1alpha.ServerReflection", "grpc.reflection.v1.ServerReflection"}) {
+    EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
+  }
+  EXPECT_EQ(services.SerializeAsString(), ask("v1alpha", list).SerializeAsString());
+
+  refl::ServerReflectionRequest symbol;
+  symbol.set_file_containing_symbol("fieldspace.v1.FieldSpace");
+  const refl::ServerReflectionResponse file = ask("v1", symbol);
+  ASSERT_GE(file.file_descriptor_response().file_descriptor_proto_size(), 1);
+  google::protobuf::FileDescriptorProto proto;
+  ASSERT_TRUE(proto.ParseFromString(file.file_descriptor_response().file_descriptor_proto(0)));
+  EXPECT_EQ(proto.name(), "fieldspace/v1/fieldspace.proto");
+  ASSERT_EQ(proto.service_size(), 1);
+  EXPECT_EQ(proto.service(0).name(), "FieldSpace");
+  EXPECT_EQ(proto.service(0).method_size(),
+            v1::MeshInfo::descriptor()->file()->service(0)->method_count());
+
+  // Every kind of question, answered as v1alpha answers it (errors: the same code).
+  std::vector<refl::ServerReflectionRequest> questions(7);
+  questions[0].set_file_containing_symbol("fieldspace.v1.FieldSpace");
+  questions[1].set_file_containing_symbol("grpc.health.v1.Health.Check");
+  questions[2].set_file_by_filename("fieldspace/v1/fieldspace.proto");
+  questions[3].set_all_extension_numbers_of_type("fieldspace.v1.MeshInfo");
+  questions[4].set_file_containing_symbol("fieldspace.v1.NoSuchThing");
+  questions[5].set_file_by_filename("no/such.proto");
+  questions[6].mutable_file_containing_extension()->set_containing_type("fieldspace.v1.MeshInfo");
+  questions[6].mutable_file_containing_extension()->set_extension_number(1000);
+  for (const refl::ServerReflectionRequest& question : questions) {
+    const refl::ServerReflectionResponse v1_answer = ask("v1", question);
+    const refl::ServerReflectionResponse v1alpha_answer = ask("v1alpha", question);
+    EXPECT_EQ(v1_answer.message_response_case(), v1alpha_answer.message_response_case())
+        << question.ShortDebugString();
+    EXPECT_EQ(v1_answer.error_response().error_code(), v1alpha_answer.error_response().error_code())
+        << question.ShortDebugString();
+    EXPECT_EQ(v1_answer.file_descriptor_response().SerializeAsString(),
+              v1alpha_answer.file_descriptor_response().SerializeAsString())
+        << question.ShortDebugString();
+    EXPECT_EQ(v1_answer.all_extension_numbers_response().SerializeAsString(),
+              v1alpha_answer.all_extension_numbers_response().SerializeAsString())
+        << question.ShortDebugString();
   }
 }
 
