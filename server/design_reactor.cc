@@ -2,6 +2,7 @@
 // edit, apply it on the pool, write the answer, read the next one.
 
 #include <atomic>
+#include <cstdint>
 #include <mutex>
 #include <string>
 
@@ -33,8 +34,9 @@ DesignEditorOptions EditorOptions(FieldService* service) {
 }
 
 // Design: one session per stream. Strictly sequential: read an edit, process it on the pool,
-// write the answer, read the next one.
-class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1::DesignUpdate>,
+// write the answer, read the next one. Raw: a message that does not parse ends the session with
+// INVALID_ARGUMENT (a typed stream would see it as the client closing the session).
+class DesignReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>,
                             public DrainableStream {
  public:
   DesignReactor(FieldService* service, grpc::CallbackServerContext* context)
@@ -60,7 +62,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
     service_->RegisterStream(this);
     registered_ = true;
     reading_ = true;
-    StartRead(&request_);
+    StartRead(&in_);
   }
 
   void OnReadDone(bool ok) override {
@@ -125,7 +127,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
     }
     switch (next) {
       case kRead:
-        StartRead(&request_);
+        StartRead(&in_);
         break;
       case kFinishCancelled:
         FinishWith(this, (absl::CancelledError("the client went away")));
@@ -167,9 +169,13 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
 
   void Work() {
     update_.Clear();
-    absl::Status status = cancelled_.load()
-                              ? absl::CancelledError("cancelled")
-                              : Guarded([this] { return editor_.Apply(request_, &update_); });
+    absl::Status status =
+        cancelled_.load() ? absl::CancelledError("cancelled") : Guarded([this]() -> absl::Status {
+          RETURN_IF_ERROR(ParseStreamMessage(&in_, "Design", ++messages_, &request_));
+          RETURN_IF_ERROR(editor_.Apply(request_, &update_));
+          update_.mutable_timings()->set_total_ms(MsSince(received_));
+          return SerializeToBuffer(update_, &out_);
+        });
     bool finish = false;
     {
       std::lock_guard<std::mutex> lock(mu_);
@@ -185,8 +191,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
       if (finish) FinishWith(this, (status));
       return;
     }
-    update_.mutable_timings()->set_total_ms(MsSince(received_));
-    StartWrite(&update_);
+    StartWrite(&out_);
   }
 
   FieldService* const service_;
@@ -200,6 +205,9 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
   bool finish_sent_ = false;
   bool drain_requested_ = false;
   Clock::time_point received_;
+  grpc::ByteBuffer in_;   // the message read, parsed into request_ on the pool
+  grpc::ByteBuffer out_;  // update_ serialized
+  int64_t messages_ = 0;  // read so far
   v1::DesignRequest request_;
   v1::DesignUpdate update_;
   DesignEditor editor_;
@@ -208,7 +216,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<v1::DesignRequest, v1
 
 }  // namespace
 
-grpc::ServerBidiReactor<v1::DesignRequest, v1::DesignUpdate>* NewDesignReactor(
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* NewDesignReactor(
     FieldService* service, grpc::CallbackServerContext* context) {
   return new DesignReactor(service, context);
 }

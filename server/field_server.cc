@@ -10,6 +10,7 @@
 #include <string>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -25,6 +26,8 @@
 #include "oneapi/tbb/global_control.h"
 #include "server/compute_pool.h"
 #include "server/field_service.h"
+#include "server/parse_failure_interceptor.h"
+#include "server/reflection_v1.h"
 #include "server/registry.h"
 #include "server/status_util.h"
 #include "server/store.h"
@@ -161,11 +164,18 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
 
   grpc::ServerBuilder builder;
+  builder.SetOption(ReflectionV1Option());  // v1alpha comes from the plugin above
   // gRPC sets SO_REUSEPORT by default: a second daemon on the same port would then start
   // silently and take half of the connections.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
   builder.RegisterService(s->service_.get());
+  {
+    std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
+        interceptors;
+    interceptors.push_back(NewParseFailureInterceptorFactory());
+    builder.experimental().SetInterceptorCreators(std::move(interceptors));
+  }
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_mb << 20));
   builder.SetMaxSendMessageSize(static_cast<int>(options.max_message_mb << 20));
   s->server_ = builder.BuildAndStart();

@@ -115,8 +115,8 @@ void FieldService::UnregisterStream(DrainableStream* stream) {
 
 // --- meshes ------------------------------------------------------------------------------------
 
-grpc::ServerReadReactor<v1::UploadMeshRequest>* FieldService::UploadMesh(
-    grpc::CallbackServerContext* context, v1::MeshInfo* response) {
+grpc::ServerReadReactor<grpc::ByteBuffer>* FieldService::UploadMesh(
+    grpc::CallbackServerContext* context, grpc::ByteBuffer* response) {
   return NewUploadReactor(this, context, response);
 }
 
@@ -357,7 +357,7 @@ grpc::ServerUnaryReactor* FieldService::Eigenfields(grpc::CallbackServerContext*
       });
 }
 
-grpc::ServerBidiReactor<v1::DesignRequest, v1::DesignUpdate>* FieldService::Design(
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* FieldService::Design(
     grpc::CallbackServerContext* context) {
   return NewDesignReactor(this, context);
 }

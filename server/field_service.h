@@ -57,10 +57,43 @@ class DrainableStream : public RefCounted {
   virtual void Drain() = 0;
 };
 
+// StackMixins<Base, M1, M2, ...>::type is M1<M2<...<Base>>>, as grpc_cpp_plugin composes services.
+template <typename Base, template <typename> class... Mixins>
+struct StackMixins {
+  using type = Base;
+};
+template <typename Base, template <typename> class First, template <typename> class... Rest>
+struct StackMixins<Base, First, Rest...> {
+  using type = First<typename StackMixins<Base, Rest...>::type>;
+};
+
+// FieldSpace::CallbackService with UploadMesh and Design raw (grpc::ByteBuffer), so that their
+// reactors can tell a message that does not parse from the end of the stream (ParseStreamMessage,
+// rpc_util.h). A raw mixin cannot sit on top of CallbackService (the typed Design clashes with the
+// raw one), hence the whole list (a method missing here could not be overridden below).
+using FieldSpaceService = fieldspace::v1::FieldSpace;
+using FieldServiceBase = StackMixins<
+    FieldSpaceService::Service, FieldSpaceService::WithRawCallbackMethod_UploadMesh,
+    FieldSpaceService::WithCallbackMethod_LoadMesh, FieldSpaceService::WithCallbackMethod_GetMesh,
+    FieldSpaceService::WithCallbackMethod_ListMeshes,
+    FieldSpaceService::WithCallbackMethod_DeleteMesh,
+    FieldSpaceService::WithCallbackMethod_GetMeshGeometry,
+    FieldSpaceService::WithCallbackMethod_BuildBasis,
+    FieldSpaceService::WithCallbackMethod_CancelBuild,
+    FieldSpaceService::WithCallbackMethod_GetBasis, FieldSpaceService::WithCallbackMethod_ListBases,
+    FieldSpaceService::WithCallbackMethod_DeleteBasis,
+    FieldSpaceService::WithCallbackMethod_Project, FieldSpaceService::WithCallbackMethod_Solve,
+    FieldSpaceService::WithCallbackMethod_Lift, FieldSpaceService::WithCallbackMethod_Eigenfields,
+    FieldSpaceService::WithRawCallbackMethod_Design,
+    FieldSpaceService::WithCallbackMethod_Curvature,
+    FieldSpaceService::WithCallbackMethod_Singularities,
+    FieldSpaceService::WithCallbackMethod_Smooth,
+    FieldSpaceService::WithCallbackMethod_Align>::type;
+
 // fieldspace.v1.FieldSpace on the callback API. Stateless apart from the set of open streams: it
 // translates protos to core types, asks the registry for handles, runs heavy work on the compute
 // pool and translates results back.
-class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
+class FieldService final : public FieldServiceBase {
  public:
   FieldService(Registry* registry, ComputePool* pool, ServiceOptions options);
 
@@ -83,8 +116,9 @@ class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
   ComputePool* pool() const { return pool_; }
   const ServiceOptions& options() const { return options_; }
 
-  grpc::ServerReadReactor<fieldspace::v1::UploadMeshRequest>* UploadMesh(
-      grpc::CallbackServerContext* context, fieldspace::v1::MeshInfo* response) override;
+  // Reads fieldspace.v1.UploadMeshRequest messages, answers a fieldspace.v1.MeshInfo.
+  grpc::ServerReadReactor<grpc::ByteBuffer>* UploadMesh(grpc::CallbackServerContext* context,
+                                                        grpc::ByteBuffer* response) override;
   grpc::ServerUnaryReactor* LoadMesh(grpc::CallbackServerContext* context,
                                      const fieldspace::v1::LoadMeshRequest* request,
                                      fieldspace::v1::MeshInfo* response) override;
@@ -128,7 +162,8 @@ class FieldService final : public fieldspace::v1::FieldSpace::CallbackService {
   grpc::ServerUnaryReactor* Eigenfields(grpc::CallbackServerContext* context,
                                         const fieldspace::v1::EigenfieldsRequest* request,
                                         fieldspace::v1::EigenfieldsResponse* response) override;
-  grpc::ServerBidiReactor<fieldspace::v1::DesignRequest, fieldspace::v1::DesignUpdate>* Design(
+  // Reads fieldspace.v1.DesignRequest messages, writes fieldspace.v1.DesignUpdate messages.
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Design(
       grpc::CallbackServerContext* context) override;
 
   grpc::ServerWriteReactor<fieldspace::v1::CurvatureChunk>* Curvature(

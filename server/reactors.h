@@ -11,10 +11,11 @@ namespace fieldspace::server {
 
 class FieldService;
 
-// UploadMesh: accumulates in-order chunks, then parses and registers the mesh on the pool.
-grpc::ServerReadReactor<fieldspace::v1::UploadMeshRequest>* NewUploadReactor(
-    FieldService* service, grpc::CallbackServerContext* context,
-    fieldspace::v1::MeshInfo* response);
+// UploadMesh (raw: UploadMeshRequest in, MeshInfo out): accumulates in-order chunks, then parses
+// and registers the mesh on the pool.
+grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
+                                                            grpc::CallbackServerContext* context,
+                                                            grpc::ByteBuffer* response);
 
 // GetMeshGeometry and Lift: chunks produced on the pool.
 grpc::ServerWriteReactor<fieldspace::v1::MeshGeometryChunk>* NewGeometryWriter(
@@ -34,9 +35,10 @@ grpc::ServerWriteReactor<fieldspace::v1::BuildBasisProgress>* NewBuildWatcher(
     FieldService* service, grpc::CallbackServerContext* context,
     const fieldspace::v1::BuildBasisRequest& request);
 
-// Design: one session per stream (the edit logic is DesignEditor, design_editor.h).
-grpc::ServerBidiReactor<fieldspace::v1::DesignRequest, fieldspace::v1::DesignUpdate>*
-NewDesignReactor(FieldService* service, grpc::CallbackServerContext* context);
+// Design (raw: DesignRequest in, DesignUpdate out): one session per stream (the edit logic is
+// DesignEditor, design_editor.h).
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* NewDesignReactor(
+    FieldService* service, grpc::CallbackServerContext* context);
 
 }  // namespace fieldspace::server
 

@@ -4,10 +4,12 @@
 // Building blocks of the RPC layer: how a call ends (FinishWith: the one place a reactor turns
 // an absl::Status into the call's grpc::Status), how exceptions from core are contained
 // (Guarded), reference counting for reactors other threads touch, unary calls on the compute
-// pool (RunUnary) and server-streaming calls that produce chunks on the pool (ChunkWriter).
+// pool (RunUnary), server-streaming calls that produce chunks on the pool (ChunkWriter), and the
+// parsing and serializing of messages on raw (grpc::ByteBuffer) streams.
 
 #include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <exception>
 #include <new>
 #include <utility>
@@ -47,6 +49,35 @@ absl::Status Guarded(Fn&& fn) {
   } catch (const std::exception& e) {
     return absl::InternalError(absl::StrCat("internal error: ", e.what()));
   }
+}
+
+// Raw streams (UploadMesh, Design) parse their messages themselves: on a typed stream gRPC reports
+// a message that does not parse exactly like the end of the stream (OnReadDone(false)), so a
+// corrupt upload or design session would pass for a complete one. `index` counts the stream's
+// messages from 1.
+template <typename Message>
+absl::Status ParseStreamMessage(grpc::ByteBuffer* buffer, const char* rpc, int64_t index,
+                                Message* message) {
+  if (!grpc::SerializationTraits<Message>::Deserialize(buffer, message).ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("message ", index, " of the ", rpc,
+                                                   " stream is not a valid ",
+                                                   Message::descriptor()->full_name()));
+  }
+  return absl::OkStatus();
+}
+
+// Replaces `buffer` (which may still hold the previous message) with `message`.
+template <typename Message>
+absl::Status SerializeToBuffer(const Message& message, grpc::ByteBuffer* buffer) {
+  buffer->Clear();  // gRPC's serializer asserts an empty buffer for messages beyond a few bytes
+  bool own_buffer;
+  const grpc::Status status =
+      grpc::SerializationTraits<Message>::Serialize(message, buffer, &own_buffer);
+  if (!status.ok()) {
+    return absl::InternalError(absl::StrCat("cannot serialize ", Message::descriptor()->full_name(),
+                                            ": ", status.error_message()));
+  }
+  return absl::OkStatus();
 }
 
 inline absl::Status ShuttingDown() { return absl::UnavailableError("server is shutting down"); }

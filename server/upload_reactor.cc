@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdint>
 #include <cstring>
 #include <string>
 
@@ -15,16 +16,19 @@
 namespace fieldspace::server {
 namespace {
 
-// UploadMesh: accumulates in-order chunks, then parses and registers on the pool.
-class UploadReactor final : public grpc::ServerReadReactor<v1::UploadMeshRequest> {
+// UploadMesh: accumulates in-order chunks, then parses and registers on the pool. Raw: a message
+// that does not parse ends the upload with INVALID_ARGUMENT (a typed stream would see it as the
+// end of the upload and store what came before).
+class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
  public:
-  UploadReactor(FieldService* service, grpc::CallbackServerContext* context, v1::MeshInfo* response)
+  UploadReactor(FieldService* service, grpc::CallbackServerContext* context,
+                grpc::ByteBuffer* response)
       : service_(service), response_(response) {
     if (absl::Status admit = service->Admit(context); !admit.ok()) {
       FinishWith(this, (admit));
       return;
     }
-    StartRead(&request_);
+    StartRead(&message_);
   }
 
   void OnReadDone(bool ok) override {
@@ -34,11 +38,15 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadMeshRequest
     }
     // Guarded: a header whose announced size cannot be reserved (bad_alloc, length_error) used
     // to throw out of this callback, which left the call unfinished and blocked shutdown.
-    if (absl::Status st = Guarded([this] { return Accept(); }); !st.ok()) {
+    if (absl::Status st = Guarded([this]() -> absl::Status {
+          RETURN_IF_ERROR(ParseStreamMessage(&message_, "UploadMesh", ++messages_, &request_));
+          return Accept();
+        });
+        !st.ok()) {
       FinishWith(this, st);
       return;
     }
-    StartRead(&request_);
+    StartRead(&message_);
   }
   void OnCancel() override { cancelled_.store(true); }
   void OnDone() override { delete this; }
@@ -147,12 +155,15 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadMeshRequest
     ASSIGN_OR_RETURN(MeshRecord record, service_->registry()->AddMesh(
                                             std::move(parsed.arrays), header_.name(),
                                             static_cast<int32_t>(parsed.polygons_triangulated)));
-    MeshInfoFromRecord(record, service_->registry()->IsMeshLoaded(record.id), response_);
-    return absl::OkStatus();
+    v1::MeshInfo info;
+    MeshInfoFromRecord(record, service_->registry()->IsMeshLoaded(record.id), &info);
+    return SerializeToBuffer(info, response_);
   }
 
   FieldService* const service_;
-  v1::MeshInfo* const response_;
+  grpc::ByteBuffer* const response_;
+  grpc::ByteBuffer message_;
+  int64_t messages_ = 0;  // read so far
   v1::UploadMeshRequest request_;
   v1::UploadMeshHeader header_;
   bool have_header_ = false;
@@ -162,8 +173,9 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadMeshRequest
 
 }  // namespace
 
-grpc::ServerReadReactor<v1::UploadMeshRequest>* NewUploadReactor(
-    FieldService* service, grpc::CallbackServerContext* context, v1::MeshInfo* response) {
+grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
+                                                            grpc::CallbackServerContext* context,
+                                                            grpc::ByteBuffer* response) {
   return new UploadReactor(service, context, response);
 }
 

@@ -174,7 +174,8 @@ def main():
         rc_client = ReflectionClient(d.address, args.protoc, args.grpc_proto_dir, work)
         services = rc_client.services()
         for s in ("fieldspace.v1.FieldSpace", "grpc.health.v1.Health",
-                  "grpc.reflection.v1alpha.ServerReflection"):
+                  "grpc.reflection.v1alpha.ServerReflection",
+                  "grpc.reflection.v1.ServerReflection"):
             check(s in services, "reflection lists %s: %s" % (s, services))
         rc_client.load_symbol("grpc.health.v1.Health")
         rc_client.load_symbol("fieldspace.v1.FieldSpace")

@@ -10,10 +10,16 @@
 #include <memory>
 #include <random>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "core/mesh/shapes.h"
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
+#include "google/protobuf/descriptor.pb.h"
+#include "grpc/reflection/v1/reflection.pb.h"
+#include "grpcpp/generic/generic_stub.h"
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
 #include "server/field_server.h"
@@ -93,10 +99,63 @@ class HostileInputTest : public ::testing::Test {
     return status.ok() ? id : "";
   }
 
+  // A call of `method` ("/package.Service/Method") that sends `messages` as they are (bytes that
+  // need not parse), then reads every response message until the server ends the call.
+  struct RawCall {
+    grpc::Status status;
+    std::vector<std::string> responses;
+  };
+  RawCall CallRaw(const std::string& method, const std::vector<std::string>& messages) {
+    grpc::GenericStub stub(
+        grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials()));
+    grpc::CompletionQueue cq;
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+    std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call =
+        stub.PrepareCall(&context, method, &cq);
+    // One operation at a time: each waits for its own completion.
+    const auto await = [&cq] {
+      void* tag;
+      bool ok = false;
+      EXPECT_TRUE(cq.Next(&tag, &ok));
+      return ok;
+    };
+    RawCall result;
+    call->StartCall(nullptr);
+    if (await()) {
+      for (const std::string& message : messages) {
+        grpc::Slice slice(message);
+        call->Write(grpc::ByteBuffer(&slice, 1), nullptr);
+        if (!await()) break;  // the server ended the call
+      }
+      call->WritesDone(nullptr);
+      await();
+      grpc::ByteBuffer response;
+      for (call->Read(&response, nullptr); await(); call->Read(&response, nullptr)) {
+        std::vector<grpc::Slice> slices;
+        EXPECT_TRUE(response.Dump(&slices).ok());
+        std::string bytes;
+        for (const grpc::Slice& s : slices) bytes.append(s.begin(), s.end());
+        result.responses.push_back(std::move(bytes));
+      }
+    }
+    call->Finish(&result.status, nullptr);
+    await();
+    cq.Shutdown();
+    void* tag;
+    bool ok;
+    while (cq.Next(&tag, &ok)) {
+    }
+    return result;
+  }
+
   fs::path root_;
   std::unique_ptr<FieldServer> server_;
   std::unique_ptr<v1::FieldSpace::Stub> stub_;
 };
+
+// Bytes that are no protobuf message: a field tag whose varint never ends.
+constexpr char kGarbage[] = "\xff\xff\xff\xff";
 
 // B4: an upload header announcing a size that cannot be reserved threw out of the read callback:
 // the call never finished and shutdown waited for it forever.
@@ -340,6 +399,201 @@ TEST_F(HostileInputTest, SolvesAndBuildsBeyondTheMemoryBudgetAreRefusedUpFront) 
       << refused.error_message();
   EXPECT_EQ(server_->registry()->work_in_use(), 0);  // every grant was given back
   EXPECT_TRUE(solve(16).ok());
+}
+
+// B5: a message that did not parse ended an upload as if it were complete (gRPC reports it to a
+// typed stream as the end of the stream): the first part of the mesh was stored, with OK.
+TEST_F(HostileInputTest, UploadWithAnUnparseableMessageStoresNothing) {
+  Start(FieldServerOptions());
+  auto arrays = MakeIcosphere(3, 1.0);  // 1,280 faces
+  ASSERT_TRUE(arrays.ok());
+  // OBJ in three parts cut at line ends: all vertices and half the faces (a valid mesh on its
+  // own), then a quarter of the faces twice.
+  std::vector<std::string> parts(3);
+  for (int64_t v = 0; v < arrays->vertices.rows(); ++v) {
+    absl::StrAppendFormat(&parts[0], "v %.17g %.17g %.17g\n", arrays->vertices(v, 0),
+                          arrays->vertices(v, 1), arrays->vertices(v, 2));
+  }
+  const int64_t nf = arrays->faces.rows();
+  for (int64_t f = 0; f < nf; ++f) {
+    absl::StrAppend(&parts[f < nf / 2       ? 0
+                           : f < 3 * nf / 4 ? 1
+                                            : 2],
+                    "f ", arrays->faces(f, 0) + 1, " ", arrays->faces(f, 1) + 1, " ",
+                    arrays->faces(f, 2) + 1, "\n");
+  }
+  std::vector<std::string> messages;
+  uint64_t offset = 0;
+  for (const std::string& part : parts) {
+    v1::UploadMeshRequest request;
+    if (offset == 0) {
+      request.mutable_header()->set_name("ico3.obj");
+      request.mutable_header()->set_format(v1::MESH_FORMAT_OBJ);
+    }
+    request.set_offset(offset);
+    request.set_data(part);
+    offset += part.size();
+    messages.push_back(request.SerializeAsString());
+  }
+  messages.insert(messages.begin() + 1, kGarbage);
+  const RawCall call = CallRaw("/fieldspace.v1.FieldSpace/UploadMesh", messages);
+  EXPECT_EQ(call.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(call.status.error_message(),
+            "message 2 of the UploadMesh stream is not a valid fieldspace.v1.UploadMeshRequest");
+  grpc::ClientContext context;
+  v1::ListMeshesResponse listed;
+  ASSERT_TRUE(stub_->ListMeshes(&context, v1::ListMeshesRequest(), &listed).ok());
+  EXPECT_EQ(listed.meshes_size(), 0);
+
+  // The same messages without the garbage upload the whole mesh (the test's upload is sound).
+  messages.erase(messages.begin() + 1);
+  const RawCall whole = CallRaw("/fieldspace.v1.FieldSpace/UploadMesh", messages);
+  ASSERT_TRUE(whole.status.ok()) << whole.status.error_message();
+  ASSERT_EQ(whole.responses.size(), 1u);
+  v1::MeshInfo info;
+  ASSERT_TRUE(info.ParseFromString(whole.responses[0]));
+  EXPECT_EQ(info.num_faces(), nf);
+}
+
+// B5: a Design message that did not parse ended the session with OK, as if the client had closed
+// it; the edits after it were dropped without a word.
+TEST_F(HostileInputTest, DesignWithAnUnparseableMessageIsInvalidArgument) {
+  Start(FieldServerOptions());
+  auto arrays = MakeIcosphere(2, 1.0);
+  ASSERT_TRUE(arrays.ok());
+  const std::string basis_id = Build(UploadRaw(*arrays, "ico2"), v1::FIELD_KIND_VECTOR, 20);
+  ASSERT_FALSE(basis_id.empty());
+  v1::DesignRequest open;
+  open.set_seq(1);
+  open.mutable_open()->set_basis_id(basis_id);
+  open.mutable_open()->mutable_weights()->set_mu_s(1);
+  open.mutable_open()->mutable_weights()->set_mu_c(1);
+  v1::DesignRequest add;
+  add.set_seq(3);
+  add.mutable_add()->set_id(1);
+  v1::Constraint* c = add.mutable_add()->mutable_constraint();
+  c->set_face(3);
+  c->add_value(1);
+  c->add_value(0);
+  c->set_encoding(v1::FIELD_ENCODING_DOF);
+  const RawCall call = CallRaw("/fieldspace.v1.FieldSpace/Design",
+                               {open.SerializeAsString(), kGarbage, add.SerializeAsString()});
+  EXPECT_EQ(call.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(call.status.error_message(),
+            "message 2 of the Design stream is not a valid fieldspace.v1.DesignRequest");
+  ASSERT_EQ(call.responses.size(), 1u);  // the open's update, and nothing after the garbage
+  v1::DesignUpdate update;
+  ASSERT_TRUE(update.ParseFromString(call.responses[0]));
+  EXPECT_EQ(update.seq(), 1u);
+  EXPECT_EQ(update.basis_id(), basis_id);
+}
+
+// B6: a unary or server-streaming request that did not parse got UNIMPLEMENTED with no message
+// (gRPC's answer for it in the callback API), as if the method did not exist.
+TEST_F(HostileInputTest, UnparseableRequestsAreInvalidArgumentUnknownMethodsUnimplemented) {
+  Start(FieldServerOptions());
+  const std::vector<std::pair<std::string, std::string>> methods = {
+      {"GetMesh", "GetMeshRequest"},
+      {"ListMeshes", "ListMeshesRequest"},
+      {"Solve", "SolveRequest"},
+      {"GetMeshGeometry", "GetMeshGeometryRequest"},  // server streaming
+      {"Lift", "LiftRequest"},                        // server streaming
+      {"BuildBasis", "BuildBasisRequest"},            // server streaming
+  };
+  for (const auto& [method, type] : methods) {
+    const RawCall call = CallRaw(absl::StrCat("/fieldspace.v1.FieldSpace/", method), {kGarbage});
+    EXPECT_EQ(call.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << method;
+    EXPECT_EQ(call.status.error_message(),
+              absl::StrCat("request is not a valid fieldspace.v1.", type))
+        << method;
+    EXPECT_TRUE(call.responses.empty()) << method;
+  }
+  // A request that parses is answered as before: an empty ListMeshesRequest lists no meshes, and
+  // GetMesh of an unknown id keeps its NOT_FOUND.
+  const RawCall listed = CallRaw("/fieldspace.v1.FieldSpace/ListMeshes", {""});
+  EXPECT_TRUE(listed.status.ok()) << listed.status.error_message();
+  EXPECT_EQ(listed.responses.size(), 1u);
+  v1::GetMeshRequest get;
+  get.set_mesh_id("m-0000000000000000");
+  EXPECT_EQ(
+      CallRaw("/fieldspace.v1.FieldSpace/GetMesh", {get.SerializeAsString()}).status.error_code(),
+      grpc::StatusCode::NOT_FOUND);
+  // Methods that do not exist stay UNIMPLEMENTED, garbage or not.
+  for (const std::string& method :
+       {"/fieldspace.v1.FieldSpace/NoSuchMethod", "/fieldspace.v1.NoSuchService/GetMesh"}) {
+    EXPECT_EQ(CallRaw(method, {kGarbage}).status.error_code(), grpc::StatusCode::UNIMPLEMENTED)
+        << method;
+    EXPECT_EQ(CallRaw(method, {""}).status.error_code(), grpc::StatusCode::UNIMPLEMENTED) << method;
+  }
+}
+
+// B9: server reflection v1 was UNIMPLEMENTED (gRPC 1.51 serves only v1alpha), and buf curl and
+// newer grpcurl ask v1 first. v1 must describe the server as v1alpha does (the two protocols are
+// the same messages under two package names, so the same request bytes serve both).
+TEST_F(HostileInputTest, ReflectionV1AnswersAsV1Alpha) {
+  Start(FieldServerOptions());
+  namespace refl = ::grpc::reflection::v1;
+  const auto ask = [&](const std::string& version, const refl::ServerReflectionRequest& request) {
+    const RawCall call = CallRaw(
+        absl::StrCat("/grpc.reflection.", version, ".ServerReflection/ServerReflectionInfo"),
+        {request.SerializeAsString()});
+    EXPECT_TRUE(call.status.ok()) << version << ": " << call.status.error_message();
+    refl::ServerReflectionResponse response;
+    EXPECT_EQ(call.responses.size(), 1u) << version;
+    if (call.responses.size() == 1) EXPECT_TRUE(response.ParseFromString(call.responses[0]));
+    return response;
+  };
+
+  refl::ServerReflectionRequest list;
+  list.set_list_services("");
+  const refl::ServerReflectionResponse services = ask("v1", list);
+  std::vector<std::string> names;
+  for (const refl::ServiceResponse& s : services.list_services_response().service()) {
+    names.push_back(s.name());
+  }
+  for (const char* name :
+       {"fieldspace.v1.FieldSpace", "grpc.health.v1.Health",
+        "grpc.reflection.v1alpha.ServerReflection", "grpc.reflection.v1.ServerReflection"}) {
+    EXPECT_NE(std::find(names.begin(), names.end(), name), names.end()) << name;
+  }
+  EXPECT_EQ(services.SerializeAsString(), ask("v1alpha", list).SerializeAsString());
+
+  refl::ServerReflectionRequest symbol;
+  symbol.set_file_containing_symbol("fieldspace.v1.FieldSpace");
+  const refl::ServerReflectionResponse file = ask("v1", symbol);
+  ASSERT_GE(file.file_descriptor_response().file_descriptor_proto_size(), 1);
+  google::protobuf::FileDescriptorProto proto;
+  ASSERT_TRUE(proto.ParseFromString(file.file_descriptor_response().file_descriptor_proto(0)));
+  EXPECT_EQ(proto.name(), "fieldspace/v1/fieldspace.proto");
+  ASSERT_EQ(proto.service_size(), 1);
+  EXPECT_EQ(proto.service(0).name(), "FieldSpace");
+  EXPECT_EQ(proto.service(0).method_size(),
+            v1::MeshInfo::descriptor()->file()->service(0)->method_count());
+
+  // Every kind of question, answered as v1alpha answers it (errors: the same code).
+  std::vector<refl::ServerReflectionRequest> questions(7);
+  questions[0].set_file_containing_symbol("fieldspace.v1.FieldSpace");
+  questions[1].set_file_containing_symbol("grpc.health.v1.Health.Check");
+  questions[2].set_file_by_filename("fieldspace/v1/fieldspace.proto");
+  questions[3].set_all_extension_numbers_of_type("fieldspace.v1.MeshInfo");
+  questions[4].set_file_containing_symbol("fieldspace.v1.NoSuchThing");
+  questions[5].set_file_by_filename("no/such.proto");
+  questions[6].mutable_file_containing_extension()->set_containing_type("fieldspace.v1.MeshInfo");
+  questions[6].mutable_file_containing_extension()->set_extension_number(1000);
+  for (const refl::ServerReflectionRequest& question : questions) {
+    const refl::ServerReflectionResponse v1_answer = ask("v1", question);
+    const refl::ServerReflectionResponse v1alpha_answer = ask("v1alpha", question);
+    EXPECT_EQ(v1_answer.message_response_case(), v1alpha_answer.message_response_case())
+        << question.ShortDebugString();
+    EXPECT_EQ(v1_answer.error_response().error_code(), v1alpha_answer.error_response().error_code())
+        << question.ShortDebugString();
+    EXPECT_EQ(v1_answer.file_descriptor_response().SerializeAsString(),
+              v1alpha_answer.file_descriptor_response().SerializeAsString())
+        << question.ShortDebugString();
+    EXPECT_EQ(v1_answer.all_extension_numbers_response().SerializeAsString(),
+              v1alpha_answer.all_extension_numbers_response().SerializeAsString())
+        << question.ShortDebugString();
+  }
 }
 
 }  // namespace
