@@ -14,7 +14,6 @@ landed in the middle of a write (a temporary file on disk after the kill).
 Exit 0 on success, 1 on failure, 77 (skip) if python3-grpcio / numpy are absent.
 """
 
-import argparse
 import os
 import random
 import shutil
@@ -25,26 +24,18 @@ import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from fs_testlib import (Daemon, check, check_listed_usable, geometry_key, log,  # noqa: E402
-                        perturbed_sphere, store_temp_files)
+from fs_testlib import (Daemon, check, check_listed_usable, client_test_args,  # noqa: E402
+                        geometry_key, log, perturbed_sphere, print_log_tail,
+                        store_temp_files)
 
 ROUNDS = 30
 PAUSE_MS = 150  # each save's pause: long enough to be hit, short enough for 30 rounds
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--daemon", required=True)
-    parser.add_argument("--python-dir", required=True, help="the build tree's python/ folder")
-    args = parser.parse_args()
-    try:
-        import grpc  # noqa: F401
-        import numpy  # noqa: F401
-    except ImportError as e:
-        print("SKIPPED: %s (python3-grpcio and python3-numpy are needed)" % e)
+    args, fs = client_test_args(__doc__)
+    if fs is None:
         return 77
-    sys.path.insert(0, args.python_dir)
-    import fieldspace as fs
 
     started = time.time()
     work = tempfile.mkdtemp(prefix="fs_crash_")
@@ -137,10 +128,7 @@ def main():
     except Exception:
         if d is not None and d.alive():
             d.proc.kill()
-        try:
-            sys.stderr.write("--- daemon log ---\n%s\n" % open(daemon_log).read()[-4000:])
-        except OSError:
-            pass
+        print_log_tail(daemon_log)
         raise
     finally:
         if d is not None and d.alive():

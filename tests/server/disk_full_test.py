@@ -11,7 +11,6 @@ meshes) until the store is full; then:
 Needs root (to mount the tmpfs): otherwise exit 77 (skipped), saying so.
 """
 
-import argparse
 import os
 import shutil
 import signal
@@ -21,25 +20,17 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from fs_testlib import (Daemon, check, check_listed_usable, geometry_key, log,  # noqa: E402
-                        perturbed_sphere, store_temp_files)
+from fs_testlib import (Daemon, check, check_listed_usable, client_test_args,  # noqa: E402
+                        geometry_key, log, perturbed_sphere, print_log_tail,
+                        store_temp_files)
 
 TMPFS_SIZE = "8m"
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--daemon", required=True)
-    parser.add_argument("--python-dir", required=True, help="the build tree's python/ folder")
-    args = parser.parse_args()
-    try:
-        import grpc  # noqa: F401
-        import numpy  # noqa: F401
-    except ImportError as e:
-        print("SKIPPED: %s (python3-grpcio and python3-numpy are needed)" % e)
+    args, fs = client_test_args(__doc__)
+    if fs is None:
         return 77
-    sys.path.insert(0, args.python_dir)
-    import fieldspace as fs
 
     work = tempfile.mkdtemp(prefix="fs_disk_full_")
     mount_point = os.path.join(work, "tmpfs")
@@ -126,10 +117,7 @@ def main():
         log("PASS (%.1f s)" % (time.time() - started))
         return 0
     except Exception:
-        try:
-            sys.stderr.write("--- daemon log ---\n%s\n" % open(daemon_log).read()[-4000:])
-        except OSError:
-            pass
+        print_log_tail(daemon_log)
         raise
     finally:
         if d is not None and d.alive():

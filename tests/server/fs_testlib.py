@@ -148,6 +148,36 @@ def log(message):
     sys.stdout.flush()
 
 
+def client_test_args(description):
+    """The arguments of a test that drives fieldspaced through the Python package: --daemon and
+    --python-dir, and the package `fieldspace` imported from there; the package is None (after
+    printing why the test is skipped) when python3-grpcio or numpy is absent."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--daemon", required=True)
+    parser.add_argument("--python-dir", required=True, help="the build tree's python/ folder")
+    args = parser.parse_args()
+    try:
+        import grpc  # noqa: F401
+        import numpy  # noqa: F401
+    except ImportError as e:
+        print("SKIPPED: %s (python3-grpcio and python3-numpy are needed)" % e)
+        return args, None
+    sys.path.insert(0, args.python_dir)
+    import fieldspace
+    return args, fieldspace
+
+
+def print_log_tail(path, what="daemon log"):
+    """The end of a log file on stderr (after a failure)."""
+    try:
+        with open(path, errors="replace") as f:
+            sys.stderr.write("--- %s %s ---\n%s\n" % (what, path, f.read()[-4000:]))
+    except OSError:
+        pass
+
+
 _SPHERES = {}
 
 
@@ -164,7 +194,7 @@ def perturbed_sphere(subdivisions, seed):
 
 
 def geometry_key(V, F):
-    """A digest of a mesh's canonical arrays (float64 vertices, int32 faces) to match round trips."""
+    """A digest of a mesh's canonical arrays (float64 vertices, int32 faces): round trips match."""
     import hashlib
     import numpy as np
 

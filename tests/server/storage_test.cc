@@ -342,15 +342,23 @@ class RegistryRepairTest : public StoreTest {
     return false;
   }
 
+  // Truncates the mesh file of MeshAndBasis's mesh and restarts: the basis, undamaged, fails to
+  // load through its mesh.
+  std::unique_ptr<Registry> StartWithTruncatedMesh(const std::string& mesh_id,
+                                                   const std::string& basis_id) {
+    const std::string path = store_->MeshPath(mesh_id);
+    fs::resize_file(path, fs::file_size(path) / 2);
+    auto registry = Start();
+    EXPECT_THAT(registry->GetBasis(basis_id), StatusIs(absl::StatusCode::kDataLoss));
+    return registry;
+  }
+
   ComputePool pool_{ComputePool::Options{1, 1}};
 };
 
 TEST_F(RegistryRepairTest, TruncatedMeshRepairedByUploadServesItsUndamagedBasisAgain) {
   const auto [mesh_id, basis_id] = MeshAndBasis();
-  const std::string path = store_->MeshPath(mesh_id);
-  fs::resize_file(path, fs::file_size(path) / 2);
-  auto registry = Start();
-  EXPECT_THAT(registry->GetBasis(basis_id), StatusIs(absl::StatusCode::kDataLoss));
+  auto registry = StartWithTruncatedMesh(mesh_id, basis_id);
   ASSERT_TRUE(registry->AddMesh(Sphere(), "sphere", 0).ok());
   // Without a restart: the mesh is served, its basis loads and is listed.
   EXPECT_TRUE(registry->GetMesh(mesh_id).ok());
@@ -362,15 +370,12 @@ TEST_F(RegistryRepairTest, TruncatedMeshRepairedByUploadServesItsUndamagedBasisA
 
 TEST_F(RegistryRepairTest, CascadeDeleteRemovesBasesThatFailedThroughTheirMesh) {
   const auto [mesh_id, basis_id] = MeshAndBasis();
-  const std::string path = store_->MeshPath(mesh_id);
-  fs::resize_file(path, fs::file_size(path) / 2);
-  auto registry = Start();
-  EXPECT_THAT(registry->GetBasis(basis_id), StatusIs(absl::StatusCode::kDataLoss));
+  auto registry = StartWithTruncatedMesh(mesh_id, basis_id);
   auto deleted = registry->DeleteMesh(mesh_id, /*cascade=*/true);
   ASSERT_TRUE(deleted.ok()) << deleted.status();
   EXPECT_THAT(*deleted, ::testing::ElementsAre(basis_id));
   EXPECT_FALSE(fs::exists(store_->BasisPath(basis_id)));
-  EXPECT_FALSE(fs::exists(path));
+  EXPECT_FALSE(fs::exists(store_->MeshPath(mesh_id)));
 }
 
 TEST_F(RegistryRepairTest, UploadRewritesAPayloadDamagedMeshBeforeItsFirstLoad) {
