@@ -16,17 +16,14 @@ Exit 0 on success, 1 on failure, 77 (skip) if python3-grpcio / numpy are absent.
 
 import os
 import random
-import shutil
 import signal
 import sys
-import tempfile
 import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from fs_testlib import (Daemon, check, check_listed_usable, client_test_args,  # noqa: E402
-                        geometry_key, log, perturbed_sphere, print_log_tail,
-                        store_temp_files)
+                        daemon_workdir, geometry_key, log, perturbed_sphere, store_temp_files)
 
 ROUNDS = 30
 PAUSE_MS = 150  # each save's pause: long enough to be hit, short enough for 30 rounds
@@ -38,20 +35,18 @@ def main():
         return 77
 
     started = time.time()
-    work = tempfile.mkdtemp(prefix="fs_crash_")
-    store = os.path.join(work, "store")
-    daemon_log = os.path.join(work, "daemon.log")
     uploaded = set()       # geometry keys of every mesh ever sent
     acknowledged = set()   # mesh and basis ids answered OK
     lifted = {}            # basis id -> DOF values of its first lift after a restart
     listed = []            # mesh ids listed after the last restart
     kills = {"total": 0, "mid_write": 0, "mesh": 0, "basis": 0}
-    d = None
-    try:
+    daemons = []
+    with daemon_workdir("fs_crash_", daemons) as (_, store, daemon_log):
         for r in range(ROUNDS):
             rng = random.Random(1000 + r)
             d = Daemon(args.daemon, store, log=daemon_log,
                        extra=["--debug-save-pause-ms", str(PAUSE_MS)]).start()
+            daemons.append(d)
             client = fs.Client(d.address, timeout=30)
             first_upload = threading.Event()
             fresh = []
@@ -106,6 +101,7 @@ def main():
             client.close()
 
             d = Daemon(args.daemon, store, log=daemon_log).start()
+            daemons.append(d)
             client = fs.Client(d.address, timeout=60)
             check(store_temp_files(store) == [], "temporary files left after the restart: %s" %
                   store_temp_files(store))
@@ -125,15 +121,6 @@ def main():
         check(kills["mid_write"] >= ROUNDS // 2, "too few kills landed mid-write: %s" % kills)
         log("PASS")
         return 0
-    except Exception:
-        if d is not None and d.alive():
-            d.proc.kill()
-        print_log_tail(daemon_log)
-        raise
-    finally:
-        if d is not None and d.alive():
-            d.proc.kill()
-        shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":

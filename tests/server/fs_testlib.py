@@ -1,12 +1,15 @@
 """Helpers shared by the end-to-end tests: meshes made in code, a daemon process, the CLI."""
 
+import contextlib
 import json
 import math
 import os
 import select
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 
@@ -169,13 +172,33 @@ def client_test_args(description):
     return args, fieldspace
 
 
-def print_log_tail(path, what="daemon log"):
-    """The end of a log file on stderr (after a failure)."""
+@contextlib.contextmanager
+def daemon_workdir(prefix, daemons):
+    """A temporary folder for a test of daemons: yields (folder, its store/, the daemons' log
+    path). On an exception prints the log's tail; at the end kills the daemons in `daemons` (a
+    list the test appends its Daemons to) that are still alive and removes the folder."""
+    work = tempfile.mkdtemp(prefix=prefix)
+    log_path = os.path.join(work, "daemon.log")
     try:
-        with open(path, errors="replace") as f:
-            sys.stderr.write("--- %s %s ---\n%s\n" % (what, path, f.read()[-4000:]))
-    except OSError:
-        pass
+        yield work, os.path.join(work, "store"), log_path
+    except BaseException:
+        try:
+            with open(log_path, errors="replace") as f:
+                sys.stderr.write("--- daemon log %s ---\n%s\n" % (log_path, f.read()[-4000:]))
+        except OSError:
+            pass
+        raise
+    finally:
+        kill_alive(daemons)
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def kill_alive(daemons):
+    """SIGKILL to each of `daemons` still alive; waits for them to exit."""
+    for d in daemons:
+        if d.alive():
+            d.proc.kill()
+            d.proc.wait(30)
 
 
 _SPHERES = {}

@@ -12,14 +12,12 @@ Exit 0 on success, 1 on failure, 77 (skip) if python3-grpcio / numpy are absent.
 """
 
 import os
-import shutil
 import signal
 import sys
-import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from fs_testlib import (Daemon, check, check_listed_usable, client_test_args,  # noqa: E402
-                        geometry_key, log, perturbed_sphere, print_log_tail)
+                        daemon_workdir, geometry_key, log, perturbed_sphere)
 
 
 def main():
@@ -28,17 +26,15 @@ def main():
         return 77
     import numpy as np
 
-    work = tempfile.mkdtemp(prefix="fs_store_repair_")
-    store = os.path.join(work, "store")
-    daemon_log = os.path.join(work, "daemon.log")
-    d = None
+    daemons = []
 
-    def restart():
-        nonlocal d
-        if d is not None:
-            check(d.stop(signal.SIGTERM) == 0, "SIGTERM exits 0")
-        d = Daemon(args.daemon, store, log=daemon_log).start()
-        return fs.Client(d.address, timeout=60)
+    def start(store, daemon_log):
+        daemons.append(Daemon(args.daemon, store, log=daemon_log).start())
+        return fs.Client(daemons[-1].address, timeout=60)
+
+    def stop(client):
+        client.close()
+        check(daemons[-1].stop(signal.SIGTERM) == 0, "SIGTERM exits 0")
 
     def expect_error(error_class, call, *call_args):
         try:
@@ -48,8 +44,8 @@ def main():
             return
         check(False, "%s%s succeeded" % (call.__name__, call_args))
 
-    try:
-        client = restart()
+    with daemon_workdir("fs_store_repair_", daemons) as (_, store, daemon_log):
+        client = start(store, daemon_log)
         truncated, flipped = perturbed_sphere(2, 1), perturbed_sphere(2, 2)
         uploaded = {geometry_key(*truncated), geometry_key(*flipped)}
         m1 = client.upload(*truncated).id
@@ -57,9 +53,7 @@ def main():
         basis = client.build(m1, "vector", 12, progress=False)
         x = np.linspace(-1, 1, client.basis(basis).columns)
         before = client.lift(basis, x, encoding="dof")
-        client.close()
-        d.stop(signal.SIGTERM)
-        d = None
+        stop(client)
 
         path = os.path.join(store, "meshes", m1 + ".fsmesh")
         os.truncate(path, os.path.getsize(path) // 2)
@@ -71,7 +65,7 @@ def main():
         with open(os.path.join(store, "bases", "stray.fsbasis"), "wb") as f:
             f.write(b"not a basis")
 
-        client = restart()
+        client = start(store, daemon_log)
         # a. The truncated mesh, repaired by an upload: its basis is served again, no restart.
         expect_error(fs.DataLoss, client.lift, basis, x)
         check(client.upload(*truncated).id == m1, "same id")
@@ -88,9 +82,9 @@ def main():
               "the foreign mesh file is deleted")
         check(not os.path.exists(os.path.join(store, "bases", "stray.fsbasis")),
               "the stray basis file is deleted")
-        client.close()
+        stop(client)
 
-        client = restart()
+        client = start(store, daemon_log)
         V, F = client.mesh_geometry(m2)
         check(geometry_key(V, F) == geometry_key(*flipped), "the rewritten mesh loads intact")
         expect_error(fs.NotFound, client.mesh, "foreign-copy")
@@ -98,17 +92,9 @@ def main():
         meshes, bases = check_listed_usable(client, store, uploaded, {basis: before})
         check(sorted(meshes) == sorted([m1, m2]) and bases == [basis],
               "listed: %s %s" % (meshes, bases))
-        client.close()
-        check(d.stop(signal.SIGTERM) == 0, "SIGTERM exits 0")
+        stop(client)
         log("PASS")
         return 0
-    except Exception:
-        print_log_tail(daemon_log)
-        raise
-    finally:
-        if d is not None and d.alive():
-            d.proc.kill()
-        shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":
