@@ -309,17 +309,24 @@ absl::StatusOr<MeshRecord> Registry::AddMesh(MeshArrays arrays, const std::strin
   record.polygons_triangulated = polygons_triangulated;
   record.created_unix_ms = NowUnixMs();
   SyncMesh(record.id);
+  std::optional<MeshRecord> listed;  // known from its file's header alone
   {
     std::lock_guard<std::mutex> lock(mu_);
     auto it = meshes_.find(record.id);
     if (it != meshes_.end() && it->second.damaged.ok()) {
       it->second.last_used = ++clock_;
-      return it->second.record;
+      if (it->second.loaded != nullptr) return it->second.record;
+      listed = it->second.record;
     }
   }
-  // Not known (or its file is damaged, which this upload repairs): persist first, then publish,
-  // so that a listed mesh always survives a restart.
-  RETURN_IF_ERROR(store_->SaveMesh(record, mesh.vertices(), mesh.faces()));
+  // A listed file that was never loaded may still have a damaged payload: check it and rewrite it
+  // unless it holds this mesh. Not known, or damaged (which this upload repairs): persist first,
+  // then publish, so that a listed mesh always survives a restart.
+  if (listed && store_->VerifyMesh(record.id, mesh.vertices(), mesh.faces()).ok()) {
+    record = *std::move(listed);
+  } else {
+    RETURN_IF_ERROR(store_->SaveMesh(record, mesh.vertices(), mesh.faces()));
+  }
   auto shared = std::make_shared<const TriangleMesh>(std::move(mesh));
   const int64_t bytes = shared->MemoryBytes();
   std::lock_guard<std::mutex> lock(mu_);
@@ -327,6 +334,13 @@ absl::StatusOr<MeshRecord> Registry::AddMesh(MeshArrays arrays, const std::strin
   MeshEntry& e = it->second;
   if (!inserted && e.damaged.ok() && e.loaded != nullptr) return e.record;  // lost a race
   if (e.loaded != nullptr) memory_in_use_ -= e.bytes;
+  // A repair: bases that failed to load because this mesh was damaged load again (a basis whose
+  // own file is damaged fails again on its next load).
+  if (!inserted) {
+    for (auto& [bid, b] : bases_) {
+      if (b.record.key.mesh_id == record.id) b.damaged = absl::OkStatus();
+    }
+  }
   e.record = record;
   e.damaged = absl::OkStatus();
   e.loaded = std::move(shared);
@@ -371,7 +385,7 @@ absl::StatusOr<std::vector<std::string>> Registry::DeleteMesh(const std::string&
     auto it = meshes_.find(id);
     if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
     for (const auto& [bid, e] : bases_) {
-      if (e.damaged.ok() && e.record.key.mesh_id == id) basis_ids.push_back(bid);
+      if (e.record.key.mesh_id == id) basis_ids.push_back(bid);
     }
     for (const auto& [bid, job] : builds_) {
       if (job->pending_record().key.mesh_id == id) jobs.push_back(job);

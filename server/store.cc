@@ -317,6 +317,12 @@ bool ValidId(std::string_view id, char prefix) {
   return true;
 }
 
+// What Scan can report as an id: the name of a file in the store's folder without its extension
+// (a damaged or foreign file's name need not be a valid id). Never a path.
+bool IsFileStem(std::string_view id) {
+  return !id.empty() && id[0] != '.' && id.find_first_of(std::string_view("/\0", 2)) == id.npos;
+}
+
 // The container of `id` at `path` with its record decoded: NotFound for an id that is not one of
 // `prefix`'s, DataLoss for metadata that does not decode or names another id.
 template <typename Record>
@@ -426,7 +432,8 @@ absl::Status Store::SaveMesh(const MeshRecord& record, const VertexMatrix& V,
   const std::string meta = EncodeMeshRecord(record);
   const std::string header =
       EncodeHeader(kMeshMagic, meta, v_bytes.size() + f_bytes.size(), hasher.Digest());
-  return WriteAtomically(MeshPath(record.id), header, meta, {v_bytes, f_bytes}, 0);
+  return WriteAtomically(MeshPath(record.id), header, meta, {v_bytes, f_bytes},
+                         options_.save_pause_ms);
 }
 
 absl::StatusOr<MeshArrays> Store::LoadMesh(const std::string& id) const {
@@ -448,6 +455,16 @@ absl::StatusOr<MeshArrays> Store::LoadMesh(const std::string& id) const {
        {reinterpret_cast<char*>(arrays.faces.data()), sizeof(int32_t) * arrays.faces.size()}},
       path));
   return arrays;
+}
+
+absl::Status Store::VerifyMesh(const std::string& id, const VertexMatrix& V,
+                               const FaceMatrix& F) const {
+  ASSIGN_OR_RETURN(MeshArrays stored, LoadMesh(id));
+  if (stored.vertices.rows() != V.rows() || stored.faces.rows() != F.rows() ||
+      stored.vertices != V || stored.faces != F) {
+    return absl::DataLossError(MeshPath(id) + ": holds another mesh than its id names");
+  }
+  return absl::OkStatus();
 }
 
 absl::Status Store::SaveBasis(const BasisRecord& record,
@@ -497,7 +514,7 @@ bool Store::HasBasis(const std::string& id) const {
 }
 
 absl::Status Store::DeleteMesh(const std::string& id) const {
-  if (!ValidId(id, 'm')) return absl::OkStatus();
+  if (!IsFileStem(id)) return absl::OkStatus();
   if (::unlink(MeshPath(id).c_str()) != 0 && errno != ENOENT) {
     return StoreErrnoStatus(errno, "deleting " + MeshPath(id));
   }
@@ -505,7 +522,7 @@ absl::Status Store::DeleteMesh(const std::string& id) const {
 }
 
 absl::Status Store::DeleteBasis(const std::string& id) const {
-  if (!ValidId(id, 'b')) return absl::OkStatus();
+  if (!IsFileStem(id)) return absl::OkStatus();
   if (::unlink(BasisPath(id).c_str()) != 0 && errno != ENOENT) {
     return StoreErrnoStatus(errno, "deleting " + BasisPath(id));
   }

@@ -16,8 +16,8 @@
 namespace fieldspace::server {
 
 struct StoreOptions {
-  // Testing only: pause this long in the middle of writing a basis payload (before the fsync and
-  // the rename), so that a crash test can kill the process during a save.
+  // Testing only: pause this long in the middle of writing a mesh or basis payload (before the
+  // fsync and the rename), so that a crash test can kill the process during a save.
   int32_t save_pause_ms = 0;
   // Several daemons use the store (--shared-store): Open leaves other daemons' temporary files
   // alone unless they are older than `stale_temp_age` (a save in progress keeps writing).
@@ -64,6 +64,9 @@ class Store {
   absl::Status SaveMesh(const MeshRecord& record, const VertexMatrix& V, const FaceMatrix& F) const;
   // NotFound if absent, DataLoss if damaged.
   absl::StatusOr<MeshArrays> LoadMesh(const std::string& id) const;
+  // OK if the file of `id` holds exactly V and F (reads and checks the whole payload: a header
+  // that Scan found fine says nothing about it). NotFound if absent, DataLoss otherwise.
+  absl::Status VerifyMesh(const std::string& id, const VertexMatrix& V, const FaceMatrix& F) const;
 
   // Basis payload: opaque serialized bytes (see registry.cc), possibly in several pieces that are
   // concatenated.
@@ -85,7 +88,8 @@ class Store {
   // DIR/leases: build leases of a shared store (server/lease.h).
   std::string LeaseDir() const { return dir_ + "/leases"; }
 
-  // OK if the file did not exist.
+  // OK if the file did not exist. `id` may be any id Scan reported, including the name of a
+  // damaged file that is not a valid id.
   absl::Status DeleteMesh(const std::string& id) const;
   absl::Status DeleteBasis(const std::string& id) const;
 

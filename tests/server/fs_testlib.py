@@ -1,12 +1,15 @@
 """Helpers shared by the end-to-end tests: meshes made in code, a daemon process, the CLI."""
 
+import contextlib
 import json
 import math
 import os
 import select
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 
 
@@ -146,3 +149,114 @@ def check(condition, message):
 def log(message):
     print(message, flush=True)
     sys.stdout.flush()
+
+
+def client_test_args(description):
+    """The arguments of a test that drives fieldspaced through the Python package: --daemon and
+    --python-dir, and the package `fieldspace` imported from there; the package is None (after
+    printing why the test is skipped) when python3-grpcio or numpy is absent."""
+    import argparse
+
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--daemon", required=True)
+    parser.add_argument("--python-dir", required=True, help="the build tree's python/ folder")
+    args = parser.parse_args()
+    try:
+        import grpc  # noqa: F401
+        import numpy  # noqa: F401
+    except ImportError as e:
+        print("SKIPPED: %s (python3-grpcio and python3-numpy are needed)" % e)
+        return args, None
+    sys.path.insert(0, args.python_dir)
+    import fieldspace
+    return args, fieldspace
+
+
+@contextlib.contextmanager
+def daemon_workdir(prefix, daemons):
+    """A temporary folder for a test of daemons: yields (folder, its store/, the daemons' log
+    path). On an exception prints the log's tail; at the end kills the daemons in `daemons` (a
+    list the test appends its Daemons to) that are still alive and removes the folder."""
+    work = tempfile.mkdtemp(prefix=prefix)
+    log_path = os.path.join(work, "daemon.log")
+    try:
+        yield work, os.path.join(work, "store"), log_path
+    except BaseException:
+        try:
+            with open(log_path, errors="replace") as f:
+                sys.stderr.write("--- daemon log %s ---\n%s\n" % (log_path, f.read()[-4000:]))
+        except OSError:
+            pass
+        raise
+    finally:
+        kill_alive(daemons)
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def kill_alive(daemons):
+    """SIGKILL to each of `daemons` still alive; waits for them to exit."""
+    for d in daemons:
+        if d.alive():
+            d.proc.kill()
+            d.proc.wait(30)
+
+
+_SPHERES = {}
+
+
+def perturbed_sphere(subdivisions, seed):
+    """(V, F) numpy arrays of icosphere_obj(subdivisions) with every vertex moved by up to 1%
+    (seeded): a mesh with its own content hash, hence its own mesh id, for every seed."""
+    import numpy as np
+
+    if subdivisions not in _SPHERES:
+        _SPHERES[subdivisions] = obj_arrays(icosphere_obj(subdivisions)[0])
+    V, F = _SPHERES[subdivisions]
+    rng = np.random.default_rng(seed)
+    return V * (1 + 0.01 * rng.uniform(-1, 1, (len(V), 1))), F.copy()
+
+
+def geometry_key(V, F):
+    """A digest of a mesh's canonical arrays (float64 vertices, int32 faces): round trips match."""
+    import hashlib
+    import numpy as np
+
+    return hashlib.sha256(np.ascontiguousarray(V, dtype="<f8").tobytes() +
+                          np.ascontiguousarray(F, dtype="<i4").tobytes()).hexdigest()
+
+
+def store_temp_files(store):
+    """Temporary files of saves in progress (or interrupted) in a store's meshes/ and bases/."""
+    return sorted(os.path.join(sub, name) for sub in ("meshes", "bases")
+                  for name in os.listdir(os.path.join(store, sub)) if ".tmp-" in name)
+
+
+def check_listed_usable(client, store, uploaded, lifted):
+    """Every file in the store is listed (none is damaged: after a crash a file is complete or
+    absent) and every mesh and basis the daemon lists is usable: each mesh's geometry is exactly
+    one that was uploaded (`uploaded`: geometry_key values) and each basis is ready, on a listed
+    mesh, and lifts; a basis lifted before (`lifted`: basis id -> DOF values, filled in here)
+    lifts to the same values. Returns (mesh ids, basis ids)."""
+    import re
+    import numpy as np
+
+    meshes = [m.id for m in client.meshes()]
+    bases = client.bases()
+    for sub, ext, ids in (("meshes", ".fsmesh", meshes),
+                          ("bases", ".fsbasis", [b.id for b in bases])):
+        files = sorted(name[:-len(ext)] for name in os.listdir(os.path.join(store, sub))
+                       if name.endswith(ext))
+        check(files == sorted(ids), "%s: files %s, listed %s" % (sub, files, sorted(ids)))
+    for mesh_id in meshes:
+        check(re.fullmatch(r"m-[0-9a-f]{16}", mesh_id) is not None, "listed mesh id %r" % mesh_id)
+        V, F = client.mesh_geometry(mesh_id)
+        check(geometry_key(V, F) in uploaded, "mesh %s holds a geometry never uploaded" % mesh_id)
+    for b in bases:
+        check(re.fullmatch(r"b-[0-9a-f]{16}", b.id) is not None, "listed basis id %r" % b.id)
+        check(b.state == "ready" and b.mesh_id in meshes, "basis %s: %s" % (b.id, b))
+        values = client.lift(b.id, np.linspace(-1, 1, b.columns), encoding="dof")
+        check(np.all(np.isfinite(values)), "basis %s lifts to non-finite values" % b.id)
+        if b.id in lifted:
+            check(np.array_equal(lifted[b.id], values), "basis %s lifts differently" % b.id)
+        lifted[b.id] = values
+    return meshes, [b.id for b in bases]

@@ -1,5 +1,6 @@
 // Unit tests of the server's building blocks: XXH64, the store (atomic writes, checksums, damage
-// detection), the compute pool and the status mapping.
+// detection), repairs of damaged entries through the registry, the compute pool and the status
+// mapping.
 
 #include <sys/stat.h>
 
@@ -21,6 +22,7 @@
 #include "server/status_util.h"
 #include "server/store.h"
 #include "tests/testing/matchers.h"
+#include "tests/testing/test_meshes.h"
 
 namespace fieldspace::server {
 namespace {
@@ -256,6 +258,10 @@ TEST_F(StoreTest, MissingAndInvalidIds) {
   r.num_faces = 3;
   EXPECT_THAT(store_->SaveMesh(r, V, F), StatusIs(absl::StatusCode::kInvalidArgument));
   EXPECT_TRUE(store_->DeleteMesh("m-0000000000000000").ok());
+  // Ids that are names of files elsewhere delete nothing.
+  std::ofstream(dir_ / "outside.fsmesh") << "x";
+  EXPECT_TRUE(store_->DeleteMesh("../outside").ok());
+  EXPECT_TRUE(fs::exists(dir_ / "outside.fsmesh"));
 }
 
 TEST_F(StoreTest, OpenRemovesTemporaryFilesOfInterruptedSaves) {
@@ -293,6 +299,124 @@ TEST_F(StoreTest, SavePauseLeavesOnlyATemporaryFileMidway) {
   writer.join();
   EXPECT_TRUE(fs::exists((*slow)->BasisPath(r.id)));
   EXPECT_EQ((*slow)->LoadBasis(r.id)->payload, payload);
+}
+
+// --- repairs of damaged entries (issue 15, B7) -------------------------------------------------
+
+class RegistryRepairTest : public StoreTest {
+ protected:
+  // A registry on the store, as after a (re)start.
+  std::unique_ptr<Registry> Start() {
+    RegistryOptions options;
+    options.build_threads = 1;
+    auto registry = Registry::Create(store_.get(), &pool_, options);
+    EXPECT_TRUE(registry.ok()) << registry.status();
+    return registry.ok() ? std::move(*registry) : nullptr;
+  }
+  static MeshArrays Sphere() {
+    const TriangleMesh mesh = ::fieldspace::testing::Icosphere(2);
+    return MeshArrays{mesh.vertices(), mesh.faces()};
+  }
+  // Stores a mesh and a vector basis on it (d 20); returns their ids.
+  std::pair<std::string, std::string> MeshAndBasis() {
+    auto registry = Start();
+    auto mesh = registry->AddMesh(Sphere(), "sphere", 0);
+    EXPECT_TRUE(mesh.ok()) << mesh.status();
+    BuildRequest request;
+    request.key.mesh_id = mesh->id;
+    request.key.field = FieldType::Vector();
+    request.key.dimension = 20;
+    auto started = registry->StartBuild(std::move(request));
+    EXPECT_TRUE(started.ok() && started->job != nullptr);
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!started->job->progress().finished && std::chrono::steady_clock::now() < give_up) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    EXPECT_TRUE(started->job->progress().status.ok()) << started->job->progress().status;
+    return {mesh->id, started->job->basis_id()};
+  }
+  static bool Lists(const Registry& registry, const std::string& basis_id) {
+    for (const BasisStatus& s : registry.ListBases("")) {
+      if (s.record.id == basis_id) return true;
+    }
+    return false;
+  }
+
+  // Truncates the mesh file of MeshAndBasis's mesh and restarts: the basis, undamaged, fails to
+  // load through its mesh.
+  std::unique_ptr<Registry> StartWithTruncatedMesh(const std::string& mesh_id,
+                                                   const std::string& basis_id) {
+    const std::string path = store_->MeshPath(mesh_id);
+    fs::resize_file(path, fs::file_size(path) / 2);
+    auto registry = Start();
+    EXPECT_THAT(registry->GetBasis(basis_id), StatusIs(absl::StatusCode::kDataLoss));
+    return registry;
+  }
+
+  ComputePool pool_{ComputePool::Options{1, 1}};
+};
+
+TEST_F(RegistryRepairTest, TruncatedMeshRepairedByUploadServesItsUndamagedBasisAgain) {
+  const auto [mesh_id, basis_id] = MeshAndBasis();
+  auto registry = StartWithTruncatedMesh(mesh_id, basis_id);
+  ASSERT_TRUE(registry->AddMesh(Sphere(), "sphere", 0).ok());
+  // Without a restart: the mesh is served, its basis loads and is listed.
+  EXPECT_TRUE(registry->GetMesh(mesh_id).ok());
+  auto basis = registry->GetBasis(basis_id);
+  EXPECT_TRUE(basis.ok()) << basis.status();
+  EXPECT_TRUE(Lists(*registry, basis_id));
+  EXPECT_TRUE(registry->GetBasisStatus(basis_id).ok());
+}
+
+TEST_F(RegistryRepairTest, CascadeDeleteRemovesBasesThatFailedThroughTheirMesh) {
+  const auto [mesh_id, basis_id] = MeshAndBasis();
+  auto registry = StartWithTruncatedMesh(mesh_id, basis_id);
+  auto deleted = registry->DeleteMesh(mesh_id, /*cascade=*/true);
+  ASSERT_TRUE(deleted.ok()) << deleted.status();
+  EXPECT_THAT(*deleted, ::testing::ElementsAre(basis_id));
+  EXPECT_FALSE(fs::exists(store_->BasisPath(basis_id)));
+  EXPECT_FALSE(fs::exists(store_->MeshPath(mesh_id)));
+}
+
+TEST_F(RegistryRepairTest, UploadRewritesAPayloadDamagedMeshBeforeItsFirstLoad) {
+  auto added = Start()->AddMesh(Sphere(), "sphere", 0);
+  ASSERT_TRUE(added.ok()) << added.status();
+  const std::string mesh_id = added->id;
+  FlipByte(store_->MeshPath(mesh_id), 5);  // inside the face array; the header is fine
+  {
+    auto registry = Start();
+    ASSERT_TRUE(registry->GetMeshRecord(mesh_id).ok());  // listed from its header
+    auto again = registry->AddMesh(Sphere(), "sphere", 0);
+    ASSERT_TRUE(again.ok()) << again.status();
+    EXPECT_EQ(again->id, mesh_id);
+  }
+  EXPECT_TRUE(store_->LoadMesh(mesh_id).ok()) << store_->LoadMesh(mesh_id).status();
+  // After a restart: an upload over the intact file leaves it alone (same record, created time
+  // included), and the mesh loads.
+  auto restarted = Start();
+  const MeshRecord before = *restarted->GetMeshRecord(mesh_id);
+  auto same = restarted->AddMesh(Sphere(), "other name", 0);
+  ASSERT_TRUE(same.ok()) << same.status();
+  EXPECT_EQ(same->name, before.name);
+  EXPECT_EQ(same->created_unix_ms, before.created_unix_ms);
+  EXPECT_TRUE(Start()->GetMesh(mesh_id).ok());
+}
+
+TEST_F(RegistryRepairTest, DeletingDamagedEntriesWithForeignFileNamesRemovesTheFiles) {
+  std::ofstream(dir_ / "meshes" / "foreign.fsmesh") << "not a mesh";
+  std::ofstream(dir_ / "bases" / "stray copy.fsbasis") << "not a basis";
+  {
+    auto registry = Start();
+    EXPECT_THAT(registry->GetMeshRecord("foreign"), StatusIs(absl::StatusCode::kDataLoss));
+    EXPECT_THAT(registry->GetBasisStatus("stray copy"), StatusIs(absl::StatusCode::kDataLoss));
+    EXPECT_TRUE(registry->DeleteMesh("foreign", false).ok());
+    EXPECT_TRUE(registry->DeleteBasis("stray copy").ok());
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "meshes" / "foreign.fsmesh"));
+  EXPECT_FALSE(fs::exists(dir_ / "bases" / "stray copy.fsbasis"));
+  auto restarted = Start();
+  EXPECT_THAT(restarted->GetMeshRecord("foreign"), StatusIs(absl::StatusCode::kNotFound));
+  EXPECT_THAT(restarted->GetBasisStatus("stray copy"), StatusIs(absl::StatusCode::kNotFound));
 }
 
 // --- compute pool ------------------------------------------------------------------------------
