@@ -93,6 +93,11 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
         return absl::ResourceExhaustedError(absl::StrCat(
             "upload of ", header_.total_bytes(), " bytes exceeds the limit of ", limit, " bytes"));
       }
+      if (header_.format() == v1::MESH_FORMAT_RAW) {
+        RETURN_IF_ERROR(Admit(24 * header_.num_vertices() + 12 * header_.num_faces()));
+      } else {
+        RETURN_IF_ERROR(Admit(static_cast<int64_t>(header_.total_bytes())));
+      }
       // Reserve up front only what is cheap to hold; larger uploads grow as chunks arrive.
       constexpr uint64_t kMaxReserve = uint64_t{256} << 20;
       if (header_.total_bytes() > 0) data_.reserve(std::min(header_.total_bytes(), kMaxReserve));
@@ -108,8 +113,24 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
       return absl::ResourceExhaustedError(
           absl::StrCat("upload exceeds the limit of ", limit, " bytes"));
     }
+    RETURN_IF_ERROR(Admit(static_cast<int64_t>(data_.size() + request_.data().size())));
     data_.append(request_.data());
     request_.Clear();
+    return absl::OkStatus();
+  }
+
+  // Admits the memory of an upload of `bytes` against the memory budget: twice its size (parsing
+  // holds the bytes and the arrays they become). Beyond the size the registry always admits, in
+  // steps of kAdmitStep as unannounced uploads grow (each step is checked).
+  absl::Status Admit(int64_t bytes) {
+    constexpr int64_t kAdmitStep = int64_t{16} << 20;
+    if (2 * bytes <= grant_.bytes()) return absl::OkStatus();
+    const int64_t want = 2 * bytes <= Registry::kSmallWorkBytes
+                             ? 2 * bytes
+                             : (2 * bytes + kAdmitStep - 1) / kAdmitStep * kAdmitStep;
+    ASSIGN_OR_RETURN(WorkGrant more,
+                     service_->registry()->AdmitWork(want - grant_.bytes(), "this upload"));
+    grant_.Merge(std::move(more));
     return absl::OkStatus();
   }
 
@@ -168,6 +189,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   v1::UploadMeshHeader header_;
   bool have_header_ = false;
   std::string data_;
+  WorkGrant grant_;  // the upload's admitted memory (Admit)
   std::atomic<bool> cancelled_{false};
 };
 

@@ -41,6 +41,13 @@ class WorkGrant {
   ~WorkGrant() { Release(); }
 
   int64_t bytes() const { return bytes_; }
+  // Takes over `more` (of the same account, or empty): one grant of both sizes.
+  void Merge(WorkGrant more) {
+    if (more.account_ == nullptr) return;
+    if (account_ == nullptr) account_ = more.account_;
+    bytes_ += std::exchange(more.bytes_, 0);
+    more.account_ = nullptr;
+  }
 
  private:
   void Release() {

@@ -10,6 +10,7 @@
 #include <memory>
 #include <random>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -594,6 +595,70 @@ TEST_F(HostileInputTest, ReflectionV1AnswersAsV1Alpha) {
               v1alpha_answer.all_extension_numbers_response().SerializeAsString())
         << question.ShortDebugString();
   }
+}
+
+// B4, B2: an upload holds its bytes (twice: the bytes and the parsed arrays) against the memory
+// budget; six concurrent 400 MB uploads used to hold 2.5 GB under a 256 MB budget.
+TEST_F(HostileInputTest, UploadsAreAdmittedAgainstTheMemoryBudget) {
+  FieldServerOptions options;
+  options.memory_budget_mb = 100;
+  Start(options);
+  const auto announced = [&](grpc::ClientContext* context, v1::MeshInfo* info, uint64_t bytes) {
+    auto writer = stub_->UploadMesh(context, info);
+    v1::UploadMeshRequest header;
+    header.mutable_header()->set_name("announced.obj");
+    header.mutable_header()->set_total_bytes(bytes);
+    writer->Write(header);
+    return writer;
+  };
+  const auto wait_for_work = [&](auto done) {
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (!done(server_->registry()->work_in_use()) &&
+           std::chrono::steady_clock::now() < give_up) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return done(server_->registry()->work_in_use());
+  };
+  // An open upload announcing 30 MB holds 64 MB of the budget ...
+  grpc::ClientContext held_context;
+  v1::MeshInfo held_info;
+  auto held = announced(&held_context, &held_info, uint64_t{30} << 20);
+  ASSERT_TRUE(wait_for_work([](int64_t w) { return w >= (int64_t{60} << 20); }));
+  // ... so a second one does not fit beside it.
+  {
+    grpc::ClientContext context;
+    v1::MeshInfo info;
+    auto second = announced(&context, &info, uint64_t{30} << 20);
+    second->WritesDone();
+    const grpc::Status status = second->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+    EXPECT_NE(status.error_message().find("this upload"), std::string::npos)
+        << status.error_message();
+  }
+  held_context.TryCancel();
+  (void)held->Finish();
+  ASSERT_TRUE(wait_for_work([](int64_t w) { return w == 0; }));
+  // Now it fits (and fails only for its missing bytes); twice the budget never does.
+  {
+    grpc::ClientContext context;
+    v1::MeshInfo info;
+    auto again = announced(&context, &info, uint64_t{30} << 20);
+    again->WritesDone();
+    EXPECT_EQ(again->Finish().error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  }
+  {
+    grpc::ClientContext context;
+    v1::MeshInfo info;
+    auto huge = announced(&context, &info, uint64_t{60} << 20);
+    huge->WritesDone();
+    const grpc::Status status = huge->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+    EXPECT_NE(status.error_message().find("--memory-budget-mb"), std::string::npos);
+  }
+  auto ico3 = MakeIcosphere(3, 1.0);
+  ASSERT_TRUE(ico3.ok());
+  EXPECT_FALSE(UploadRaw(*ico3, "ico3").empty());
+  EXPECT_TRUE(wait_for_work([](int64_t w) { return w == 0; }));
 }
 
 }  // namespace
