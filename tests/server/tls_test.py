@@ -23,7 +23,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from fs_testlib import Cli, Daemon, check, icosphere_obj, log, run  # noqa: E402
+from fs_testlib import Cli, Daemon, check, icosphere_obj, kill_all, log, run  # noqa: E402
 
 def make_certs(script, folder):
     """deploy/make-certs.sh into `folder`: {"ca": (cert, key), "server": ..., "client": ...}."""
@@ -81,15 +81,14 @@ def main():
     parser.add_argument("--grpc-proto-dir", required=True)
     parser.add_argument("--make-certs", required=True, help="deploy/make-certs.sh")
     args = parser.parse_args()
-    openssl = shutil.which("openssl")
-    if openssl is None:
-        print("SKIPPED: the openssl CLI is missing (.ci/install-deps installs openssl)")
-        return 77
     try:
         import grpc
         from fs_reflection import ReflectionClient
+        missing = None if shutil.which("openssl") else "the openssl CLI"
     except ImportError as e:
-        print("SKIPPED: %s (python3-grpcio and python3-protobuf are needed)" % e)
+        missing = "%s (python3-grpcio, python3-protobuf)" % e
+    if missing:
+        print("SKIPPED: %s is missing; .ci/install-deps installs it" % missing)
         return 77
     sys.path.insert(0, args.python_dir)
     import fieldspace as fs
@@ -152,7 +151,11 @@ def main():
         _, _, err = cli("--tls-ca", ca[0], "--tls-server-name", "elsewhere.example", "health",
                         expect=1, timeout=60)
         check("UNAVAILABLE" in err, "CLI expecting a name the certificate lacks: %s" % err)
-        log("CLI over TLS: health, upload, meshes; plaintext and other CA fail")
+        # export runs the Python package, which gets the --tls-* options passed on.
+        vtu = os.path.join(work, "sphere.vtu")
+        cli(*tls_cli, "export", uploaded["id"], "--out", vtu, timeout=120)
+        check(os.path.getsize(vtu) > 0, "CLI export of a server mesh over TLS")
+        log("CLI over TLS: health, upload, meshes, export; plaintext and other CA fail")
 
         reflection = ReflectionClient(d.address, args.protoc, args.grpc_proto_dir, work,
                                       credentials=grpc.ssl_channel_credentials(ca_bytes))
@@ -193,10 +196,7 @@ def main():
         log("PASS")
         return 0
     finally:
-        for d in daemons:
-            if d.alive():
-                d.proc.kill()
-                d.proc.wait()
+        kill_all(daemons)
         shutil.rmtree(work, ignore_errors=True)
 
 
