@@ -106,6 +106,11 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
 
 FIELD_FILE: text (one face per line; '# encoding: dof' or ambient, the default) or, for output,
 .ply (the mesh with the field as face properties). Formats: README.md.
+
+TLS (a server started with --tls-cert), options before COMMAND; any of them turns TLS on:
+--tls-ca FILE (the CA of the server's certificate; default: the system's roots), --tls-cert FILE
+--tls-key FILE (this client's certificate and key, for a server with --tls-client-ca),
+--tls-server-name NAME (the name to expect in the server's certificate; default: HOST).
 )";
 
 // The usage of one command: its lines of kUsage (the line naming it and the indented lines after
@@ -124,9 +129,10 @@ std::string CommandUsage(const std::string& command) {
     if (in_block) absl::StrAppend(&block, line, "\n");
   }
   return absl::StrCat(
-      "usage: fieldspace [--server HOST:PORT] [--token FILE] [--timeout SECONDS] ", command,
-      " ...\n\n", block,
-      "\nThe server defaults to $FIELDSPACE_SERVER; FIELD_FILE formats: fieldspace --help.\n");
+      "usage: fieldspace [--server HOST:PORT] [--token FILE] [--timeout SECONDS] [--tls-* ...] ",
+      command, " ...\n\n", block,
+      "\nThe server defaults to $FIELDSPACE_SERVER; FIELD_FILE formats and TLS options: "
+      "fieldspace --help.\n");
 }
 
 // While alive, Ctrl-C (SIGINT) runs `on_interrupt(basis_id, joined)` on a thread of its own with
@@ -469,6 +475,8 @@ class Cli {
   std::ostream& err_;
   std::string command_;     // the command being run, for messages
   std::string token_file_;  // --token FILE, passed on to the Python tools
+  // --tls-* flags as given (flag name without dashes, value), passed on to the Python tools.
+  std::vector<std::pair<std::string, std::string>> tls_flags_;
   FieldClientOptions options_;
   std::unique_ptr<FieldClient> client_;
 };
@@ -476,7 +484,8 @@ class Cli {
 std::vector<std::string> Cli::ParseGlobal(const std::vector<std::string>& args) {
   if (const char* env = std::getenv("FIELDSPACE_SERVER"); env != nullptr) options_.address = env;
   FlagSpec spec;
-  spec.value_flags = {"server", "token", "timeout"};
+  spec.value_flags = {"server",   "token",   "timeout",        "tls-ca",
+                      "tls-cert", "tls-key", "tls-server-name"};
   spec.switches = {"help"};
   spec.stop_at_positional = true;
   const CommandLine global = OrUsageError(CommandLine::Parse(
@@ -500,6 +509,18 @@ std::vector<std::string> Cli::ParseGlobal(const std::vector<std::string>& args) 
     if (!token.ok()) throw UsageError("cannot read --token file " + token_file);
     options_.token = std::string(absl::StripAsciiWhitespace(*token));
   }
+  ClientTlsOptions tls;
+  const std::pair<const char*, std::string*> tls_flags[] = {{"tls-ca", &tls.ca_file},
+                                                            {"tls-cert", &tls.cert_file},
+                                                            {"tls-key", &tls.key_file},
+                                                            {"tls-server-name", &tls.server_name}};
+  for (const auto& [flag, target] : tls_flags) {
+    if (!global.Has(flag)) continue;
+    *target = GetString(global, flag);
+    if (target->empty()) throw UsageError(absl::StrCat("--", flag, " needs a value"));
+    tls_flags_.emplace_back(flag, *target);
+  }
+  if (!tls_flags_.empty()) options_.tls = tls;
   return global.positional();
 }
 
@@ -621,6 +642,7 @@ int Cli::RunPythonTool(const std::string& tool, absl::Span<const std::string> ar
   argv.insert(argv.end(), args.begin(), args.end());
   argv.insert(argv.end(), {"--server", options_.address});
   if (!token_file_.empty()) argv.insert(argv.end(), {"--token", token_file_});
+  for (const auto& [flag, value] : tls_flags_) argv.insert(argv.end(), {"--" + flag, value});
   std::vector<char*> raw;
   for (std::string& a : argv) raw.push_back(a.data());
   raw.push_back(nullptr);

@@ -10,6 +10,8 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "core/common/file_util.h"
+#include "core/common/status_macros.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 
 namespace fieldspace::client {
@@ -32,6 +34,40 @@ absl::Status ReadAll(grpc::ClientReader<Message>& reader, OnMessage on_message) 
 }
 
 constexpr std::chrono::seconds kHealthTimeout(10);
+
+// The PEM file `path` (`what` names it in messages), read and checked for a PEM block.
+absl::StatusOr<std::string> ReadPemFile(const std::string& what, const std::string& path) {
+  absl::StatusOr<std::string> pem = ReadFileToString(path, int64_t{1} << 20);
+  if (!pem.ok()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(what, " ", path, ": cannot read it: ", pem.status().message()));
+  }
+  if (!absl::StrContains(*pem, "-----BEGIN ")) {
+    return absl::InvalidArgumentError(absl::StrCat(what, " ", path, ": not a PEM file"));
+  }
+  return pem;
+}
+
+// Plaintext without options.tls; otherwise TLS with its files.
+absl::StatusOr<std::shared_ptr<grpc::ChannelCredentials>> ChannelCredentials(
+    const FieldClientOptions& options) {
+  if (!options.tls) return grpc::InsecureChannelCredentials();
+  const ClientTlsOptions& tls = *options.tls;
+  if (tls.cert_file.empty() != tls.key_file.empty()) {
+    return absl::InvalidArgumentError(
+        "a TLS client certificate needs its key and the other way round (--tls-cert and "
+        "--tls-key)");
+  }
+  grpc::SslCredentialsOptions ssl;
+  if (!tls.ca_file.empty()) {
+    ASSIGN_OR_RETURN(ssl.pem_root_certs, ReadPemFile("TLS CA file", tls.ca_file));
+  }
+  if (!tls.cert_file.empty()) {
+    ASSIGN_OR_RETURN(ssl.pem_cert_chain, ReadPemFile("TLS certificate", tls.cert_file));
+    ASSIGN_OR_RETURN(ssl.pem_private_key, ReadPemFile("TLS key", tls.key_file));
+  }
+  return grpc::SslCredentials(ssl);
+}
 
 }  // namespace
 
@@ -57,15 +93,21 @@ absl::StatusOr<std::unique_ptr<FieldClient>> FieldClient::Create(FieldClientOpti
   if (options.upload_chunk_bytes == 0) {
     return absl::InvalidArgumentError("FieldClient upload_chunk_bytes must be positive");
   }
-  return std::unique_ptr<FieldClient>(new FieldClient(std::move(options)));
+  ASSIGN_OR_RETURN(std::shared_ptr<grpc::ChannelCredentials> credentials,
+                   ChannelCredentials(options));
+  return std::unique_ptr<FieldClient>(new FieldClient(std::move(options), std::move(credentials)));
 }
 
-FieldClient::FieldClient(FieldClientOptions options) : options_(std::move(options)) {
+FieldClient::FieldClient(FieldClientOptions options,
+                         std::shared_ptr<grpc::ChannelCredentials> credentials)
+    : options_(std::move(options)) {
   grpc::ChannelArguments channel_args;
   channel_args.SetMaxReceiveMessageSize(-1);  // the server enforces its own limit
   channel_args.SetMaxSendMessageSize(-1);
-  channel_ =
-      grpc::CreateCustomChannel(options_.address, grpc::InsecureChannelCredentials(), channel_args);
+  if (options_.tls && !options_.tls->server_name.empty()) {
+    channel_args.SetSslTargetNameOverride(options_.tls->server_name);
+  }
+  channel_ = grpc::CreateCustomChannel(options_.address, credentials, channel_args);
   stub_ = v1::FieldSpace::NewStub(channel_);
 }
 

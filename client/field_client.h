@@ -26,10 +26,25 @@
 
 namespace fieldspace::client {
 
+// TLS to a daemon started with --tls-cert (files are PEM).
+struct ClientTlsOptions {
+  // The CA that signed the server's certificate; empty: the system's trusted roots.
+  std::string ca_file;
+  // The client's certificate and key, for a server with --tls-client-ca (mutual TLS): both or
+  // neither.
+  std::string cert_file;
+  std::string key_file;
+  // The name the server's certificate must carry, instead of the host of the address (e.g. a
+  // certificate issued to `fieldspaced` reached as 127.0.0.1); empty: the host.
+  std::string server_name;
+};
+
 struct FieldClientOptions {
   std::string address;  // HOST:PORT of fieldspaced
   // Sent as `authorization: Bearer <token>` on every call when not empty.
   std::string token;
+  // TLS when set, plaintext otherwise.
+  std::optional<ClientTlsOptions> tls;
   // Deadline of every call (for a stream: of the whole stream, e.g. a build or a design
   // session); none when unset.
   std::optional<std::chrono::milliseconds> timeout;
@@ -60,7 +75,9 @@ std::string RoutingKey(const google::protobuf::Message& request);
 
 class FieldClient {
  public:
-  // InvalidArgument for an empty address. Connecting is lazy: an unreachable server shows as
+  // InvalidArgument for an empty address, a TLS certificate without its key (or the other way
+  // round) and a TLS file that cannot be read or holds no PEM block (the message names it).
+  // Connecting is lazy: an unreachable server, or one whose certificate fails the check, shows as
   // UNAVAILABLE on the first call.
   static absl::StatusOr<std::unique_ptr<FieldClient>> Create(FieldClientOptions options);
 
@@ -135,7 +152,7 @@ class FieldClient {
   std::unique_ptr<DesignStream> Design(const std::string& basis_id = "") const;
 
  private:
-  explicit FieldClient(FieldClientOptions options);
+  FieldClient(FieldClientOptions options, std::shared_ptr<grpc::ChannelCredentials> credentials);
   // A context with the token, the deadline of the options and the routing key (when not empty).
   std::unique_ptr<grpc::ClientContext> NewContext(const std::string& routing_key = "") const;
   // Unary calls of FieldSpace, one implementation for all.

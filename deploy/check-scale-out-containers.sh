@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs the scale-out set in containers and checks it end to end (docs/scale-out.md): 3 fieldspaced
 # replicas with --shared-store on one volume behind the nginx router, driven from the host through
-# the router's published port with the CLI and the token.
+# the router's published port with the CLI, the token and TLS (certificates of
+# deploy/make-certs.sh, made in the temporary directory).
 #
 #   deploy/check-scale-out-containers.sh [compose|kube|all]        (from the repository root;
 #                                                                    default: all = both, in turn)
@@ -67,7 +68,7 @@ check() {  # check MESSAGE COMMAND...: PASS or FAIL by the command's exit status
   if "$@"; then pass "$message"; else fail "$message"; fi
 }
 die() { printf 'FAIL: %s\n' "$*"; exit 2; }
-cli() { "$CLIENT" --server "$ADDR" --token "$WORK/token.txt" --timeout 600 "$@"; }
+cli() { "$CLIENT" --server "$ADDR" --tls-ca "$WORK/certs/ca.crt" --token "$WORK/token.txt" --timeout 600 "$@"; }
 json_field() { "$PYTHON" -c 'import json, sys; print(json.load(sys.stdin)[sys.argv[1]])' "$1"; }
 ids_of() {  # ids_of KEY: the sorted ids of a listing ({"meshes": [...]}) on stdin, one line
   "$PYTHON" -c 'import json, sys; print(" ".join(sorted(x["id"] for x in json.load(sys.stdin)[sys.argv[1]])))' "$1"
@@ -115,7 +116,7 @@ start_compose() {
   local t0=$SECONDS
   (cd "$ROOT/deploy" &&
      FIELDSPACE_IMAGE=$FIELDSPACE_IMAGE FIELDSPACE_NGINX_IMAGE=$FIELDSPACE_NGINX_IMAGE \
-     FIELDSPACE_PORT=$PORT FIELDSPACE_TOKEN_FILE=$WORK/token.txt \
+     FIELDSPACE_PORT=$PORT FIELDSPACE_TOKEN_FILE=$WORK/token.txt FIELDSPACE_CERTS=$WORK/certs \
      $COMPOSE -p "$PROJECT" -f compose-scale-out.yaml up -d) > "$WORK/compose-up.log" 2>&1 ||
     { tail -n 30 "$WORK/compose-up.log"; die "compose up failed"; }
   REPLICAS=()
@@ -144,7 +145,8 @@ start_compose() {
 #  - the images become $FIELDSPACE_IMAGE and $FIELDSPACE_NGINX_IMAGE;
 #  - nginx.conf names the pods (podman's DNS answers pod names on a network with DNS) instead of
 #    the cluster's names, without `resolver` and `resolve` (no kube-dns; nginx < 1.27.3);
-#  - the token Secret volume becomes a hostPath directory: podman 4.3.1 writes a Secret volume's
+#  - the Secret volumes become hostPath directories (the token's, and the certificates' of
+#    deploy/make-certs.sh for fieldspace-tls): podman 4.3.1 writes a Secret volume's
 #    file base64-encoded (and panics on a secret volume without `optional`);
 #  - the claim fieldspace-store becomes the podman volume fscheck-store (not the README's
 #    fieldspace-store of a single daemon); the ConfigMap becomes a volume of its name.
@@ -156,7 +158,7 @@ kube_manifest() {
   cp "$WORK/token.txt" "$WORK/secret/token"
   chmod 755 "$WORK/secret"
   IMAGE=$FIELDSPACE_IMAGE ROUTER_IMAGE=$FIELDSPACE_NGINX_IMAGE PORT=$PORT STORE=$KUBE_STORE \
-  SECRET_DIR=$WORK/secret VOLUMES=$WORK/kube-volumes "$PYTHON" - "$WORK/rendered.yaml" > "$WORK/kube.yaml" <<'EOF'
+  SECRET_DIR=$WORK/secret TLS_DIR=$WORK/certs VOLUMES=$WORK/kube-volumes "$PYTHON" - "$WORK/rendered.yaml" > "$WORK/kube.yaml" <<'EOF'
 import copy, os, re, sys
 import yaml
 
@@ -176,8 +178,8 @@ def adapt(spec):
                 p.update(hostPort=port, hostIP="127.0.0.1")
     for v in spec.get("volumes", []):
         if "secret" in v:
-            del v["secret"]
-            v["hostPath"] = {"path": env["SECRET_DIR"], "type": "Directory"}
+            tls = v.pop("secret")["secretName"] == "fieldspace-tls"
+            v["hostPath"] = {"path": env["TLS_DIR" if tls else "SECRET_DIR"], "type": "Directory"}
         if "persistentVolumeClaim" in v:
             v["persistentVolumeClaim"]["claimName"] = env["STORE"]
 
@@ -246,7 +248,7 @@ start_kube() {
 # --- The checks -----------------------------------------------------------------------------------
 in_replica() {  # in_replica CONTAINER ARGS...: the image's CLI against that replica alone
   "$ENGINE" exec "$1" /usr/local/bin/fieldspace --server 127.0.0.1:50051 --token "$TOKEN_IN" \
-    --timeout 60 "${@:2}"
+    --tls-ca /etc/fieldspace-tls/ca.crt --tls-server-name fieldspaced --timeout 60 "${@:2}"
 }
 quiet() { "$@" >/dev/null 2>&1; }
 running() { [ "$("$ENGINE" inspect -f '{{.State.Running}}' "$1" 2>/dev/null)" = true ]; }
@@ -262,7 +264,8 @@ wait_until() {  # wait_until SECONDS COMMAND...
 
 exercise() {
   local name=$1 r
-  check "$name: router answers health on $ADDR" wait_until 60 "$CLIENT" --server "$ADDR" --timeout 3 health
+  check "$name: router answers health on $ADDR" wait_until 60 "$CLIENT" --server "$ADDR" \
+    --tls-ca "$WORK/certs/ca.crt" --timeout 3 health
   for r in "${REPLICAS[@]}"; do
     check "$name: $r serving" wait_until 60 in_replica "$r" health
   done
@@ -395,6 +398,7 @@ EOF
 
 if [ "$MODE" = kube-manifest ]; then  # print what kube mode plays, and stop
   (umask 022; echo token > "$WORK/token.txt")
+  sh "$ROOT/deploy/make-certs.sh" "$WORK/certs" >/dev/null
   kube_manifest
   cat "$WORK/kube.yaml"
   exit 0
@@ -413,6 +417,7 @@ for p in "$PORT" $((PORT + 1)); do
   if (exec 3<>"/dev/tcp/127.0.0.1/$p") 2>/dev/null; then die "port $p is in use (set PORT)"; fi
 done
 (umask 022; od -An -N32 -tx1 /dev/urandom | tr -d ' \n' > "$WORK/token.txt"; echo >> "$WORK/token.txt")
+sh "$ROOT/deploy/make-certs.sh" "$WORK/certs" >/dev/null
 "$PYTHON" - "$EDITS" > "$WORK/edits.jsonl" <<'EOF'
 import sys
 edits = int(sys.argv[1])

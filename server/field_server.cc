@@ -31,6 +31,7 @@
 #include "server/registry.h"
 #include "server/status_util.h"
 #include "server/store.h"
+#include "server/tls.h"
 
 namespace fieldspace::server {
 namespace {
@@ -93,10 +94,11 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
     return absl::InvalidArgumentError(
         absl::StrCat("--listen must be HOST:PORT, got '", options.listen, "'"));
   }
-  if (!IsLoopbackListenAddress(options.listen) && options.auth_token.empty() && !options.insecure) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("refusing to listen on non-loopback address ", options.listen,
-                     " without --auth-token-file (or say --insecure explicitly)"));
+  if (!IsLoopbackListenAddress(options.listen) && options.auth_token.empty() &&
+      !options.tls.verifies_clients() && !options.insecure) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "refusing to listen on non-loopback address ", options.listen,
+        " without --auth-token-file or --tls-client-ca (or say --insecure explicitly)"));
   }
   if (options.store_dir.empty()) return absl::InvalidArgumentError("--store DIR is required");
   if (options.threads < 0 || options.memory_budget_mb < 0 || options.max_message_mb < 1 ||
@@ -107,6 +109,9 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
         "--max-upload-mb >= 1, --max-dimension >= 1, --design-verify-every >= 1, "
         "--max-design-sessions >= 1");
   }
+  // Before the store and the port: a bad certificate must not leave a half-started daemon.
+  ASSIGN_OR_RETURN(const std::shared_ptr<grpc::ServerCredentials> credentials,
+                   MakeServerCredentials(options.tls));
 
   std::unique_ptr<FieldServer> s(new FieldServer());
   s->options_ = options;
@@ -168,7 +173,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   // gRPC sets SO_REUSEPORT by default: a second daemon on the same port would then start
   // silently and take half of the connections.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
-  builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(), &s->port_);
+  builder.AddListeningPort(options.listen, credentials, &s->port_);
   builder.RegisterService(s->service_.get());
   {
     std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>

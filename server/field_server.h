@@ -11,6 +11,7 @@
 #include "absl/status/statusor.h"
 #include "server/lease.h"
 #include "server/store_lock.h"
+#include "server/tls.h"
 
 namespace grpc {
 class Server;
@@ -35,7 +36,9 @@ struct FieldServerOptions {
   int32_t design_verify_interval = 16;  // see DesignSessionOptions::verify_interval
   int32_t max_design_sessions = 256;    // open Design streams at once; more: RESOURCE_EXHAUSTED
   std::string auth_token;               // required from clients when not empty
-  // Listening on a non-loopback address needs an auth token, or this explicit opt-out.
+  TlsFiles tls;                         // --tls-cert, --tls-key, --tls-client-ca; none: plaintext
+  // Listening on a non-loopback address needs an auth token or client certificates
+  // (tls.client_ca_file), or this explicit opt-out.
   bool insecure = false;
   int32_t debug_save_pause_ms = 0;  // testing only (see StoreOptions)
   // Whether other daemons may use the same store (see StoreLock): kShared is --shared-store
@@ -49,8 +52,9 @@ struct FieldServerOptions {
 // grpc.health.v1.Health.
 class FieldServer {
  public:
-  // Locks and opens the store, binds, starts serving. InvalidArgument for bad options,
-  // FailedPrecondition for a non-loopback address without a token or --insecure or for a store
+  // Checks the TLS files, locks and opens the store, binds, starts serving. InvalidArgument for
+  // bad options (TLS files: see MakeServerCredentials), FailedPrecondition for a non-loopback
+  // address without a token, client certificates or --insecure, or for a store
   // that another daemon holds (the message names its pid), Unavailable if the address cannot be
   // bound ("address already in use" when another process listens on it: the port is never
   // shared, SO_REUSEPORT is off).

@@ -3,8 +3,8 @@
 //   fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]
 //               [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]
 //               [--max-dimension N] [--design-verify-every K] [--auth-token-file FILE]
-//               [--insecure] [--drain-seconds S] [--shared-store [--daemon-id ID]]
-//               [--demo]
+//               [--tls-cert PEM --tls-key PEM [--tls-client-ca PEM]] [--insecure]
+//               [--drain-seconds S] [--shared-store [--daemon-id ID]] [--demo]
 //
 // Prints "listening on HOST:PORT" as the first line on stdout once serving (port 0 picks a free
 // port). SIGTERM / SIGINT drain and exit 0.
@@ -33,11 +33,13 @@ constexpr char kUsage[] =
     "usage: fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]\n"
     "                   [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]\n"
     "                   [--max-dimension N] [--design-verify-every K] [--max-design-sessions N]\n"
-    "                   [--auth-token-file FILE] [--insecure]\n"
+    "                   [--auth-token-file FILE] [--tls-cert PEM --tls-key PEM\n"
+    "                   [--tls-client-ca PEM]] [--insecure]\n"
     "                   [--drain-seconds S] [--shared-store [--daemon-id ID]] [--demo]\n"
     "\n"
     "  --listen HOST:PORT      address to serve on (default 127.0.0.1:50051; port 0 = any free\n"
-    "                          port). Non-loopback needs --auth-token-file or --insecure.\n"
+    "                          port). Non-loopback needs --auth-token-file, --tls-client-ca or\n"
+    "                          --insecure.\n"
     "  --store DIR             where meshes and bases persist (required)\n"
     "  --data-root DIR         LoadMesh reads mesh files below DIR only (default: disabled)\n"
     "  --threads N             compute threads (default: all cores)\n"
@@ -49,7 +51,10 @@ constexpr char kUsage[] =
     "                          system, and risky ones always (16; 1: every edit)\n"
     "  --max-design-sessions N open Design streams at once (256)\n"
     "  --auth-token-file FILE  clients must send 'authorization: Bearer <token>'\n"
-    "  --insecure              allow a non-loopback address without a token\n"
+    "  --tls-cert PEM          serve TLS with this certificate (chain: leaf first) ...\n"
+    "  --tls-key PEM           ... and its private key (unencrypted)\n"
+    "  --tls-client-ca PEM     mutual TLS: clients need a certificate signed by this CA\n"
+    "  --insecure              allow a non-loopback address without a token or client CA\n"
     "  --drain-seconds S       how long shutdown waits for in-flight RPCs (10)\n"
     "  --shared-store          several daemons use --store (e.g. replicas behind a router on a\n"
     "                          shared file system): lookups on a miss, a build lease per basis\n"
@@ -72,11 +77,11 @@ int main(int argc, char** argv) {
   double drain_seconds = 10;
   std::string token_file;
 
-  std::map<std::string, std::string*> string_flags = {{"listen", &options.listen},
-                                                      {"store", &options.store_dir},
-                                                      {"data-root", &options.data_root},
-                                                      {"auth-token-file", &token_file},
-                                                      {"daemon-id", &options.daemon_id}};
+  std::map<std::string, std::string*> string_flags = {
+      {"listen", &options.listen},        {"store", &options.store_dir},
+      {"data-root", &options.data_root},  {"auth-token-file", &token_file},
+      {"daemon-id", &options.daemon_id},  {"tls-cert", &options.tls.cert_file},
+      {"tls-key", &options.tls.key_file}, {"tls-client-ca", &options.tls.client_ca_file}};
   std::map<std::string, int64_t*> int64_flags = {{"memory-budget-mb", &options.memory_budget_mb},
                                                  {"max-message-mb", &options.max_message_mb},
                                                  {"max-upload-mb", &options.max_upload_mb}};

@@ -5,8 +5,11 @@ Renders each argument with `kubectl kustomize` (a directory with kustomization.y
 (a YAML file), then checks every object against the API models of the Python kubernetes client
 (Debian's python3-kubernetes): each field must exist in its model (as kubectl's strict validation
 demands), have the model's type (object, list, map, string, integer, boolean), and every field the
-model requires must be there. Prints one line per object and exits 1 on any error, 77 when
-kubectl or the kubernetes module is missing.
+model requires must be there. Then checks that TLS is on (check_tls): every fieldspaced container
+serves TLS (--tls-cert, --tls-key) from the mounted Secret fieldspace-tls and probes over TLS, and
+every nginx router mounts that Secret and its configuration listens with ssl and passes to grpcs://
+with verification. Prints one line per object and exits 1 on any error, 77 when kubectl or the
+kubernetes module is missing.
 
 The python3-kubernetes of Debian bookworm (22.6) describes Kubernetes 1.22: fields added since are
 unknown to it. They are listed in NEWER_FIELDS with the version that added them and accepted.
@@ -21,6 +24,67 @@ import sys
 
 # (model, field) -> the Kubernetes version that added it.
 NEWER_FIELDS = {("V1Probe", "grpc"): "1.24 (beta; GA in 1.27)"}
+
+
+TLS_SECRET = "fieldspace-tls"
+
+
+def check_tls(doc, name, configs, errors):
+    """TLS on in a Deployment / StatefulSet: fieldspaced containers (image .../fieldspace) get
+    --tls-cert and --tls-key files of the Secret TLS_SECRET's volume and probe with --tls-ca; nginx
+    containers mount the Secret, and the nginx.conf of their ConfigMap (in `configs`) listens with
+    ssl and passes to grpcs:// with grpc_ssl_verify on, naming only files the Secret holds."""
+    pod = doc.get("spec", {}).get("template", {}).get("spec", {})
+    tls_volumes = {v["name"]: v["secret"] for v in pod.get("volumes", [])
+                   if v.get("secret", {}).get("secretName") == TLS_SECRET}
+
+    def tls_files(container):
+        """The paths under which the container sees the Secret's files."""
+        files = set()
+        for mount in container.get("volumeMounts", []):
+            secret = tls_volumes.get(mount["name"])
+            if secret is not None:
+                keys = [i["path"] for i in secret.get("items", [])] or ["tls.crt", "tls.key",
+                                                                        "ca.crt"]
+                files |= {mount["mountPath"].rstrip("/") + "/" + k for k in keys}
+        return files
+
+    for c in pod.get("containers", []):
+        where = "%s container %s" % (name, c.get("name"))
+        files = tls_files(c)
+        image = c.get("image", "").rsplit(":", 1)[0]
+        if image.endswith("/fieldspace"):
+            args = c.get("args", [])
+            for flag in ("--tls-cert", "--tls-key"):
+                value = args[args.index(flag) + 1] if flag in args[:-1] else None
+                if value is None:
+                    errors.append("%s: TLS is off (no %s in args)" % (where, flag))
+                elif value not in files:
+                    errors.append("%s: %s %s is not a file of the mounted Secret %s" %
+                                  (where, flag, value, TLS_SECRET))
+            for probe in ("readinessProbe", "livenessProbe"):
+                command = c.get(probe, {}).get("exec", {}).get("command", [])
+                if "--tls-ca" not in command[:-1] or command[command.index("--tls-ca") + 1] \
+                        not in files:
+                    errors.append("%s: %s does not check health over TLS with the Secret's CA "
+                                  "(Kubernetes' grpc probes speak plaintext only)" % (where, probe))
+        elif "nginx" in image or c.get("args", [""])[0] == "nginx":
+            if not files:
+                errors.append("%s: the Secret %s is not mounted" % (where, TLS_SECRET))
+            confs = [configs.get(m["name"]) for m in c.get("volumeMounts", [])
+                     if configs.get(m["name"]) is not None]
+            if not confs:
+                errors.append("%s: no nginx.conf from a ConfigMap" % where)
+            for conf in confs:
+                for pattern, what in ((r"listen\s+\S+\s+ssl\b", "listen ... ssl"),
+                                      (r"grpc_pass\s+grpcs://", "grpc_pass grpcs://"),
+                                      (r"grpc_ssl_verify\s+on;", "grpc_ssl_verify on")):
+                    if not re.search(pattern, conf):
+                        errors.append("%s: nginx.conf lacks %s" % (where, what))
+                for path in re.findall(r"(/etc/fieldspace-tls/[\w.]+)", conf):
+                    if path not in files:
+                        errors.append("%s: nginx.conf names %s, not a file of the mounted Secret"
+                                      % (where, path))
 
 
 def main():
@@ -105,9 +169,11 @@ def main():
         else:
             text = subprocess.run([kubectl, "kustomize", source], check=True,
                                   capture_output=True, text=True).stdout
-        for doc in yaml.safe_load_all(text):
-            if doc is None:
-                continue
+        docs = [doc for doc in yaml.safe_load_all(text) if doc is not None]
+        # ConfigMap volume name -> its nginx.conf, per pod template (for check_tls).
+        config_maps = {d["metadata"]["name"]: d.get("data", {}).get("nginx.conf")
+                       for d in docs if d.get("kind") == "ConfigMap"}
+        for doc in docs:
             key = (doc.get("apiVersion"), doc.get("kind"))
             name = "%s %s/%s" % (source, key[1], doc.get("metadata", {}).get("name"))
             if key not in kinds:
@@ -115,6 +181,11 @@ def main():
                 continue
             before = len(errors)
             check_model(doc, model_of(kinds[key]), name)
+            if key[1] in ("Deployment", "StatefulSet"):
+                pod = doc.get("spec", {}).get("template", {}).get("spec", {})
+                configs = {v["name"]: config_maps.get(v["configMap"]["name"])
+                           for v in pod.get("volumes", []) if "configMap" in v}
+                check_tls(doc, name, configs, errors)
             print("%s: %s" % (name, "ok" if len(errors) == before else "ERRORS"))
     for e in errors:
         print("error: " + e)

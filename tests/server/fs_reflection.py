@@ -24,7 +24,8 @@ def message_class(pool, name):
 class ReflectionClient:
     """A grpcio client that knows nothing of fieldspace: it fetches the schema through reflection."""
 
-    def __init__(self, address, protoc, grpc_proto_dir, workdir):
+    def __init__(self, address, protoc, grpc_proto_dir, workdir, credentials=None):
+        """``credentials``: grpc channel credentials for a TLS server (default: plaintext)."""
         # Only the reflection protocol itself is compiled here (protoc is a build dependency);
         # it is copied under another folder so that its module does not shadow the grpc package.
         src = os.path.join(workdir, "refl_src", "fsrefl")
@@ -38,7 +39,8 @@ class ReflectionClient:
         sys.path.insert(0, out)
         from fsrefl import reflection_pb2  # noqa: E402
         self.r = reflection_pb2
-        self.channel = grpc.insecure_channel(address)
+        self.channel = (grpc.secure_channel(address, credentials) if credentials is not None
+                        else grpc.insecure_channel(address))
         self.pool = descriptor_pool.DescriptorPool()
         self.loaded = set()
         self.reflect = self.channel.stream_stream(

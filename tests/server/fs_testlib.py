@@ -118,6 +118,14 @@ class Daemon:
         return self.proc is not None and self.proc.poll() is None
 
 
+def kill_all(daemons):
+    """SIGKILLs the Daemons still running and reaps them (a test's cleanup after a failure)."""
+    for d in daemons:
+        if d.alive():
+            d.proc.kill()
+            d.proc.wait()
+
+
 def run(args, timeout=300, check=None):
     """Runs a command; returns (returncode, stdout, stderr) as text."""
     p = subprocess.run(args, capture_output=True, text=True, timeout=timeout)

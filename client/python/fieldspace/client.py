@@ -50,6 +50,18 @@ def _id(target):
     return target if isinstance(target, str) else target.id
 
 
+def _pem(source, what):
+    """PEM bytes from a path or bytes (None stays None)."""
+    if source is None or isinstance(source, bytes):
+        return source
+    try:
+        with open(source, "rb") as f:
+            return f.read()
+    except OSError as e:
+        raise InvalidArgument("Client", "%s %s: cannot read it: %s" % (what, source, e.strerror)) \
+            from None
+
+
 def _timings(message):
     return {f.name: getattr(message, f.name) for f in message.DESCRIPTOR.fields}
 
@@ -64,6 +76,12 @@ class Client:
         timeout: the default deadline in seconds of every call except ``build`` and ``design``
             (long-lived streams: they take only their own ``timeout=``); None: no deadline. Every
             method takes ``timeout=`` to override it for one call.
+        tls_ca, tls_cert, tls_key: TLS to a server started with ``--tls-cert`` (any of them turns
+            TLS on): the CA of the server's certificate (default: the system's roots), and this
+            client's certificate and key for a server with ``--tls-client-ca``. Each is a PEM
+            file's path or its bytes.
+        tls_server_name: the name the server's certificate must carry, instead of the address's
+            host (e.g. a certificate issued to ``fieldspaced`` reached as 127.0.0.1).
 
     Fields are numpy arrays in the ambient encoding unless ``encoding="dof"`` is given (the wire
     protocol's default is DOF; this package, like the CLI, defaults to ambient): see
@@ -72,7 +90,8 @@ class Client:
     thread-safe; close it (or use it as a context manager) to release the channel.
     """
 
-    def __init__(self, address=None, token=None, timeout=None, upload_chunk_bytes=1 << 20):
+    def __init__(self, address=None, token=None, timeout=None, upload_chunk_bytes=1 << 20,
+                 tls_ca=None, tls_cert=None, tls_key=None, tls_server_name=None):
         if address is None:
             address = os.environ.get("FIELDSPACE_SERVER") or DEFAULT_ADDRESS
         if not address:
@@ -84,8 +103,18 @@ class Client:
         self._metadata = (("authorization", "Bearer " + token),) if token else ()
         # Answers can be as large as the server's --max-message-mb (64 MB by default), far above
         # grpc's 4 MB default receive limit.
-        self._channel = grpc.insecure_channel(address, options=[
-            ("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)])
+        options = [("grpc.max_receive_message_length", -1), ("grpc.max_send_message_length", -1)]
+        if tls_ca is None and tls_cert is None and tls_key is None and tls_server_name is None:
+            self._channel = grpc.insecure_channel(address, options=options)
+        else:
+            if (tls_cert is None) != (tls_key is None):
+                raise InvalidArgument("Client", "tls_cert and tls_key go together")
+            if tls_server_name:
+                options.append(("grpc.ssl_target_name_override", tls_server_name))
+            credentials = grpc.ssl_channel_credentials(
+                root_certificates=_pem(tls_ca, "tls_ca"), private_key=_pem(tls_key, "tls_key"),
+                certificate_chain=_pem(tls_cert, "tls_cert"))
+            self._channel = grpc.secure_channel(address, credentials, options=options)
         self._stub = pb_grpc.FieldSpaceStub(self._channel)
         self._health = self._channel.unary_unary(
             "/grpc.health.v1.Health/Check",

@@ -440,7 +440,7 @@ def main(argv=None):
     try:
         V, F, field, kind = mesh_io.load_mesh_and_field(
             args.mesh, args.field, args.kind, args.n, server=args.server,
-            token=mesh_io.read_token(args.token))
+            token=mesh_io.read_token(args.token), tls=mesh_io.tls_arguments(args))
         ext = os.path.splitext(args.out)[1].lower()
         if ext == ".vtu":
             write_vtu(args.out, V, F, field, kind, args.name, binary=not args.ascii)

@@ -162,17 +162,18 @@ def read_mesh(path):
 
 
 def load_mesh_and_field(mesh_path, field_path=None, kind=None, n=None, server=None,
-                        token=None):
+                        token=None, tls=None):
     """``(V, F, field, kind)`` from a mesh file and a CLI field file (fieldspace.fields
     :func:`read_field_text`); ``field`` and ``kind`` are None when ``field_path`` is None.
     ``mesh_path`` may also be a mesh id (``m-`` and 16 hex digits) of the daemon at ``server``
-    (with the bearer ``token``), whose geometry is then fetched."""
+    (with the bearer ``token`` and the Client's ``tls_*`` arguments in ``tls``, see
+    :func:`tls_arguments`), whose geometry is then fetched."""
     from . import fields as fl
 
     if re.fullmatch(r"m-[0-9a-f]{16}", mesh_path) and not os.path.exists(mesh_path):
         from .client import Client
 
-        with Client(server, token=token) as client:
+        with Client(server, token=token, **(tls or {})) as client:
             V, F = client.mesh_geometry(mesh_path)
     else:
         V, F = read_mesh(mesh_path)
@@ -181,6 +182,13 @@ def load_mesh_and_field(mesh_path, field_path=None, kind=None, n=None, server=No
     text = fl.read_field_text(field_path)
     kind, n = fl.text_kind(text, kind, n)
     return V, F, fl.field_from_text(V, F, text, kind=kind, n=n), kind
+
+
+def tls_arguments(args):
+    """The Client's ``tls_*`` arguments from parsed --tls-* options (add_field_arguments)."""
+    return {name: getattr(args, name) for name in ("tls_ca", "tls_cert", "tls_key",
+                                                   "tls_server_name")
+            if getattr(args, name) is not None}
 
 
 def read_token(path):
@@ -199,6 +207,11 @@ def add_field_arguments(parser):
                         help="HOST:PORT of fieldspaced for a mesh id (default $FIELDSPACE_SERVER "
                         "or 127.0.0.1:50051)")
     parser.add_argument("--token", default=None, help="a file holding the server's token")
+    for flag, what in (("--tls-ca", "FILE: the CA of the server's TLS certificate"),
+                       ("--tls-cert", "FILE: this client's TLS certificate (mutual TLS)"),
+                       ("--tls-key", "FILE: this client's TLS key (mutual TLS)"),
+                       ("--tls-server-name", "NAME: the name in the server's certificate")):
+        parser.add_argument(flag, default=None, help=what + " (as the fieldspace CLI)")
     parser.add_argument("field", nargs="?", default=None,
                         help="a field file as the fieldspace CLI writes it (--out FILE.txt)")
     parser.add_argument("--kind", choices=("vector", "nfield", "tensor"),

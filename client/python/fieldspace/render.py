@@ -731,7 +731,7 @@ def main(argv=None):
     try:
         V, F, field, kind = mesh_io.load_mesh_and_field(
             args.mesh, args.field, args.kind, args.n, server=args.server,
-            token=mesh_io.read_token(args.token))
+            token=mesh_io.read_token(args.token), tls=mesh_io.tls_arguments(args))
         result = render(V, F, field, kind, out_png=args.out, style=args.style, size=args.size,
                         camera=args.camera, scalar_bar=args.scalar_bar, max_glyphs=args.glyphs,
                         streamline_count=args.lines, streamline_length=args.line_length,
