@@ -85,8 +85,14 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
     total_ = subset_ ? request_.faces().size() : basis_->mesh->num_faces();
     if (!subset_) {
       // All faces: one parallel pass of the LiftPlan now; the chunks only encode slices of it.
+      // The DOF encoding is the lift narrowed to float, done in the lift's own pass.
       const auto start = Clock::now();
-      ASSIGN_OR_RETURN(all_dofs_, fieldspace::Lift(*basis_->system, x_));
+      if (encoding_ == FieldEncoding::kDof) {
+        all_values_.resize(basis_->system->dofs());
+        RETURN_IF_ERROR(LiftIntoFloat(*basis_->system, x_, absl::MakeSpan(all_values_)));
+      } else {
+        ASSIGN_OR_RETURN(all_dofs_, fieldspace::Lift(*basis_->system, x_));
+      }
       server_ms_ = MsSince(start);
     }
     return absl::OkStatus();
@@ -110,6 +116,10 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
     if (subset_) {
       RETURN_IF_ERROR(
           LiftToValues(*basis_, x_, faces_, encoding_, out->mutable_field()->mutable_values()));
+    } else if (encoding_ == FieldEncoding::kDof) {
+      const int64_t dpf = basis_->basis->type.dofs_per_face();
+      out->mutable_field()->mutable_values()->Add(all_values_.data() + dpf * next_,
+                                                  all_values_.data() + dpf * (next_ + count));
     } else {
       const int64_t dpf = basis_->basis->type.dofs_per_face();
       RETURN_IF_ERROR(EncodeDofs(*basis_, faces_,
@@ -125,7 +135,9 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
   const v1::LiftRequest request_;
   std::shared_ptr<const ServedBasis> basis_;
   Eigen::VectorXd x_;
-  Eigen::VectorXd all_dofs_;  // all-faces lifts: the whole field, lifted in Prepare
+  // All-faces lifts: the whole field, lifted in Prepare (as float for the DOF encoding).
+  Eigen::VectorXd all_dofs_;
+  std::vector<float> all_values_;
   FieldEncoding encoding_ = FieldEncoding::kDof;
   std::vector<int32_t> faces_;
   bool subset_ = false;

@@ -345,8 +345,7 @@ absl::Status EncodeDofs(const ServedBasis& basis, absl::Span<const int32_t> face
     finite = std::all_of(values.begin(), values.end(), [](float v) { return std::isfinite(v); });
   }
   if (!finite) {
-    return absl::InvalidArgumentError(
-        "the lifted field overflows float (values beyond 3.4e38): the coefficients are too large");
+    return absl::InvalidArgumentError(kFloatOverflowMessage);
   }
   return absl::OkStatus();
 }

@@ -1,6 +1,8 @@
 #include "core/subspace/lift_plan.h"
 
 #include <algorithm>
+#include <atomic>
+#include <cmath>
 
 #include "core/subspace/subspace_util.h"
 #include "oneapi/tbb/blocked_range.h"
@@ -75,6 +77,25 @@ void LiftPlan::LiftAll(const double* x, double* out) const {
                     [&](const tbb::blocked_range<int64_t>& r) {
                       for (int64_t f = r.begin(); f < r.end(); ++f) LiftFace(x, f, out + f * p_);
                     });
+}
+
+bool LiftPlan::LiftAllToFloat(const double* x, float* out) const {
+  std::atomic<bool> finite{true};
+  tbb::parallel_for(tbb::blocked_range<int64_t>(0, num_faces(), 4096),
+                    [&](const tbb::blocked_range<int64_t>& r) {
+                      bool ok = true;
+                      double face[8];
+                      for (int64_t f = r.begin(); f < r.end(); ++f) {
+                        LiftFace(x, f, face);
+                        float* o = out + f * p_;
+                        for (int32_t c = 0; c < p_; ++c) {
+                          o[c] = static_cast<float>(face[c]);
+                          ok &= std::isfinite(o[c]);
+                        }
+                      }
+                      if (!ok) finite.store(false, std::memory_order_relaxed);
+                    });
+  return finite.load();
 }
 
 int64_t LiftPlan::memory_bytes() const {

@@ -37,6 +37,9 @@ class LiftPlan {
   }
   // All faces into out (k values), parallel over faces.
   void LiftAll(const double* x, double* out) const;
+  // The same narrowed to float in the same pass (half the bytes written: what the wire sends).
+  // False when a value is not finite as a float (beyond 3.4e38 or NaN); out is filled anyway.
+  bool LiftAllToFloat(const double* x, float* out) const;
   int64_t memory_bytes() const;
 
  private:

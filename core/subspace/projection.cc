@@ -231,6 +231,22 @@ absl::Status LiftInto(const ReducedSystem& system,
   return absl::OkStatus();
 }
 
+absl::Status LiftIntoFloat(const ReducedSystem& system,
+                           const Eigen::Ref<const Eigen::VectorXd>& coefficients,
+                           absl::Span<float> out) {
+  const Basis& basis = system.basis();
+  RETURN_IF_ERROR(CheckCoefficients(basis, coefficients, "Lift"));
+  if (static_cast<int64_t>(out.size()) != basis.U.rows()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("Lift: output has ", out.size(), " values, expected ", basis.U.rows()));
+  }
+  const Eigen::VectorXd x = coefficients;
+  if (!system.lift_plan().LiftAllToFloat(x.data(), out.data())) {
+    return absl::InvalidArgumentError(kFloatOverflowMessage);
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<Eigen::VectorXd> Lift(const ReducedSystem& system,
                                      const Eigen::Ref<const Eigen::VectorXd>& coefficients) {
   Eigen::VectorXd out(system.dofs());

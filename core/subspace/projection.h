@@ -74,6 +74,13 @@ absl::StatusOr<Eigen::VectorXd> Lift(const ReducedSystem& system,
 absl::Status LiftInto(const ReducedSystem& system,
                       const Eigen::Ref<const Eigen::VectorXd>& coefficients,
                       absl::Span<double> out);
+// The whole field narrowed to float in the lift's own pass (the wire's DOF encoding):
+// InvalidArgument (kFloatOverflowMessage) when a value overflows float.
+inline constexpr char kFloatOverflowMessage[] =
+    "the lifted field overflows float (values beyond 3.4e38): the coefficients are too large";
+absl::Status LiftIntoFloat(const ReducedSystem& system,
+                           const Eigen::Ref<const Eigen::VectorXd>& coefficients,
+                           absl::Span<float> out);
 absl::StatusOr<Eigen::VectorXd> LiftFaces(const ReducedSystem& system,
                                           const Eigen::Ref<const Eigen::VectorXd>& coefficients,
                                           absl::Span<const int32_t> faces);

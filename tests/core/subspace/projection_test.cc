@@ -117,6 +117,18 @@ TEST_F(ProjectionTest, LiftFacesMatchesLiftAll) {
   auto planned_some = LiftFaces(*sys_, x, faces);
   ASSERT_TRUE(planned_some.ok());
   EXPECT_EQ(*planned_some, *some);
+  // Narrowed to float in the lift's pass: each value is the double lift rounded to float.
+  std::vector<float> narrow(op_.dofs());
+  ASSERT_TRUE(LiftIntoFloat(*sys_, x, absl::MakeSpan(narrow)).ok());
+  for (int64_t i = 0; i < op_.dofs(); ++i) {
+    ASSERT_EQ(narrow[i], static_cast<float>((*all)[i])) << i;
+  }
+  // Coefficients whose field overflows float are refused, not sent as infinities.
+  const absl::Status overflow = LiftIntoFloat(*sys_, x * 1e300, absl::MakeSpan(narrow));
+  EXPECT_EQ(overflow.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(overflow.message(), kFloatOverflowMessage);
+  EXPECT_EQ(LiftIntoFloat(*sys_, x, absl::MakeSpan(narrow.data(), 3)).code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 TEST(LiftPlanTest, TensorRowsWithDifferentSupportsAndWideIndices) {
