@@ -217,15 +217,26 @@ absl::StatusOr<Eigen::VectorXd> LiftFaces(const Basis& basis,
   return out;
 }
 
+namespace {
+
+// The checks of an all-faces lift into `out_size` values through the system's plan.
+absl::Status CheckLiftAll(const ReducedSystem& system,
+                          const Eigen::Ref<const Eigen::VectorXd>& coefficients, size_t out_size) {
+  const Basis& basis = system.basis();
+  RETURN_IF_ERROR(CheckCoefficients(basis, coefficients, "Lift"));
+  if (static_cast<int64_t>(out_size) != basis.U.rows()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("Lift: output has ", out_size, " values, expected ", basis.U.rows()));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 absl::Status LiftInto(const ReducedSystem& system,
                       const Eigen::Ref<const Eigen::VectorXd>& coefficients,
                       absl::Span<double> out) {
-  const Basis& basis = system.basis();
-  RETURN_IF_ERROR(CheckCoefficients(basis, coefficients, "Lift"));
-  if (static_cast<int64_t>(out.size()) != basis.U.rows()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("Lift: output has ", out.size(), " values, expected ", basis.U.rows()));
-  }
+  RETURN_IF_ERROR(CheckLiftAll(system, coefficients, out.size()));
   const Eigen::VectorXd x = coefficients;
   system.lift_plan().LiftAll(x.data(), out.data());
   return absl::OkStatus();
@@ -234,12 +245,7 @@ absl::Status LiftInto(const ReducedSystem& system,
 absl::Status LiftIntoFloat(const ReducedSystem& system,
                            const Eigen::Ref<const Eigen::VectorXd>& coefficients,
                            absl::Span<float> out) {
-  const Basis& basis = system.basis();
-  RETURN_IF_ERROR(CheckCoefficients(basis, coefficients, "Lift"));
-  if (static_cast<int64_t>(out.size()) != basis.U.rows()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("Lift: output has ", out.size(), " values, expected ", basis.U.rows()));
-  }
+  RETURN_IF_ERROR(CheckLiftAll(system, coefficients, out.size()));
   const Eigen::VectorXd x = coefficients;
   if (!system.lift_plan().LiftAllToFloat(x.data(), out.data())) {
     return absl::InvalidArgumentError(kFloatOverflowMessage);
