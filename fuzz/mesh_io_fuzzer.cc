@@ -27,8 +27,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (body.size() != uint64_t{24} * nv + uint64_t{12} * nf) return 0;
     arrays.vertices.resize(nv, 3);
     arrays.faces.resize(nf, 3);
-    std::memcpy(arrays.vertices.data(), body.data(), uint64_t{24} * nv);
-    std::memcpy(arrays.faces.data(), body.data() + uint64_t{24} * nv, uint64_t{12} * nf);
+    // (The upload requires both counts > 0; here empty arrays reach validation too.)
+    if (nv > 0) std::memcpy(arrays.vertices.data(), body.data(), uint64_t{24} * nv);
+    if (nf > 0)
+      std::memcpy(arrays.faces.data(), body.data() + uint64_t{24} * nv, uint64_t{12} * nf);
   } else {
     MeshReadOptions options;
     options.triangulate_polygons = (mode & 0x10) == 0;
