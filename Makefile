@@ -1,11 +1,12 @@
 # Newcomer entry points. `make run`: install deps, build, start the daemon on a demo mesh.
 # `make test`: install deps, build, run the test suite. `make install PREFIX=DIR`: programs and
-# the Python package into DIR.
+# the Python package into DIR. `make fuzz`: the clang fuzz targets (fuzz/) in $(BUILD_DIR)/fuzz.
 BUILD_DIR ?= build
+FUZZ_DIR ?= $(BUILD_DIR)/fuzz
 BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 
-.PHONY: all deps configure build test install run format clean
+.PHONY: all deps configure build test fuzz install run format clean
 
 all: build
 
@@ -20,8 +21,18 @@ configure: deps $(BUILD_DIR)/build.ninja
 build: configure
 	cmake --build $(BUILD_DIR) -j $(JOBS)
 
-test: build
+# The suite, then a few seconds of every fuzz target (fuzz/run.sh --smoke).
+test: build fuzz
 	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
+	cd $(FUZZ_DIR) && ctest --output-on-failure
+
+# Fuzz targets with clang, ASan and UBSan (fuzz/CMakeLists.txt); ccache when installed.
+$(FUZZ_DIR)/build.ninja:
+	cmake -S fuzz -B $(FUZZ_DIR) -G Ninja -DCMAKE_CXX_COMPILER=clang++ \
+	    $(if $(shell command -v ccache),-DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+
+fuzz: deps $(FUZZ_DIR)/build.ninja
+	cmake --build $(FUZZ_DIR) -j $(JOBS)
 
 # Installs fieldspaced, fieldspace and fieldspace-bench into $(PREFIX)/bin and the Python package
 # into $(PREFIX)/lib/python3/dist-packages/fieldspace (put $(PREFIX)/lib/python3/dist-packages on

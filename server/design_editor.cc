@@ -14,16 +14,56 @@ absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* u
   update->set_seq(r.seq());
   refactorized_ = false;
   edit_start_ = Clock::now();
+  if (r.edit_case() == v1::DesignRequest::EDIT_NOT_SET) {
+    return absl::InvalidArgumentError("a DesignRequest must carry one edit");
+  }
+  // What undoes the edit when its answer cannot be made (e.g. a constraint of 1e39 whose lifted
+  // values overflow float): a failed request leaves the session as it was.
+  const EnergyWeights weights = is_open() ? session_->weights() : EnergyWeights{};
+  std::vector<int32_t> watch;
+  if (r.has_watch()) watch = watch_;
+  const FieldEncoding watch_encoding = watch_encoding_;
+  absl::StatusOr<FieldConstraint> previous = absl::NotFoundError("no such constraint");
+  if (is_open() && (r.has_move() || r.has_remove())) {
+    previous = session_->GetConstraint(r.has_move() ? r.move().id() : r.remove().id());
+  }
+  RETURN_IF_ERROR(r.has_open() ? Open(r.open()) : Edit(r));
+  absl::Status status = Answer(update);
+  if (status.ok()) return status;
+  absl::Status undone = absl::OkStatus();
   switch (r.edit_case()) {
-    case v1::DesignRequest::EDIT_NOT_SET:
-      return absl::InvalidArgumentError("a DesignRequest must carry one edit");
     case v1::DesignRequest::kOpen:
-      RETURN_IF_ERROR(Open(r.open()));
+      session_.reset();
+      basis_.reset();
+      watch_.clear();
       break;
-    default:
-      RETURN_IF_ERROR(Edit(r));
+    case v1::DesignRequest::kAdd:
+      undone = session_->RemoveConstraint(r.add().id());
+      break;
+    case v1::DesignRequest::kMove:
+      undone = session_->MoveConstraint(r.move().id(), *previous);
+      break;
+    case v1::DesignRequest::kRemove:
+      undone = session_->AddConstraint(r.remove().id(), *previous);
+      break;
+    case v1::DesignRequest::kSetWeights:
+      undone = session_->SetWeights(weights);
+      break;
+    case v1::DesignRequest::kWatch:
+      watch_ = std::move(watch);
+      watch_encoding_ = watch_encoding;
+      break;
+    case v1::DesignRequest::EDIT_NOT_SET:
       break;
   }
+  if (!undone.ok()) {
+    return absl::InternalError(
+        absl::StrCat("could not undo a failed edit (", status.message(), "): ", undone.message()));
+  }
+  return status;
+}
+
+absl::Status DesignEditor::Answer(v1::DesignUpdate* update) {
   const double edit_ms = MsSince(edit_start_);
   const Eigen::VectorXd& x = session_->coefficients();
   RETURN_IF_ERROR(CheckSolutionFinite(x));

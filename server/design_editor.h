@@ -58,6 +58,8 @@ class DesignEditor {
   absl::Status Open(const fieldspace::v1::OpenDesign& open);
   absl::Status Edit(const fieldspace::v1::DesignRequest& request);
   absl::Status SetWatch(absl::Span<const int32_t> faces, int encoding);
+  // Fills `update` from the session after an edit: coefficients, watched values, singularities.
+  absl::Status Answer(fieldspace::v1::DesignUpdate* update);
   // The singularities of the field with coefficients `x` compared with the previous update's.
   absl::Status SingularityChanges(const Eigen::VectorXd& x,
                                   fieldspace::v1::SingularityChanges* changes);

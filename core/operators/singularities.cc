@@ -51,6 +51,14 @@ absl::StatusOr<VertexIndices> ComputeVertexIndices(const TriangleMesh& mesh,
                                                    const Eigen::Ref<const Eigen::VectorXd>& dofs,
                                                    const SingularityOptions& options) {
   if (absl::Status s = Validate(mesh, dofs, options); !s.ok()) return s;
+  // Indices depend on directions only. A field whose products below would overflow to inf and
+  // then NaN (|u| beyond ~1e150) or underflow (below ~1e-150) is rescaled by its largest
+  // magnitude first.
+  const double max_abs = dofs.size() > 0 ? dofs.cwiseAbs().maxCoeff() : 0.0;
+  if (max_abs > 1e150 || (max_abs > 0 && max_abs < 1e-150)) {
+    const Eigen::VectorXd scaled = dofs / max_abs;
+    return ComputeVertexIndices(mesh, scaled, options);
+  }
   const int32_t nf = mesh.num_faces(), ne = mesh.num_edges(), nv = mesh.num_vertices();
   const int32_t n = options.n;
   const FaceMatrix& F = mesh.faces();

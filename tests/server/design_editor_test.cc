@@ -205,6 +205,43 @@ TEST_F(DesignEditorTest, ErrorsHaveExactCodesAndLeaveTheSessionAsItWas) {
   for (size_t i = 0; i < before.size(); ++i) EXPECT_EQ(x[i], before[i]) << i;
 }
 
+// An edit that the session accepts but whose answer cannot be made (a constraint of 1e39 is a
+// finite double, but its lifted value overflows float) fails and is undone (found by
+// fuzz/design_fuzzer.cc).
+TEST_F(DesignEditorTest, EditsWhoseAnswerFailsAreUndone) {
+  DesignEditor editor = NewEditor();
+  v1::DesignUpdate u;
+  ASSERT_TRUE(editor.Apply(Open(1, 0, 1), &u).ok());
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(Add(1, 10, 1, 0, /*hard=*/true), &u).ok());
+  const std::vector<double> before(u.coefficients().begin(), u.coefficients().end());
+  const auto expect_unchanged = [&] {
+    EXPECT_EQ(editor.session()->num_constraints(), 1);
+    EXPECT_EQ(editor.session()->num_hard_constraints(), 1);
+    auto kept = editor.session()->GetConstraint(1);
+    ASSERT_TRUE(kept.ok()) << kept.status();
+    EXPECT_EQ(kept->face, 10);
+    EXPECT_EQ(kept->value[0], 1);
+    const Eigen::VectorXd& x = editor.session()->coefficients();
+    ASSERT_EQ(static_cast<size_t>(x.size()), before.size());
+    for (size_t i = 0; i < before.size(); ++i) EXPECT_NEAR(x[i], before[i], 1e-12) << i;
+  };
+  EXPECT_EQ(editor.Apply(Add(2, 600, 1e39, 0, /*hard=*/true), &u).code(),
+            absl::StatusCode::kInvalidArgument);
+  expect_unchanged();
+  v1::DesignRequest move;
+  move.mutable_move()->set_id(1);
+  move.mutable_move()->set_face(600);
+  move.mutable_move()->add_value(1e39);
+  move.mutable_move()->add_value(0);
+  EXPECT_EQ(editor.Apply(move, &u).code(), absl::StatusCode::kInvalidArgument);
+  expect_unchanged();
+  // The session still answers, and equals a fresh solve.
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(Add(3, 600, 0, 1, /*hard=*/false), &u).ok());
+  ExpectFresh(editor, u);
+}
+
 // Sessions opened with singularities: every update's changes, applied to the previous state, give
 // the singularities of its own coefficients (computed afresh), and the indices sum to the sphere's
 // Euler characteristic 2 after every edit that leaves a nonzero field.

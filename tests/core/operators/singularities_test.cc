@@ -316,6 +316,22 @@ TEST(KnownSingularitiesTest, RotationalFieldOnSphereHasTwoPoles) {
   }
 }
 
+// Indices do not depend on the field's scale, also where its squares overflow or underflow
+// double (a field of 1e200 once gave NaN rotations; found by fuzz/requests_fuzzer.cc).
+TEST(SingularitiesInvarianceTest, HugeAndTinyFieldsKeepTheirIndices) {
+  const TriangleMesh mesh = MustCreate(UvSphere(12, 24));
+  const AmbientVectors a = AtBarycenters(
+      mesh, [](const Eigen::Vector3d& p) { return Eigen::Vector3d(0, 0, 1).cross(p); });
+  for (int n : {1, 4}) {
+    const Eigen::VectorXd dofs = Dofs(mesh, n, a);
+    const VertexIndices unit = MustIndices(mesh, dofs, n);
+    for (double scale : {1e200, 1e-200}) {
+      const VertexIndices scaled = MustIndices(mesh, scale * dofs, n);
+      EXPECT_EQ(scaled.index, unit.index) << "n " << n << " scale " << scale;
+    }
+  }
+}
+
 // The same field around an axis through a valence-5 vertex of an icosphere. For n = 1, 2 the
 // poles carry the index. For n = 4 the field turns by 72 degrees from face to face around the
 // pole, which as a set of 4 directions is the smaller turn of -18 degrees: the index is read as
