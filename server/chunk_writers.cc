@@ -87,6 +87,10 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
     if (!subset_) {
       // All faces: one parallel pass of the LiftPlan now; the chunks only encode slices of it.
       // The DOF encoding is the lift narrowed to float, done in the lift's own pass.
+      ASSIGN_OR_RETURN(
+          grant_,
+          service()->registry()->AdmitWork(
+              (encoding_ == FieldEncoding::kDof ? 4 : 8) * basis_->system->dofs(), "this Lift"));
       const auto start = Clock::now();
       if (encoding_ == FieldEncoding::kDof) {
         // Uninitialized: the lift writes every value (no zero-fill pass over 11 MB at 1.38M faces).
@@ -141,6 +145,7 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
   // All-faces lifts: the whole field, lifted in Prepare (as float for the DOF encoding).
   Eigen::VectorXd all_dofs_;
   std::unique_ptr<float[]> all_values_;
+  WorkGrant grant_;  // the whole-field buffers' memory
   FieldEncoding encoding_ = FieldEncoding::kDof;
   std::vector<int32_t> faces_;
   bool subset_ = false;
@@ -175,6 +180,8 @@ class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
     ShapeOperatorOptions options;
     ASSIGN_OR_RETURN(options.estimator, EstimatorFromProto(request_.estimator()));
     ASSIGN_OR_RETURN(mesh_, service()->registry()->GetMesh(request_.mesh_id()));
+    ASSIGN_OR_RETURN(grant_, service()->registry()->AdmitWork(
+                                 CurvatureWorkingBytes(mesh_->num_faces()), "this Curvature call"));
     ASSIGN_OR_RETURN(dofs_, ComputeShapeOperator(*mesh_, options));
     if (request_.principal()) {
       ASSIGN_OR_RETURN(principal_, ComputePrincipalCurvatures(*mesh_, dofs_));
@@ -221,6 +228,7 @@ class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
   std::shared_ptr<const TriangleMesh> mesh_;
   Eigen::VectorXd dofs_;
   PrincipalCurvatures principal_;
+  WorkGrant grant_;  // the memory of the curvature computations
   FieldEncoding encoding_ = FieldEncoding::kDof;
   std::vector<int32_t> faces_;
   int32_t chunk_ = 0;

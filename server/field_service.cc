@@ -32,6 +32,13 @@ namespace {
 
 constexpr int32_t kMaxConstraints = 1 << 20;
 
+// Admits working memory that scales with the field: `per_dof` bytes per DOF of `basis`, plus
+// `extra` bytes.
+absl::StatusOr<WorkGrant> AdmitFieldWork(Registry* registry, const ServedBasis& basis,
+                                         int64_t per_dof, int64_t extra, absl::string_view what) {
+  return registry->AdmitWork(per_dof * basis.system->dofs() + extra, what);
+}
+
 // Threads of oneTBB's default arena, which core's parallel loops use.
 int32_t HardwareThreads() {
   return static_cast<int32_t>(std::max(1u, std::thread::hardware_concurrency()));
@@ -125,9 +132,12 @@ grpc::ServerUnaryReactor* FieldService::LoadMesh(grpc::CallbackServerContext* co
                                                  v1::MeshInfo* response) {
   return RunUnary(this, context, Where::kPool, [this, request, response](const std::atomic<bool>*) {
     ASSIGN_OR_RETURN(ReadableFile file, OpenDataFile(options_.data_root, request->path()));
-    // The same size limit as an upload.
+    // The same size limit as an upload, and the same memory: the bytes and the parsed arrays.
     MeshReadOptions read;
     read.max_file_bytes = options_.max_upload_bytes;
+    ASSIGN_OR_RETURN(
+        WorkGrant grant,
+        registry_->AdmitWork(2 * std::min(file.size, read.max_file_bytes), "this LoadMesh"));
     ASSIGN_OR_RETURN(MeshReadResult parsed, ReadMeshFile(std::move(file), request->path(), read));
     const std::string name = request->name().empty() ? request->path() : request->name();
     ASSIGN_OR_RETURN(MeshRecord record,
@@ -233,6 +243,8 @@ grpc::ServerUnaryReactor* FieldService::Project(grpc::CallbackServerContext* con
         const auto start = Clock::now();
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
                          registry_->GetBasis(request->basis_id()));
+        // The field in double and its reconstruction for the relative error.
+        ASSIGN_OR_RETURN(WorkGrant grant, AdmitFieldWork(registry_, *basis, 16, 0, "this Project"));
         ASSIGN_OR_RETURN(Eigen::VectorXd X, FieldFromProto(request->field(), *basis));
         ASSIGN_OR_RETURN(ProjectionResult result, fieldspace::Project(*basis->system, X, cancel));
         response->mutable_coefficients()->Add(
@@ -381,6 +393,10 @@ grpc::ServerUnaryReactor* FieldService::Singularities(grpc::CallbackServerContex
           return absl::InvalidArgumentError(
               "singularities are defined for vector and n-field bases, not tensor bases");
         }
+        // The field in double and the per-vertex indices.
+        ASSIGN_OR_RETURN(WorkGrant grant, AdmitFieldWork(registry_, *basis, 8,
+                                                         32 * int64_t{basis->mesh->num_faces()},
+                                                         "this Singularities call"));
         const bool has_field = !request->field().values().empty();
         if (has_field == !request->coefficients().empty()) {
           return absl::InvalidArgumentError(
@@ -405,8 +421,9 @@ namespace {
 absl::Status SmoothInto(const ServedBasis& basis, const Eigen::VectorXd& X0,
                         const EnergyWeights& weights, absl::Span<const double> face_weights,
                         bool scale_free, bool return_field, int field_encoding, bool singularities,
-                        const ServiceOptions& service, const std::atomic<bool>* cancel,
-                        Clock::time_point start, v1::SmoothResponse* response) {
+                        const ServiceOptions& service, Registry* registry,
+                        const std::atomic<bool>* cancel, Clock::time_point start,
+                        v1::SmoothResponse* response) {
   RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(weights));
   ASSIGN_OR_RETURN(FieldEncoding encoding, EncodingFromProto(field_encoding));
   if (return_field) {
@@ -417,6 +434,11 @@ absl::Status SmoothInto(const ServedBasis& basis, const Eigen::VectorXd& X0,
           "the smoothed field (", bytes, " bytes) exceeds the message size limit; use Lift"));
     }
   }
+  // The smoother, and the lifted field (double and float) on request.
+  ASSIGN_OR_RETURN(
+      WorkGrant grant,
+      AdmitFieldWork(registry, basis, return_field || singularities ? 12 : 0,
+                     SmoothWorkingBytes(*basis.system, HardwareThreads()), "this smoothing"));
   SmoothingOptions options;
   options.scale_free = scale_free;
   options.cancel = cancel;
@@ -465,8 +487,8 @@ grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* cont
                     return SmoothInto(
                         *basis, X0, WeightsFromProto(request->weights(), kDefaultSmoothingWeights),
                         request->face_weights(), request->scale_free(), request->return_field(),
-                        request->field_encoding(), request->singularities(), options_, cancel,
-                        start, response);
+                        request->field_encoding(), request->singularities(), options_, registry_,
+                        cancel, start, response);
                   });
 }
 
@@ -480,12 +502,17 @@ grpc::ServerUnaryReactor* FieldService::Align(grpc::CallbackServerContext* conte
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
                          registry_->GetBasis(request->basis_id()));
         ASSIGN_OR_RETURN(CurvatureEstimator estimator, EstimatorFromProto(request->estimator()));
+        // The curvature target while it is computed (the smoothing is admitted in SmoothInto).
+        ASSIGN_OR_RETURN(
+            WorkGrant grant,
+            AdmitFieldWork(registry_, *basis, 8, CurvatureWorkingBytes(basis->mesh->num_faces()),
+                           "this Align"));
         ASSIGN_OR_RETURN(AlignmentTarget target, CurvatureAlignmentTarget(*basis, estimator));
         return SmoothInto(
             *basis, target.dofs, WeightsFromProto(request->weights(), kDefaultSmoothingWeights),
             absl::MakeConstSpan(target.face_weights.data(), target.face_weights.size()),
             /*scale_free=*/true, request->return_field(), request->field_encoding(),
-            request->singularities(), options_, cancel, start, response);
+            request->singularities(), options_, registry_, cancel, start, response);
       });
 }
 

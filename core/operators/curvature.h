@@ -114,6 +114,11 @@ struct CurvatureAlignedTargets {
 absl::StatusOr<CurvatureAlignedTargets> ComputeCurvatureAlignedTargets(
     const TriangleMesh& mesh, const Eigen::Ref<const Eigen::VectorXd>& tensor_dofs, int32_t n);
 
+// An upper estimate of the bytes the curvature computations above hold for a mesh of `num_faces`
+// faces (the shape operator, principal curvatures and directions, targets and per-vertex data,
+// about 150 bytes a face), for admission against a memory budget.
+inline int64_t CurvatureWorkingBytes(int64_t num_faces) { return 256 * num_faces; }
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_OPERATORS_CURVATURE_H_

@@ -207,4 +207,12 @@ absl::StatusOr<SmoothingResult> SmoothReduced(const ReducedSystem& system,
   return result;
 }
 
+int64_t SmoothWorkingBytes(const ReducedSystem& system, int32_t threads) {
+  const int64_t k = system.dofs();
+  const int64_t nnz = system.stats().pattern_nonzeros;
+  const int64_t factor = system.stats().factor_nonzeros;
+  return 3 * k * 8 + (std::max<int32_t>(threads, 1) + 2) * nnz * 12 + 2 * factor * 8 +
+         8 * int64_t{system.dimension()} * 8;
+}
+
 }  // namespace fieldspace

@@ -142,6 +142,11 @@ class ReducedSmoother {
 
 // One-shot smoothing: ReducedSmoother::Create + Solve, with all four timings filled in. `system`
 // must outlive the call only.
+// An upper estimate of the bytes SmoothReduced allocates on `system`: the field and its
+// right-hand side, the weighted mass and energy on the shared pattern (per thread while they are
+// summed) and the factorization. For admission against a memory budget.
+int64_t SmoothWorkingBytes(const ReducedSystem& system, int32_t threads);
+
 absl::StatusOr<SmoothingResult> SmoothReduced(const ReducedSystem& system,
                                               const Eigen::Ref<const Eigen::VectorXd>& field,
                                               const EnergyWeights& weights,

@@ -16,6 +16,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/mesh/mesh_io.h"
 #include "core/mesh/shapes.h"
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
 #include "google/protobuf/descriptor.pb.h"
@@ -659,6 +660,34 @@ TEST_F(HostileInputTest, UploadsAreAdmittedAgainstTheMemoryBudget) {
   ASSERT_TRUE(ico3.ok());
   EXPECT_FALSE(UploadRaw(*ico3, "ico3").empty());
   EXPECT_TRUE(wait_for_work([](int64_t w) { return w == 0; }));
+}
+
+// B2: LoadMesh holds the file's bytes and the parsed arrays: admitted against the memory budget
+// like an upload.
+TEST_F(HostileInputTest, LoadMeshIsAdmittedAgainstTheMemoryBudget) {
+  const fs::path data = root_ / "data";
+  fs::create_directories(data);
+  for (const auto& [name, level] : {std::pair<std::string, int>{"small.ply", 3}, {"big.ply", 7}}) {
+    auto arrays = MakeIcosphere(level, 1.0);  // 1,280 faces (24 KB); 327,680 faces (6.2 MB)
+    ASSERT_TRUE(arrays.ok());
+    ASSERT_TRUE(WritePly((data / name).string(), arrays->vertices, arrays->faces).ok());
+  }
+  FieldServerOptions options;
+  options.memory_budget_mb = 8;
+  options.data_root = data.string();
+  Start(options);
+  const auto load = [&](const std::string& path) {
+    grpc::ClientContext context;
+    v1::LoadMeshRequest request;
+    request.set_path(path);
+    v1::MeshInfo info;
+    return stub_->LoadMesh(&context, request, &info);
+  };
+  const grpc::Status big = load("big.ply");
+  EXPECT_EQ(big.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << big.error_message();
+  EXPECT_NE(big.error_message().find("this LoadMesh"), std::string::npos) << big.error_message();
+  EXPECT_TRUE(load("small.ply").ok());
+  EXPECT_EQ(server_->registry()->work_in_use(), 0);
 }
 
 }  // namespace
