@@ -86,48 +86,38 @@ void Registry::DropLocked(std::map<std::string, E>& entries,
   entries.erase(it);
 }
 
-void Registry::SyncMesh(const std::string& id) const {
-  if (!options_.shared_store) return;
-  const bool on_disk = store_->HasMesh(id);
+template <typename E, typename Record>
+void Registry::SyncEntry(std::map<std::string, E>& entries, const std::string& id, bool on_disk,
+                         const std::function<absl::StatusOr<Record>()>& read) const {
   {
     std::lock_guard<std::mutex> lock(mu_);
-    auto it = meshes_.find(id);
+    auto it = entries.find(id);
     if (!on_disk) {
-      if (it != meshes_.end()) DropLocked(meshes_, it);
+      if (it != entries.end()) DropLocked(entries, it);
       return;
     }
-    if (it != meshes_.end() && it->second.damaged.ok()) return;
+    if (it != entries.end() && it->second.damaged.ok()) return;
   }
-  absl::StatusOr<MeshRecord> record = store_->ReadMeshRecord(id);
+  absl::StatusOr<Record> record = read();
   if (!record.ok() && record.status().code() != absl::StatusCode::kDataLoss) return;
   std::lock_guard<std::mutex> lock(mu_);
-  MeshEntry& e = meshes_[id];
-  if (e.loaded != nullptr) return;  // an upload here won the race
+  E& e = entries[id];
+  if (e.loaded != nullptr) return;  // an upload or build here won the race
   e.record.id = id;
   e.damaged = record.status();
   if (record.ok()) e.record = *std::move(record);
 }
 
+void Registry::SyncMesh(const std::string& id) const {
+  if (!options_.shared_store) return;
+  SyncEntry<MeshEntry, MeshRecord>(meshes_, id, store_->HasMesh(id),
+                                   [&] { return store_->ReadMeshRecord(id); });
+}
+
 void Registry::SyncBasis(const std::string& id) const {
   if (!options_.shared_store) return;
-  const bool on_disk = store_->HasBasis(id);
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = bases_.find(id);
-    if (!on_disk) {
-      if (it != bases_.end()) DropLocked(bases_, it);
-      return;
-    }
-    if (it != bases_.end() && it->second.damaged.ok()) return;
-  }
-  absl::StatusOr<BasisRecord> record = store_->ReadBasisRecord(id);
-  if (!record.ok() && record.status().code() != absl::StatusCode::kDataLoss) return;
-  std::lock_guard<std::mutex> lock(mu_);
-  BasisEntry& e = bases_[id];
-  if (e.loaded != nullptr) return;
-  e.record.id = id;
-  e.damaged = record.status();
-  if (record.ok()) e.record = *std::move(record);
+  SyncEntry<BasisEntry, BasisRecord>(bases_, id, store_->HasBasis(id),
+                                     [&] { return store_->ReadBasisRecord(id); });
 }
 
 void Registry::Rescan() const {

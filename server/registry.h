@@ -197,6 +197,11 @@ class Registry final : public WorkAccount {
   // with its store file (one stat; the header on first sight); Rescan does it for all files.
   void SyncMesh(const std::string& id) const;
   void SyncBasis(const std::string& id) const;
+  // Both: drops the entry of `id` in `entries` when its file is gone (`on_disk` false), else reads
+  // its record with `read` unless it is known and sound.
+  template <typename E, typename Record>
+  void SyncEntry(std::map<std::string, E>& entries, const std::string& id, bool on_disk,
+                 const std::function<absl::StatusOr<Record>()>& read) const;
   void Rescan() const;
   // Removes an entry that a delete elsewhere made stale. Requires mu_.
   template <typename E>

@@ -340,6 +340,31 @@ absl::StatusOr<OpenedFile> OpenRecordFile(const std::string& id, char prefix,
   return f;
 }
 
+// The records of the files `*<ext>` in DIR/<folder> (Store::Scan): sound ones into `records`,
+// the others into `damaged` (with `basis` telling which kind they are).
+template <typename Record>
+void ScanFolder(const std::string& dir, const char* folder, const char* ext, const char (&magic)[8],
+                bool (*decode)(std::string_view, Record*), bool basis, std::vector<Record>* records,
+                std::vector<DamagedEntry>* damaged) {
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(fs::path(dir) / folder, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (!absl::EndsWith(name, ext) || absl::StartsWith(name, ".")) continue;
+    const std::string id = name.substr(0, name.size() - std::strlen(ext));
+    absl::StatusOr<OpenedFile> f = OpenContainer(entry.path().string(), magic);
+    Record record;
+    absl::Status status = f.status();
+    if (status.ok() && (!decode(f->meta, &record) || record.id != id)) {
+      status = absl::DataLossError(absl::StrCat(entry.path().string(), ": corrupt metadata"));
+    }
+    if (status.ok()) {
+      records->push_back(std::move(record));
+    } else {
+      damaged->push_back({id, basis, status});
+    }
+  }
+}
+
 }  // namespace
 
 absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir,
@@ -380,39 +405,10 @@ std::string Store::BasisPath(const std::string& id) const {
 
 StoreContents Store::Scan() const {
   StoreContents out;
-  std::error_code ec;
-  for (const auto& entry : fs::directory_iterator(fs::path(dir_) / "meshes", ec)) {
-    const std::string name = entry.path().filename().string();
-    if (!absl::EndsWith(name, kMeshExt) || absl::StartsWith(name, ".")) continue;
-    const std::string id = name.substr(0, name.size() - std::strlen(kMeshExt));
-    absl::StatusOr<OpenedFile> f = OpenContainer(entry.path().string(), kMeshMagic);
-    MeshRecord record;
-    absl::Status status = f.status();
-    if (status.ok() && (!DecodeMeshRecord(f->meta, &record) || record.id != id)) {
-      status = absl::DataLossError(absl::StrCat(entry.path().string(), ": corrupt metadata"));
-    }
-    if (status.ok()) {
-      out.meshes.push_back(std::move(record));
-    } else {
-      out.damaged.push_back({id, false, status});
-    }
-  }
-  for (const auto& entry : fs::directory_iterator(fs::path(dir_) / "bases", ec)) {
-    const std::string name = entry.path().filename().string();
-    if (!absl::EndsWith(name, kBasisExt) || absl::StartsWith(name, ".")) continue;
-    const std::string id = name.substr(0, name.size() - std::strlen(kBasisExt));
-    absl::StatusOr<OpenedFile> f = OpenContainer(entry.path().string(), kBasisMagic);
-    BasisRecord record;
-    absl::Status status = f.status();
-    if (status.ok() && (!DecodeBasisRecord(f->meta, &record) || record.id != id)) {
-      status = absl::DataLossError(absl::StrCat(entry.path().string(), ": corrupt metadata"));
-    }
-    if (status.ok()) {
-      out.bases.push_back(std::move(record));
-    } else {
-      out.damaged.push_back({id, true, status});
-    }
-  }
+  ScanFolder(dir_, "meshes", kMeshExt, kMeshMagic, DecodeMeshRecord, /*basis=*/false, &out.meshes,
+             &out.damaged);
+  ScanFolder(dir_, "bases", kBasisExt, kBasisMagic, DecodeBasisRecord, /*basis=*/true, &out.bases,
+             &out.damaged);
   return out;
 }
 
