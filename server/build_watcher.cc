@@ -17,10 +17,9 @@ namespace {
 class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgress>,
                            public RefCounted {
  public:
-  BuildWatcher(FieldService* service, grpc::CallbackServerContext* context,
-               const v1::BuildBasisRequest& request)
+  BuildWatcher(FieldService* service, const v1::BuildBasisRequest& request)
       : registry_(service->registry()) {
-    absl::Status st = service->Admit(context);
+    absl::Status st = service->Admit();
     absl::StatusOr<Registry::StartedBuild> started = Registry::StartedBuild{};
     if (st.ok()) {
       started = Start(service, request);
@@ -183,9 +182,8 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
 }  // namespace
 
 grpc::ServerWriteReactor<v1::BuildBasisProgress>* NewBuildWatcher(
-    FieldService* service, grpc::CallbackServerContext* context,
-    const v1::BuildBasisRequest& request) {
-  return new BuildWatcher(service, context, request);
+    FieldService* service, const v1::BuildBasisRequest& request) {
+  return new BuildWatcher(service, request);
 }
 
 }  // namespace fieldspace::server

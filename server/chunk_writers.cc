@@ -17,9 +17,8 @@ namespace {
 
 class GeometryWriter final : public ChunkWriter<v1::MeshGeometryChunk> {
  public:
-  GeometryWriter(FieldService* service, grpc::CallbackServerContext* context,
-                 const v1::GetMeshGeometryRequest& request)
-      : ChunkWriter(service, context), request_(request) {
+  GeometryWriter(FieldService* service, const v1::GetMeshGeometryRequest& request)
+      : ChunkWriter(service), request_(request) {
     Begin();
   }
 
@@ -63,9 +62,8 @@ class GeometryWriter final : public ChunkWriter<v1::MeshGeometryChunk> {
 
 class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
  public:
-  LiftWriter(FieldService* service, grpc::CallbackServerContext* context,
-             const v1::LiftRequest& request)
-      : ChunkWriter(service, context), request_(request) {
+  LiftWriter(FieldService* service, const v1::LiftRequest& request)
+      : ChunkWriter(service), request_(request) {
     Begin();
   }
 
@@ -160,9 +158,8 @@ class LiftWriter final : public ChunkWriter<v1::FieldChunk> {
 // Prepare, then sent in chunks of faces.
 class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
  public:
-  CurvatureWriter(FieldService* service, grpc::CallbackServerContext* context,
-                  const v1::CurvatureRequest& request)
-      : ChunkWriter(service, context), request_(request) {
+  CurvatureWriter(FieldService* service, const v1::CurvatureRequest& request)
+      : ChunkWriter(service), request_(request) {
     Begin();
   }
 
@@ -239,21 +236,18 @@ class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
 }  // namespace
 
 grpc::ServerWriteReactor<v1::CurvatureChunk>* NewCurvatureWriter(
-    FieldService* service, grpc::CallbackServerContext* context,
-    const v1::CurvatureRequest& request) {
-  return new CurvatureWriter(service, context, request);
+    FieldService* service, const v1::CurvatureRequest& request) {
+  return new CurvatureWriter(service, request);
 }
 
 grpc::ServerWriteReactor<v1::MeshGeometryChunk>* NewGeometryWriter(
-    FieldService* service, grpc::CallbackServerContext* context,
-    const v1::GetMeshGeometryRequest& request) {
-  return new GeometryWriter(service, context, request);
+    FieldService* service, const v1::GetMeshGeometryRequest& request) {
+  return new GeometryWriter(service, request);
 }
 
 grpc::ServerWriteReactor<v1::FieldChunk>* NewLiftWriter(FieldService* service,
-                                                        grpc::CallbackServerContext* context,
                                                         const v1::LiftRequest& request) {
-  return new LiftWriter(service, context, request);
+  return new LiftWriter(service, request);
 }
 
 }  // namespace fieldspace::server

@@ -45,7 +45,7 @@ class DesignReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
         editor_([registry =
                      service->registry()](const std::string& id) { return registry->GetBasis(id); },
                 EditorOptions(service)) {
-    if (absl::Status admit = service->Admit(context); !admit.ok()) {
+    if (absl::Status admit = service->Admit(); !admit.ok()) {
       finish_sent_ = true;
       FinishWith(this, (admit));
       return;

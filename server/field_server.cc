@@ -24,6 +24,7 @@
 #include "grpcpp/server.h"
 #include "grpcpp/server_builder.h"
 #include "oneapi/tbb/global_control.h"
+#include "server/auth.h"
 #include "server/compute_pool.h"
 #include "server/field_service.h"
 #include "server/parse_failure_interceptor.h"
@@ -112,6 +113,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   // Before the store and the port: a bad certificate must not leave a half-started daemon.
   ASSIGN_OR_RETURN(const std::shared_ptr<grpc::ServerCredentials> credentials,
                    MakeServerCredentials(options.tls));
+  if (!options.auth_token.empty()) RequireBearerToken(*credentials, options.auth_token);
 
   std::unique_ptr<FieldServer> s(new FieldServer());
   s->options_ = options;
@@ -154,7 +156,6 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
                    Registry::Create(s->store_.get(), s->pool_.get(), registry_options));
 
   ServiceOptions service_options;
-  service_options.auth_token = options.auth_token;
   service_options.data_root = options.data_root;
   service_options.max_upload_bytes = options.max_upload_mb << 20;
   service_options.max_message_bytes = options.max_message_mb << 20;

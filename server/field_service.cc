@@ -57,30 +57,8 @@ int32_t ServiceOptions::ChunkFaces(int32_t requested, int64_t bytes_per_face) co
 FieldService::FieldService(Registry* registry, ComputePool* pool, ServiceOptions options)
     : registry_(registry), pool_(pool), options_(std::move(options)) {}
 
-absl::Status FieldService::Admit(grpc::CallbackServerContext* context) const {
+absl::Status FieldService::Admit() const {
   if (draining_.load()) return absl::UnavailableError("server is shutting down");
-  if (options_.auth_token.empty()) return absl::OkStatus();
-  const auto& metadata = context->client_metadata();
-  auto it = metadata.find("authorization");
-  if (it == metadata.end()) {
-    return absl::UnauthenticatedError("missing 'authorization: Bearer <token>' metadata");
-  }
-  const std::string_view value(it->second.data(), it->second.size());
-  // The scheme is case-insensitive (RFC 7235, section 2.1); the token is not.
-  constexpr std::string_view kScheme = "bearer ";
-  if (value.size() < kScheme.size() ||
-      !absl::EqualsIgnoreCase(absl::string_view(value.data(), kScheme.size()),
-                              absl::string_view(kScheme.data(), kScheme.size()))) {
-    return absl::UnauthenticatedError("expected 'authorization: Bearer <token>'");
-  }
-  const std::string_view token = value.substr(kScheme.size());
-  const std::string& expected = options_.auth_token;
-  // Constant-time comparison: the time taken must not reveal how much of the token matched.
-  unsigned char diff = token.size() == expected.size() ? 0 : 1;
-  for (size_t i = 0; i < expected.size(); ++i) {
-    diff |= static_cast<unsigned char>(expected[i] ^ (i < token.size() ? token[i] : 0));
-  }
-  if (diff != 0) return absl::UnauthenticatedError("invalid token");
   return absl::OkStatus();
 }
 
@@ -123,14 +101,14 @@ void FieldService::UnregisterStream(DrainableStream* stream) {
 // --- meshes ------------------------------------------------------------------------------------
 
 grpc::ServerReadReactor<grpc::ByteBuffer>* FieldService::UploadMesh(
-    grpc::CallbackServerContext* context, grpc::ByteBuffer* response) {
-  return NewUploadReactor(this, context, response);
+    grpc::CallbackServerContext* /*context*/, grpc::ByteBuffer* response) {
+  return NewUploadReactor(this, response);
 }
 
-grpc::ServerUnaryReactor* FieldService::LoadMesh(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::LoadMesh(grpc::CallbackServerContext* /*context*/,
                                                  const v1::LoadMeshRequest* request,
                                                  v1::MeshInfo* response) {
-  return RunUnary(this, context, Where::kPool, [this, request, response](const std::atomic<bool>*) {
+  return RunUnary(this, Where::kPool, [this, request, response](const std::atomic<bool>*) {
     ASSIGN_OR_RETURN(ReadableFile file, OpenDataFile(options_.data_root, request->path()));
     // The same size limit as an upload, and the same memory: the bytes and the parsed arrays.
     MeshReadOptions read;
@@ -148,21 +126,20 @@ grpc::ServerUnaryReactor* FieldService::LoadMesh(grpc::CallbackServerContext* co
   });
 }
 
-grpc::ServerUnaryReactor* FieldService::GetMesh(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::GetMesh(grpc::CallbackServerContext* /*context*/,
                                                 const v1::GetMeshRequest* request,
                                                 v1::MeshInfo* response) {
-  return RunUnary(
-      this, context, Where::kInline, [this, request, response](const std::atomic<bool>*) {
-        ASSIGN_OR_RETURN(MeshRecord record, registry_->GetMeshRecord(request->mesh_id()));
-        MeshInfoFromRecord(record, registry_->IsMeshLoaded(record.id), response);
-        return absl::OkStatus();
-      });
+  return RunUnary(this, Where::kInline, [this, request, response](const std::atomic<bool>*) {
+    ASSIGN_OR_RETURN(MeshRecord record, registry_->GetMeshRecord(request->mesh_id()));
+    MeshInfoFromRecord(record, registry_->IsMeshLoaded(record.id), response);
+    return absl::OkStatus();
+  });
 }
 
-grpc::ServerUnaryReactor* FieldService::ListMeshes(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::ListMeshes(grpc::CallbackServerContext* /*context*/,
                                                    const v1::ListMeshesRequest*,
                                                    v1::ListMeshesResponse* response) {
-  return RunUnary(this, context, Where::kInline, [this, response](const std::atomic<bool>*) {
+  return RunUnary(this, Where::kInline, [this, response](const std::atomic<bool>*) {
     for (const MeshRecord& r : registry_->ListMeshes()) {
       MeshInfoFromRecord(r, registry_->IsMeshLoaded(r.id), response->add_meshes());
     }
@@ -170,10 +147,10 @@ grpc::ServerUnaryReactor* FieldService::ListMeshes(grpc::CallbackServerContext* 
   });
 }
 
-grpc::ServerUnaryReactor* FieldService::DeleteMesh(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::DeleteMesh(grpc::CallbackServerContext* /*context*/,
                                                    const v1::DeleteMeshRequest* request,
                                                    v1::DeleteMeshResponse* response) {
-  return RunUnary(this, context, Where::kPool, [this, request, response](const std::atomic<bool>*) {
+  return RunUnary(this, Where::kPool, [this, request, response](const std::atomic<bool>*) {
     ASSIGN_OR_RETURN(std::vector<std::string> deleted,
                      registry_->DeleteMesh(request->mesh_id(), request->cascade()));
     for (std::string& id : deleted) response->add_deleted_basis_ids(std::move(id));
@@ -182,63 +159,61 @@ grpc::ServerUnaryReactor* FieldService::DeleteMesh(grpc::CallbackServerContext* 
 }
 
 grpc::ServerWriteReactor<v1::MeshGeometryChunk>* FieldService::GetMeshGeometry(
-    grpc::CallbackServerContext* context, const v1::GetMeshGeometryRequest* request) {
-  return NewGeometryWriter(this, context, *request);
+    grpc::CallbackServerContext* /*context*/, const v1::GetMeshGeometryRequest* request) {
+  return NewGeometryWriter(this, *request);
 }
 
 // --- bases -------------------------------------------------------------------------------------
 
 grpc::ServerWriteReactor<v1::BuildBasisProgress>* FieldService::BuildBasis(
-    grpc::CallbackServerContext* context, const v1::BuildBasisRequest* request) {
-  return NewBuildWatcher(this, context, *request);
+    grpc::CallbackServerContext* /*context*/, const v1::BuildBasisRequest* request) {
+  return NewBuildWatcher(this, *request);
 }
 
-grpc::ServerUnaryReactor* FieldService::CancelBuild(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::CancelBuild(grpc::CallbackServerContext* /*context*/,
                                                     const v1::CancelBuildRequest* request,
                                                     v1::CancelBuildResponse*) {
-  return RunUnary(this, context, Where::kInline, [this, request](const std::atomic<bool>*) {
+  return RunUnary(this, Where::kInline, [this, request](const std::atomic<bool>*) {
     return registry_->CancelBuild(request->basis_id());
   });
 }
 
-grpc::ServerUnaryReactor* FieldService::GetBasis(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::GetBasis(grpc::CallbackServerContext* /*context*/,
                                                  const v1::GetBasisRequest* request,
                                                  v1::BasisInfo* response) {
-  return RunUnary(
-      this, context, Where::kInline, [this, request, response](const std::atomic<bool>*) {
-        ASSIGN_OR_RETURN(BasisStatus status, registry_->GetBasisStatus(request->basis_id()));
-        BasisInfoFromStatus(status, response);
-        return absl::OkStatus();
-      });
+  return RunUnary(this, Where::kInline, [this, request, response](const std::atomic<bool>*) {
+    ASSIGN_OR_RETURN(BasisStatus status, registry_->GetBasisStatus(request->basis_id()));
+    BasisInfoFromStatus(status, response);
+    return absl::OkStatus();
+  });
 }
 
-grpc::ServerUnaryReactor* FieldService::ListBases(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::ListBases(grpc::CallbackServerContext* /*context*/,
                                                   const v1::ListBasesRequest* request,
                                                   v1::ListBasesResponse* response) {
-  return RunUnary(this, context, Where::kInline,
-                  [this, request, response](const std::atomic<bool>*) {
-                    for (const BasisStatus& s : registry_->ListBases(request->mesh_id())) {
-                      BasisInfoFromStatus(s, response->add_bases());
-                    }
-                    return absl::OkStatus();
-                  });
+  return RunUnary(this, Where::kInline, [this, request, response](const std::atomic<bool>*) {
+    for (const BasisStatus& s : registry_->ListBases(request->mesh_id())) {
+      BasisInfoFromStatus(s, response->add_bases());
+    }
+    return absl::OkStatus();
+  });
 }
 
-grpc::ServerUnaryReactor* FieldService::DeleteBasis(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::DeleteBasis(grpc::CallbackServerContext* /*context*/,
                                                     const v1::DeleteBasisRequest* request,
                                                     v1::DeleteBasisResponse*) {
-  return RunUnary(this, context, Where::kPool, [this, request](const std::atomic<bool>*) {
+  return RunUnary(this, Where::kPool, [this, request](const std::atomic<bool>*) {
     return registry_->DeleteBasis(request->basis_id());
   });
 }
 
 // --- subspace methods ----------------------------------------------------------------------------
 
-grpc::ServerUnaryReactor* FieldService::Project(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::Project(grpc::CallbackServerContext* /*context*/,
                                                 const v1::ProjectRequest* request,
                                                 v1::ProjectResponse* response) {
   return RunUnary(
-      this, context, Where::kPool,
+      this, Where::kPool,
       [this, request, response](const std::atomic<bool>* cancel) -> absl::Status {
         const auto start = Clock::now();
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
@@ -255,11 +230,11 @@ grpc::ServerUnaryReactor* FieldService::Project(grpc::CallbackServerContext* con
       });
 }
 
-grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* /*context*/,
                                               const v1::SolveRequest* request,
                                               v1::SolveResponse* response) {
   return RunUnary(
-      this, context, Where::kPool,
+      this, Where::kPool,
       [this, request, response](const std::atomic<bool>* cancel) -> absl::Status {
         const auto start = Clock::now();
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
@@ -327,16 +302,16 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* conte
       });
 }
 
-grpc::ServerWriteReactor<v1::FieldChunk>* FieldService::Lift(grpc::CallbackServerContext* context,
-                                                             const v1::LiftRequest* request) {
-  return NewLiftWriter(this, context, *request);
+grpc::ServerWriteReactor<v1::FieldChunk>* FieldService::Lift(
+    grpc::CallbackServerContext* /*context*/, const v1::LiftRequest* request) {
+  return NewLiftWriter(this, *request);
 }
 
-grpc::ServerUnaryReactor* FieldService::Eigenfields(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::Eigenfields(grpc::CallbackServerContext* /*context*/,
                                                     const v1::EigenfieldsRequest* request,
                                                     v1::EigenfieldsResponse* response) {
   return RunUnary(
-      this, context, Where::kPool,
+      this, Where::kPool,
       [this, request, response](const std::atomic<bool>* cancel) -> absl::Status {
         const auto start = Clock::now();
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
@@ -377,16 +352,15 @@ grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* FieldService::Desig
 // --- applications ------------------------------------------------------------------------------
 
 grpc::ServerWriteReactor<v1::CurvatureChunk>* FieldService::Curvature(
-    grpc::CallbackServerContext* context, const v1::CurvatureRequest* request) {
-  return NewCurvatureWriter(this, context, *request);
+    grpc::CallbackServerContext* /*context*/, const v1::CurvatureRequest* request) {
+  return NewCurvatureWriter(this, *request);
 }
 
-grpc::ServerUnaryReactor* FieldService::Singularities(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::Singularities(grpc::CallbackServerContext* /*context*/,
                                                       const v1::SingularitiesRequest* request,
                                                       v1::SingularitiesResponse* response) {
   return RunUnary(
-      this, context, Where::kPool,
-      [this, request, response](const std::atomic<bool>*) -> absl::Status {
+      this, Where::kPool, [this, request, response](const std::atomic<bool>*) -> absl::Status {
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
                          registry_->GetBasis(request->basis_id()));
         if (basis->basis->type.kind == FieldKind::kTensor) {
@@ -475,10 +449,10 @@ absl::Status SmoothInto(const ServedBasis& basis, const Eigen::VectorXd& X0,
 
 }  // namespace
 
-grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* /*context*/,
                                                const v1::SmoothRequest* request,
                                                v1::SmoothResponse* response) {
-  return RunUnary(this, context, Where::kPool,
+  return RunUnary(this, Where::kPool,
                   [this, request, response](const std::atomic<bool>* cancel) -> absl::Status {
                     const auto start = Clock::now();
                     ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,
@@ -492,11 +466,11 @@ grpc::ServerUnaryReactor* FieldService::Smooth(grpc::CallbackServerContext* cont
                   });
 }
 
-grpc::ServerUnaryReactor* FieldService::Align(grpc::CallbackServerContext* context,
+grpc::ServerUnaryReactor* FieldService::Align(grpc::CallbackServerContext* /*context*/,
                                               const v1::AlignRequest* request,
                                               v1::SmoothResponse* response) {
   return RunUnary(
-      this, context, Where::kPool,
+      this, Where::kPool,
       [this, request, response](const std::atomic<bool>* cancel) -> absl::Status {
         const auto start = Clock::now();
         ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> basis,

@@ -18,8 +18,7 @@
 namespace fieldspace::server {
 
 struct ServiceOptions {
-  std::string auth_token;  // required as "authorization: Bearer <token>" when not empty
-  std::string data_root;   // LoadMesh reads only below it; empty disables LoadMesh
+  std::string data_root;  // LoadMesh reads only below it; empty disables LoadMesh
   int64_t max_upload_bytes = int64_t{2} << 30;
   int64_t max_message_bytes = int64_t{64} << 20;  // responses larger than this are refused
   // Design sessions check every k-th edit's solution against the true system (and the risky
@@ -109,8 +108,9 @@ class FieldService final : public FieldServiceBase {
   void RegisterStream(DrainableStream* stream);
   void UnregisterStream(DrainableStream* stream);
 
-  // Authentication and drain check for a new RPC.
-  absl::Status Admit(grpc::CallbackServerContext* context) const;
+  // The drain check for a new RPC: Unavailable once the server is shutting down. (Tokens are
+  // checked before a call reaches the service: server/auth.h.)
+  absl::Status Admit() const;
 
   Registry* registry() const { return registry_; }
   ComputePool* pool() const { return pool_; }

@@ -14,26 +14,21 @@ class FieldService;
 // UploadMesh (raw: UploadMeshRequest in, MeshInfo out): accumulates in-order chunks, then parses
 // and registers the mesh on the pool.
 grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
-                                                            grpc::CallbackServerContext* context,
                                                             grpc::ByteBuffer* response);
 
 // GetMeshGeometry and Lift: chunks produced on the pool.
 grpc::ServerWriteReactor<fieldspace::v1::MeshGeometryChunk>* NewGeometryWriter(
-    FieldService* service, grpc::CallbackServerContext* context,
-    const fieldspace::v1::GetMeshGeometryRequest& request);
+    FieldService* service, const fieldspace::v1::GetMeshGeometryRequest& request);
 grpc::ServerWriteReactor<fieldspace::v1::FieldChunk>* NewLiftWriter(
-    FieldService* service, grpc::CallbackServerContext* context,
-    const fieldspace::v1::LiftRequest& request);
+    FieldService* service, const fieldspace::v1::LiftRequest& request);
 
 // Curvature: the mesh's shape operator, computed on the pool, sent in chunks.
 grpc::ServerWriteReactor<fieldspace::v1::CurvatureChunk>* NewCurvatureWriter(
-    FieldService* service, grpc::CallbackServerContext* context,
-    const fieldspace::v1::CurvatureRequest& request);
+    FieldService* service, const fieldspace::v1::CurvatureRequest& request);
 
 // BuildBasis: watches a (possibly shared) build job; the job outlives the stream.
 grpc::ServerWriteReactor<fieldspace::v1::BuildBasisProgress>* NewBuildWatcher(
-    FieldService* service, grpc::CallbackServerContext* context,
-    const fieldspace::v1::BuildBasisRequest& request);
+    FieldService* service, const fieldspace::v1::BuildBasisRequest& request);
 
 // Design (raw: DesignRequest in, DesignUpdate out): one session per stream (the edit logic is
 // DesignEditor, design_editor.h).

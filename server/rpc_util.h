@@ -97,10 +97,9 @@ class UnaryCall final : public grpc::ServerUnaryReactor {
 // on the gRPC thread (bookkeeping that only takes a lock and copies a little).
 enum class Where { kPool, kInline };
 template <typename Work>
-grpc::ServerUnaryReactor* RunUnary(FieldService* service, grpc::CallbackServerContext* context,
-                                   Where where, Work work) {
+grpc::ServerUnaryReactor* RunUnary(FieldService* service, Where where, Work work) {
   auto* call = new UnaryCall();
-  if (absl::Status admit = service->Admit(context); !admit.ok()) {
+  if (absl::Status admit = service->Admit(); !admit.ok()) {
     FinishWith(call, admit);
     return call;
   }
@@ -122,9 +121,7 @@ grpc::ServerUnaryReactor* RunUnary(FieldService* service, grpc::CallbackServerCo
 template <typename Message>
 class ChunkWriter : public grpc::ServerWriteReactor<Message> {
  public:
-  ChunkWriter(FieldService* service, grpc::CallbackServerContext* context) : service_(service) {
-    admitted_ = service->Admit(context);
-  }
+  explicit ChunkWriter(FieldService* service) : service_(service) { admitted_ = service->Admit(); }
 
   // Call once from the subclass constructor.
   void Begin() {

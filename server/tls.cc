@@ -10,6 +10,7 @@
 #include "core/common/file_util.h"
 #include "core/common/status_macros.h"
 #include "grpcpp/security/server_credentials.h"
+#include "server/auth.h"
 
 namespace fieldspace::server {
 namespace {
@@ -70,7 +71,7 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(
       return absl::InvalidArgumentError(
           "--tls-client-ca needs --tls-cert and --tls-key (the server's own certificate)");
     }
-    return grpc::InsecureServerCredentials();
+    return PlaintextServerCredentials();
   }
   if (files.cert_file.empty()) {
     return absl::InvalidArgumentError(

@@ -24,7 +24,7 @@ struct TlsFiles {
   bool verifies_clients() const { return !client_ca_file.empty(); }
 };
 
-// The credentials of the listening port: InsecureServerCredentials without TLS, otherwise
+// The credentials of the listening port: PlaintextServerCredentials (auth.h) without TLS, otherwise
 // SslServerCredentials of the files, read and checked first. InvalidArgument, naming the flag
 // and the file, for a certificate without a key or the other way round, a client CA without a
 // certificate, a file that cannot be read or holds no PEM certificate (key), and a key that does

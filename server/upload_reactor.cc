@@ -21,11 +21,10 @@ namespace {
 // end of the upload and store what came before).
 class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
  public:
-  UploadReactor(FieldService* service, grpc::CallbackServerContext* context,
-                grpc::ByteBuffer* response)
+  UploadReactor(FieldService* service, grpc::ByteBuffer* response)
       : service_(service), response_(response) {
-    if (absl::Status admit = service->Admit(context); !admit.ok()) {
-      FinishWith(this, (admit));
+    if (absl::Status admit = service->Admit(); !admit.ok()) {
+      FinishWith(this, admit);
       return;
     }
     StartRead(&message_);
@@ -196,9 +195,8 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
 }  // namespace
 
 grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
-                                                            grpc::CallbackServerContext* context,
                                                             grpc::ByteBuffer* response) {
-  return new UploadReactor(service, context, response);
+  return new UploadReactor(service, response);
 }
 
 }  // namespace fieldspace::server
