@@ -8,6 +8,7 @@
 #include "Eigen/QR"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/string_view.h"
 #include "core/linalg/lanczos.h"
 
 namespace fieldspace::basis_internal {
@@ -72,15 +73,16 @@ absl::StatusOr<LocalEigenResult> SolveLanczos(LocalOperator& op, int32_t m, doub
   lanczos.tolerance = std::min(1e-10, tolerance * tolerance);
   lanczos.context = "local eigenproblem";
   absl::StatusOr<LanczosResult> run = ShiftInvertEigenpairs(n, inverse, -op.shift(), lanczos);
-  if (absl::IsResourceExhausted(run.status())) {
-    // This is the fallback: when it does not converge either, nothing did. Not a server fault:
-    // the parameters ask for more than this region's eigenproblem gives (seen: n = 64 at d = 10,
-    // where each region is a large part of the mesh and its spectrum is dense).
-    return absl::FailedPreconditionError(absl::StrCat(
-        "local eigenproblem of a region of ", n,
-        " DOFs did not converge (LOBPCG, then Spectra's Lanczos): ", run.status().message(),
-        "; a larger dimension d (smaller regions) or a smaller n helps"));
-  }
+  // This is the fallback: when it does not converge either, nothing did. Not a server fault: the
+  // parameters ask for more than this region's eigenproblem gives (seen: n = 64 at d = 10, where
+  // each region is a large part of the mesh and its spectrum is dense).
+  const auto not_converged = [n](absl::string_view why) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("local eigenproblem of a region of ", n,
+                     " DOFs did not converge (LOBPCG, then Spectra's Lanczos): ", why,
+                     "; a larger dimension d (smaller regions) or a smaller n helps"));
+  };
+  if (absl::IsResourceExhausted(run.status())) return not_converged(run.status().message());
   if (!run.ok()) return run.status();
   LocalEigenResult result;
   const Eigen::MatrixXd X = Orthonormalize(run->vectors);
@@ -91,6 +93,17 @@ absl::StatusOr<LocalEigenResult> SolveLanczos(LocalOperator& op, int32_t m, doub
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(H);
   result.values = es.eigenvalues();
   result.vectors = X * es.eigenvectors();
+  // Lanczos judges convergence through the inverse alone; an inaccurate inverse (a factorization
+  // of a nearly singular region) can pass it with wrong pairs. The residual with S_bar itself
+  // is the test LOBPCG passes too.
+  const Eigen::MatrixXd R = SX * es.eigenvectors() - result.vectors * result.values.asDiagonal();
+  for (int32_t i = 0; i < m; ++i) {
+    const double bound = tolerance * (std::abs(result.values[i]) + op.shift());
+    if (!(R.col(i).norm() <= bound)) {
+      return not_converged(absl::StrFormat("eigenpair %d has residual %.3g against S, above %.3g",
+                                           i, R.col(i).norm(), bound));
+    }
+  }
   result.lanczos_fallback = true;
   return result;
 }

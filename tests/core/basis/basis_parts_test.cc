@@ -252,6 +252,33 @@ TEST(LocalEigensolverTest, FallsBackToLanczosWhenLobpcgDoesNotConverge) {
   }
 }
 
+// The path Laplacian seen through an inverse that is off by a different random 1% at every
+// application, as a factorization of a nearly singular region can be: Spectra's Lanczos then
+// reports convergence on wrong pairs (lowest eigenvalue 1.09e-4 instead of 6.1e-5).
+class NoisyInverseOperator : public PathOperator {
+ public:
+  using PathOperator::PathOperator;
+  void ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override {
+    PathOperator::ApplyShiftInverse(X, Y);
+    *Y += 0.01 * Y->norm() / std::sqrt(static_cast<double>(Y->size())) *
+          Eigen::MatrixXd::Random(Y->rows(), Y->cols());
+  }
+};
+
+// B9 of issue 15: a local eigenproblem on which neither LOBPCG nor the Lanczos fallback converges
+// was INTERNAL (or, as here, wrong pairs were accepted); it is FAILED_PRECONDITION with advice,
+// the Lanczos pairs checked against S_bar itself.
+TEST(LocalEigensolverTest, NoConvergenceIsAFailedPreconditionWithAdvice) {
+  NoisyInverseOperator op(400, 1e-4);
+  LocalEigenOptions options;
+  options.count = 2;
+  options.max_iterations = 1;  // LOBPCG (robust to a poor preconditioner) stops early
+  options.tolerance = 1e-9;
+  EXPECT_THAT(basis_internal::SolveLocalEigenproblem(op, options, nullptr),
+              StatusIs(absl::StatusCode::kFailedPrecondition,
+                       ::testing::HasSubstr("a larger dimension d (smaller regions)")));
+}
+
 TEST(Crc32cTest, KnownValuesAndIncremental) {
   const char* s = "123456789";
   EXPECT_EQ(Crc32c(s, 9), 0xE3069283u);  // the standard check value
