@@ -191,6 +191,18 @@ absl::StatusOr<std::shared_ptr<const ReducedSmoother>> DesignEditor::DataTerm(
   return std::make_shared<const ReducedSmoother>(std::move(smoother));
 }
 
+absl::Status DesignEditor::AdmitConstraints(int64_t constraints) {
+  if (!options_.admit_work) return absl::OkStatus();
+  const int64_t bytes = DesignSessionConstraintBytes(*basis_->system, constraints);
+  const int64_t held = constraints_grant_.bytes();
+  if (bytes <= held) return absl::OkStatus();
+  ASSIGN_OR_RETURN(WorkGrant more, options_.admit_work(std::max(bytes, 2 * held) - held,
+                                                       absl::StrCat("this design session's ",
+                                                                    constraints, " constraints")));
+  constraints_grant_.Merge(std::move(more));
+  return absl::OkStatus();
+}
+
 absl::Status DesignEditor::Edit(const v1::DesignRequest& r) {
   if (session_ == nullptr) {
     return absl::FailedPreconditionError("the first message of a session must be 'open'");
@@ -200,6 +212,7 @@ absl::Status DesignEditor::Edit(const v1::DesignRequest& r) {
       if (session_->num_constraints() >= options_.max_constraints) {
         return absl::ResourceExhaustedError("too many constraints in this session");
       }
+      RETURN_IF_ERROR(AdmitConstraints(int64_t{session_->num_constraints()} + 1));
       ASSIGN_OR_RETURN(FieldConstraint c,
                        ConstraintFromProto(*basis_, r.add().constraint(),
                                            absl::StrCat("add id ", r.add().id())));

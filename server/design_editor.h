@@ -24,8 +24,8 @@ struct DesignEditorOptions {
   // Watched faces must fit in half of a message of this size.
   int64_t max_message_bytes = int64_t{64} << 20;
   int32_t max_constraints = 1 << 20;
-  // Admits an opening session's memory (DesignSessionOpenBytes) for the session's lifetime; none
-  // when empty.
+  // Admits an opening session's memory (DesignSessionOpenBytes) for the session's lifetime, and
+  // its constraints' (DesignSessionConstraintBytes) as they are added; none when empty.
   AdmitWorkFn admit_work;
 };
 
@@ -68,7 +68,12 @@ class DesignEditor {
   DesignEditorOptions options_;
   std::shared_ptr<const ServedBasis> basis_;
   std::unique_ptr<DesignSession> session_;
-  WorkGrant grant_;  // the session's admitted memory
+  // Admits the memory of `constraints` constraints into constraints_grant_, which grows by at
+  // least doubling (as the session's own capacity does) and never shrinks (nor does that).
+  absl::Status AdmitConstraints(int64_t constraints);
+
+  WorkGrant grant_;              // the open session's admitted memory
+  WorkGrant constraints_grant_;  // its constraints' (AdmitConstraints)
   std::vector<int32_t> watch_;
   FieldEncoding watch_encoding_ = FieldEncoding::kDof;
   bool refactorized_ = false;                                 // by the request being applied

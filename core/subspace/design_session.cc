@@ -390,4 +390,9 @@ int64_t DesignSessionOpenBytes(const ReducedSystem& system) {
   return 2 * system.stats().factor_nonzeros * 8 + 16 * int64_t{system.dimension()} * 8;
 }
 
+int64_t DesignSessionConstraintBytes(const ReducedSystem& system, int64_t constraints) {
+  const int64_t r = std::max<int64_t>(constraints, 0) * system.dofs_per_face();
+  return 8 * (2 * int64_t{system.dimension()} * r + 6 * r * r);
+}
+
 }  // namespace fieldspace

@@ -222,6 +222,12 @@ class DesignSession {
 // each constraint adds about d x dofs-per-face doubles. For admission against a memory budget.
 int64_t DesignSessionOpenBytes(const ReducedSystem& system);
 
+// An upper bound on the bytes `constraints` constraints add to a DesignSession on `system`, for
+// r = constraints x dofs-per-face rows: W (d x r) and K (r x r) at up to twice r (their capacity
+// doubles), and the r x r matrix H with its Cholesky factor: 8 (2 d r + 6 r^2). The r^2 terms
+// dominate beyond r ~ d / 3 (e.g. 4,700 vector constraints take ~4 GiB at any d).
+int64_t DesignSessionConstraintBytes(const ReducedSystem& system, int64_t constraints);
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_SUBSPACE_DESIGN_SESSION_H_

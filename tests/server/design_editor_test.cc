@@ -304,8 +304,7 @@ TEST_F(DesignEditorTest, SessionMemoryIsAdmittedForTheSessionsLifetime) {
     account.held += bytes;
     return WorkGrant(&account, bytes);
   };
-  const auto lookup =
-      [](const std::string&) -> absl::StatusOr<std::shared_ptr<const ServedBasis>> {
+  const auto lookup = [](const std::string&) -> absl::StatusOr<std::shared_ptr<const ServedBasis>> {
     return *basis_;
   };
   const int64_t expected = DesignSessionOpenBytes(*(*basis_)->system);
@@ -316,7 +315,7 @@ TEST_F(DesignEditorTest, SessionMemoryIsAdmittedForTheSessionsLifetime) {
     ASSERT_TRUE(editor.Apply(Open(1, 0, 1), &u).ok());
     EXPECT_EQ(account.held, expected);
     ASSERT_TRUE(editor.Apply(Add(1, 20, 1.0, 0.0, false), &u).ok());
-    EXPECT_EQ(account.held, expected);
+    EXPECT_EQ(account.held, expected + DesignSessionConstraintBytes(*(*basis_)->system, 1));
   }
   EXPECT_EQ(account.held, 0);  // released with the session
   refuse = true;
@@ -326,6 +325,64 @@ TEST_F(DesignEditorTest, SessionMemoryIsAdmittedForTheSessionsLifetime) {
   EXPECT_EQ(st.code(), absl::StatusCode::kResourceExhausted) << st;
   EXPECT_THAT(st.message(), ::testing::HasSubstr("this design session"));
   EXPECT_FALSE(refused.is_open());
+  EXPECT_EQ(account.held, 0);
+}
+
+// Issue 15, B10: constraints are admitted as they are added (a session's dense constraint
+// matrices grow with the square of their rows: 20,000 vector constraints would take 77 GB).
+// Within a budget the account never holds more than it, always covers what the constraints
+// need, and refuses only when they need more than a quarter of it (the grant grows by doubling,
+// so it holds less than twice the need); a refused add leaves the session as it was.
+TEST_F(DesignEditorTest, ConstraintMemoryIsAdmittedAsConstraintsAreAdded) {
+  const ReducedSystem& system = *(*basis_)->system;
+  const int64_t open_bytes = DesignSessionOpenBytes(system);
+  const int64_t budget = open_bytes + DesignSessionConstraintBytes(system, 40);
+  struct Account : WorkAccount {
+    void ReleaseWork(int64_t bytes) override { held -= bytes; }
+    int64_t held = 0;
+  } account;
+  DesignEditorOptions options;
+  options.admit_work = [&](int64_t bytes, absl::string_view what) -> absl::StatusOr<WorkGrant> {
+    if (account.held + bytes > budget) {
+      return absl::ResourceExhaustedError(absl::StrCat(what, " refused"));
+    }
+    account.held += bytes;
+    return WorkGrant(&account, bytes);
+  };
+  const auto lookup = [](const std::string&) -> absl::StatusOr<std::shared_ptr<const ServedBasis>> {
+    return *basis_;
+  };
+  {
+    DesignEditor editor(lookup, options);
+    v1::DesignUpdate u;
+    ASSERT_TRUE(editor.Apply(Open(1, 0, 1), &u).ok());
+    v1::DesignUpdate last;
+    int added = 0;
+    absl::Status refused;
+    for (int id = 1; id <= 60 && refused.ok(); ++id) {
+      u.Clear();
+      refused = editor.Apply(Add(id, 7 * id, 1.0, 0.5, false), &u);
+      if (refused.ok()) {
+        ++added;
+        last = u;
+        EXPECT_GE(account.held, open_bytes + DesignSessionConstraintBytes(system, added));
+        EXPECT_LE(account.held, budget);
+      }
+    }
+    EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted) << refused;
+    EXPECT_THAT(refused.message(), ::testing::HasSubstr("constraints refused"));
+    EXPECT_LT(added, 40);
+    EXPECT_GT(4 * DesignSessionConstraintBytes(system, added + 1), budget - open_bytes);
+    // The session still has `added` constraints: a weight change answers their field.
+    v1::DesignRequest touch;
+    touch.mutable_set_weights()->set_mu_c(1.0);
+    u.Clear();
+    ASSERT_TRUE(editor.Apply(touch, &u).ok());
+    ASSERT_EQ(u.coefficients_size(), last.coefficients_size());
+    for (int i = 0; i < u.coefficients_size(); ++i) {
+      EXPECT_NEAR(u.coefficients(i), last.coefficients(i), 1e-9) << i;
+    }
+  }
   EXPECT_EQ(account.held, 0);
 }
 
