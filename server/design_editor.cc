@@ -23,6 +23,8 @@ absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* u
   std::vector<int32_t> watch;
   if (r.has_watch()) watch = watch_;
   const FieldEncoding watch_encoding = watch_encoding_;
+  // The answer before the edit: the inverse edit re-solves, which agrees with it only to rounding.
+  const Eigen::VectorXd coefficients = is_open() ? session_->coefficients() : Eigen::VectorXd();
   absl::StatusOr<FieldConstraint> previous = absl::NotFoundError("no such constraint");
   if (is_open() && (r.has_move() || r.has_remove())) {
     previous = session_->GetConstraint(r.has_move() ? r.move().id() : r.remove().id());
@@ -55,6 +57,10 @@ absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* u
       break;
     case v1::DesignRequest::EDIT_NOT_SET:
       break;
+  }
+  if (undone.ok() && r.edit_case() != v1::DesignRequest::kOpen &&
+      r.edit_case() != v1::DesignRequest::kWatch) {
+    undone = session_->RestoreCoefficients(coefficients);
   }
   if (!undone.ok()) {
     return absl::InternalError(

@@ -193,6 +193,17 @@ void DesignSession::Resolve() {
   last_refinement_steps_ = sol.refinement_steps;
 }
 
+absl::Status DesignSession::RestoreCoefficients(const Eigen::VectorXd& x) {
+  constexpr double kSameSolution = 1e-6;
+  if (x.size() != coefficients_.size() ||
+      !((x - coefficients_).norm() <= kSameSolution * coefficients_.norm())) {
+    return absl::FailedPreconditionError(
+        "RestoreCoefficients: not a solution of the session's current problem");
+  }
+  coefficients_ = x;
+  return absl::OkStatus();
+}
+
 absl::Status DesignSession::AddConstraint(int64_t id, const FieldConstraint& constraint) {
   if (slot_by_id_.count(id)) {
     return absl::AlreadyExistsError(absl::StrCat("constraint id ", id, " already exists"));

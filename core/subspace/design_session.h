@@ -155,6 +155,12 @@ class DesignSession {
 
   // d: the current reduced solution x.
   const Eigen::VectorXd& coefficients() const { return coefficients_; }
+  // Takes back `x`, the solution this session gave for its current problem earlier: after an
+  // edit and its inverse (a caller rejecting an edit's result), the re-solved coefficients agree
+  // with x only to rounding, and a session "as it was" answers x itself. FailedPrecondition,
+  // session unchanged, when x differs from the current coefficients by more than 1e-6 relative
+  // (it is then not a solution of the current problem).
+  absl::Status RestoreCoefficients(const Eigen::VectorXd& x);
   // The lifted field U x at the given faces (see LiftFaces in projection.h), or at all faces.
   absl::StatusOr<Eigen::VectorXd> LiftFaces(absl::Span<const int32_t> faces) const;
   absl::StatusOr<Eigen::VectorXd> LiftAll() const;

@@ -4,6 +4,7 @@
 
 #include "server/design_editor.h"
 
+#include <cstring>
 #include <map>
 #include <memory>
 #include <string>
@@ -240,6 +241,43 @@ TEST_F(DesignEditorTest, EditsWhoseAnswerFailsAreUndone) {
   u.Clear();
   ASSERT_TRUE(editor.Apply(Add(3, 600, 0, 1, /*hard=*/false), &u).ok());
   ExpectFresh(editor, u);
+}
+
+// Found by the design fuzzer: a failed weight change (its field overflowed float) was undone by
+// setting the old weights again, whose re-solve agreed with the old coefficients only to rounding
+// (1.6e-15 relative); the session answers exactly its old coefficients now, for every kind of
+// edit. A soft constraint of 5e38 is pulled about half way at mu_c = 1 (below float's 3.4e38) and
+// all the way at mu_c = 1e6 (beyond it; mu_b changes too, so the undo refactorizes); so is one
+// of 2e39 at mu_c = 1.
+TEST_F(DesignEditorTest, FailedEditsLeaveTheCoefficientsBitForBit) {
+  DesignEditor editor = NewEditor();
+  v1::DesignUpdate u;
+  ASSERT_TRUE(editor.Apply(Open(1, 0, 1), &u).ok());
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(Add(1, 10, 5e38, 0, /*hard=*/false), &u).ok());
+  ASSERT_TRUE(editor.Apply(Add(2, 600, 1, 2, /*hard=*/true), &u).ok());
+  const Eigen::VectorXd before = editor.session()->coefficients();
+  const auto expect_bitwise_unchanged = [&](const char* what) {
+    const Eigen::VectorXd& x = editor.session()->coefficients();
+    ASSERT_EQ(x.size(), before.size()) << what;
+    EXPECT_EQ(std::memcmp(x.data(), before.data(), sizeof(double) * x.size()), 0) << what;
+    EXPECT_EQ(editor.session()->num_constraints(), 2) << what;
+  };
+  v1::DesignRequest weights;
+  weights.mutable_set_weights()->set_mu_c(1e6);
+  weights.mutable_set_weights()->set_mu_b(0.64);
+  EXPECT_EQ(editor.Apply(weights, &u).code(), absl::StatusCode::kInvalidArgument);
+  expect_bitwise_unchanged("set_weights");
+  v1::DesignRequest move;
+  move.mutable_move()->set_id(1);
+  move.mutable_move()->set_face(10);
+  move.mutable_move()->add_value(2e39);
+  move.mutable_move()->add_value(0);
+  EXPECT_EQ(editor.Apply(move, &u).code(), absl::StatusCode::kInvalidArgument);
+  expect_bitwise_unchanged("move");
+  EXPECT_EQ(editor.Apply(Add(3, 10, 2e39, 0, /*hard=*/false), &u).code(),
+            absl::StatusCode::kInvalidArgument);
+  expect_bitwise_unchanged("add");
 }
 
 // Sessions opened with singularities: every update's changes, applied to the previous state, give

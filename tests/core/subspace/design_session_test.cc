@@ -233,6 +233,29 @@ TEST_P(DesignSessionTest, ErrorsLeaveTheSessionUnchanged) {
               StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
+// RestoreCoefficients takes back the solution from before an edit and its inverse, bit for bit,
+// and refuses a vector that is not a solution of the current problem.
+TEST_P(DesignSessionTest, RestoreCoefficientsAfterAnEditAndItsInverse) {
+  auto session = DesignSession::Create(sys_, {1.0, 0.05, 2.0});
+  ASSERT_TRUE(session.ok());
+  DesignSession& s = **session;
+  std::mt19937_64 rng(21);
+  ASSERT_TRUE(s.AddConstraint(1, As(ConstraintKind::kHard, RandomConstraint(rng))).ok());
+  ASSERT_TRUE(s.AddConstraint(2, As(ConstraintKind::kSoft, RandomConstraint(rng))).ok());
+  const Eigen::VectorXd before = s.coefficients();
+  ASSERT_TRUE(s.SetWeights({1.0, 0.5, 2.0}).ok());
+  const Eigen::VectorXd other = s.coefficients();
+  EXPECT_THAT(s.RestoreCoefficients(before), StatusIs(absl::StatusCode::kFailedPrecondition));
+  EXPECT_EQ(s.coefficients(), other);
+  ASSERT_TRUE(s.SetWeights({1.0, 0.05, 2.0}).ok());
+  EXPECT_LT((s.coefficients() - before).norm(), 1e-9 * before.norm());
+  ASSERT_TRUE(s.RestoreCoefficients(before).ok());
+  EXPECT_EQ(s.coefficients(), before);
+  EXPECT_THAT(s.RestoreCoefficients(before.head(3)),
+              StatusIs(absl::StatusCode::kFailedPrecondition));
+  ExpectMatchesFreshSolve(s);
+}
+
 TEST_P(DesignSessionTest, SessionsWithEqualEnergyWeightsShareOneFactorization) {
   auto cache = std::make_shared<EnergyFactorCache>();
   DesignSessionOptions options;
