@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/linalg/supernodal_cholesky.h"
+#include "core/subspace/model_problem.h"
 #include "core/subspace/projection.h"
 
 namespace fieldspace {
@@ -215,6 +216,23 @@ absl::StatusOr<Eigen::MatrixXd> SmoothingErrors(const FieldOperator& op,
     ASSIGN_OR_RETURN(errors.col(j), RelativeResiduals(system, X, x));
   }
   return errors;
+}
+
+absl::StatusOr<Eigen::VectorXd> BiharmonicModelErrors(const ReducedSystem& system,
+                                                      const TestFieldSet& tests) {
+  const int64_t m = tests.fields.cols();
+  if (static_cast<int64_t>(tests.constraints.size()) != m) {
+    return absl::InvalidArgumentError("BiharmonicModelErrors: one constraint set per field");
+  }
+  Eigen::MatrixXd x(system.dimension(), m);
+  for (int64_t j = 0; j < m; ++j) {
+    ModelProblem problem;
+    problem.weights = {/*mu_s=*/0.0, /*mu_b=*/1.0, /*mu_c=*/1.0};
+    problem.constraints = tests.constraints[j];
+    ASSIGN_OR_RETURN(ReducedSolution solution, SolveReducedModelProblem(system, problem));
+    x.col(j) = solution.coefficients;
+  }
+  return RelativeResiduals(system, tests.fields, x);
 }
 
 ErrorSummary Summarize(const Eigen::Ref<const Eigen::MatrixXd>& errors) {

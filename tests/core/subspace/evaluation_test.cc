@@ -111,6 +111,54 @@ TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
               StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
+TEST(EvaluationTest, BiharmonicModelErrorsAgainstADenseKktSolve) {
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  TestFieldOptions options;
+  options.count = 2;
+  options.min_constraints = 4;
+  options.max_constraints = 6;
+  options.seed = 5;
+  auto tests = GenerateTestFields(op, options);
+  ASSERT_TRUE(tests.ok()) << tests.status();
+  // U = I: the reduced problem is the full one, whose minimizer is the test field.
+  auto identity = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
+  ASSERT_TRUE(identity.ok());
+  auto zero = BiharmonicModelErrors(**identity, *tests);
+  ASSERT_TRUE(zero.ok()) << zero.status();
+  EXPECT_LT(zero->maxCoeff(), 1e-7);
+  // A random subspace: min x^T U^T B U x subject to the constraint rows C U x = c, by a dense
+  // KKT solve, against the field in the mass norm.
+  auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 120, 30, 9);
+  auto sys = ReducedSystem::Build(basis, op);
+  ASSERT_TRUE(sys.ok());
+  auto errors = BiharmonicModelErrors(**sys, *tests);
+  ASSERT_TRUE(errors.ok()) << errors.status();
+  const Eigen::MatrixXd U = DenseU(*basis);
+  const Eigen::MatrixXd B = Eigen::MatrixXd(BiharmonicMatrix(op));
+  const Eigen::MatrixXd M = op.mass.asDiagonal();
+  const int64_t d = U.cols();
+  for (int f = 0; f < 2; ++f) {
+    const auto& constraints = tests->constraints[f];
+    const int64_t r = 2 * static_cast<int64_t>(constraints.size());
+    Eigen::MatrixXd K = Eigen::MatrixXd::Zero(d + r, d + r);
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(d + r);
+    K.topLeftCorner(d, d) = U.transpose() * B * U;
+    for (size_t i = 0; i < constraints.size(); ++i) {
+      const Eigen::MatrixXd rows = U.middleRows(2 * int64_t{constraints[i].face}, 2);
+      K.block(d + 2 * i, 0, 2, d) = rows;
+      K.block(0, d + 2 * i, d, 2) = rows.transpose();
+      rhs.segment(d + 2 * i, 2) = constraints[i].value;
+    }
+    const Eigen::VectorXd x = K.fullPivLu().solve(rhs).head(d);
+    const Eigen::VectorXd res = tests->fields.col(f) - U * x;
+    const double expected =
+        std::sqrt(res.dot(M * res) / tests->fields.col(f).dot(M * tests->fields.col(f)));
+    EXPECT_NEAR((*errors)[f], expected, 1e-6 * expected);
+    EXPECT_GT(expected, 1e-3);
+  }
+}
+
 TEST(EvaluationTest, InvalidTestFieldOptions) {
   const TriangleMesh mesh = Icosphere(1);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
