@@ -24,6 +24,7 @@
 #include "tbb/enumerable_thread_specific.h"
 #include "tbb/parallel_for.h"
 #include "tbb/task_arena.h"
+#include "tbb/task_group.h"
 
 namespace fieldspace {
 namespace {
@@ -474,12 +475,29 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
   tbb::task_arena arena(threads);
   absl::StatusOr<Basis> result;
   arena.execute([&] {
+    // The kernel of S is computed beside the local fields: most of it is one sparse Cholesky
+    // factorization on one thread, and the local fields keep the other threads busy meanwhile.
+    // (It cannot stop early when the local fields fail; it does when the build is cancelled.)
+    absl::StatusOr<Eigen::MatrixXd> kernel = Eigen::MatrixXd();
+    tbb::task_group kernel_task;
+    if (options.kernel_columns) {
+      kernel_task.run([&] {
+        KernelFieldOptions kernel_options;
+        kernel_options.cancel = options.cancel;
+        kernel = ComputeKernelFields(mesh, op, kernel_options);
+      });
+    }
     result = Build(mesh, op, options, m, ticker);
-    if (result.ok() && options.kernel_columns) {
+    const auto local_done = std::chrono::steady_clock::now();
+    if (options.kernel_columns) {
       ticker.SetPhase(BasisPhase::kAssembly, 0.0);
       ticker.ReportNow();
-      absl::Status s = AddKernelColumns(mesh, op, options.cancel, &*result);
+    }
+    kernel_task.wait();
+    if (result.ok() && options.kernel_columns) {
+      absl::Status s = kernel.ok() ? AppendKernelColumns(*kernel, &*result) : kernel.status();
       if (!s.ok()) result = s;
+      if (result.ok()) result->timings.kernel_seconds = SecondsSince(local_done);
     }
   });
   if (ticker.cancelled()) return ProgressTicker::CancelledError();

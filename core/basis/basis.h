@@ -63,7 +63,10 @@ struct BasisTimings {
   double sampling_seconds = 0;
   double regions_seconds = 0;
   double eigensolve_seconds = 0;
-  double kernel_seconds = 0;  // ComputeKernelFields and appending its columns (not stored)
+  // What the kernel columns added to the build: BuildBasis computes them beside the local fields
+  // and counts the wait for them after the local fields plus appending them; BuildTwoLevelBasis
+  // (after both levels) counts all of ComputeKernelFields. Not stored.
+  double kernel_seconds = 0;
   double total_seconds = 0;
 };
 
