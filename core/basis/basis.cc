@@ -393,18 +393,6 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   return basis;
 }
 
-// Computes the kernel of S and appends it to `basis` (BasisOptions::kernel_columns).
-absl::Status AddKernelColumns(const TriangleMesh& mesh, const FieldOperator& op,
-                              const CancelFlag* cancel, Basis* basis) {
-  const auto t0 = std::chrono::steady_clock::now();
-  KernelFieldOptions kernel_options;
-  kernel_options.cancel = cancel;
-  ASSIGN_OR_RETURN(Eigen::MatrixXd K, ComputeKernelFields(mesh, op, kernel_options));
-  RETURN_IF_ERROR(AppendKernelColumns(K, basis));
-  basis->timings.kernel_seconds = SecondsSince(t0);
-  return absl::OkStatus();
-}
-
 }  // namespace
 
 absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
@@ -583,19 +571,35 @@ absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOp
       options.progress(phase, start + share * fraction);
     };
   }
-  level.params.dimension = d - coarse_dimension;
-  ASSIGN_OR_RETURN(Basis fine, BuildBasis(mesh, op, level));
-  start = share;
-  share = 1 - start;
-  level.params.dimension = coarse_dimension;
-  ASSIGN_OR_RETURN(Basis coarse, BuildBasis(mesh, op, level));
-  ASSIGN_OR_RETURN(Basis stacked, StackBases(std::move(fine), coarse));
+  // The kernel of S beside both levels, as in BuildBasis.
+  absl::StatusOr<Eigen::MatrixXd> kernel = Eigen::MatrixXd();
+  tbb::task_group kernel_task;
   if (options.kernel_columns) {
-    if (IsCancelled(options.cancel)) return ProgressTicker::CancelledError();
-    RETURN_IF_ERROR(AddKernelColumns(mesh, op, options.cancel, &stacked));
-    stacked.timings.total_seconds += stacked.timings.kernel_seconds;
-    if (options.progress) options.progress(BasisPhase::kAssembly, 1.0);
+    kernel_task.run([&] {
+      KernelFieldOptions kernel_options;
+      kernel_options.cancel = options.cancel;
+      kernel = ComputeKernelFields(mesh, op, kernel_options);
+    });
   }
+  const auto levels = [&]() -> absl::StatusOr<Basis> {
+    level.params.dimension = d - coarse_dimension;
+    ASSIGN_OR_RETURN(Basis fine, BuildBasis(mesh, op, level));
+    start = share;
+    share = 1 - start;
+    level.params.dimension = coarse_dimension;
+    ASSIGN_OR_RETURN(Basis coarse, BuildBasis(mesh, op, level));
+    return StackBases(std::move(fine), coarse);
+  };
+  absl::StatusOr<Basis> stacked = levels();
+  const auto levels_done = std::chrono::steady_clock::now();
+  kernel_task.wait();
+  if (!stacked.ok() || !options.kernel_columns) return stacked;
+  if (IsCancelled(options.cancel)) return ProgressTicker::CancelledError();
+  if (!kernel.ok()) return kernel.status();
+  RETURN_IF_ERROR(AppendKernelColumns(*kernel, &*stacked));
+  stacked->timings.kernel_seconds = SecondsSince(levels_done);
+  stacked->timings.total_seconds += stacked->timings.kernel_seconds;
+  if (options.progress) options.progress(BasisPhase::kAssembly, 1.0);
   return stacked;
 }
 

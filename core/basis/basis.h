@@ -63,9 +63,9 @@ struct BasisTimings {
   double sampling_seconds = 0;
   double regions_seconds = 0;
   double eigensolve_seconds = 0;
-  // What the kernel columns added to the build: BuildBasis computes them beside the local fields
-  // and counts the wait for them after the local fields plus appending them; BuildTwoLevelBasis
-  // (after both levels) counts all of ComputeKernelFields. Not stored.
+  // What the kernel columns added to the build: BuildBasis and BuildTwoLevelBasis compute them
+  // beside the local fields and count the wait for them after the local fields plus appending
+  // them. Not stored.
   double kernel_seconds = 0;
   double total_seconds = 0;
 };
