@@ -1,9 +1,12 @@
 // `fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S]
 //   [--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats]
-//   [--tolerance T] [--no-kernel-columns]`:
+//   [--tolerance T] [--no-kernel-columns] [--coarse-dim C]`:
 // builds the locally supported basis (paper section 4) and prints one JSON object
 //   {"dim","regions","kernel_columns","dofs","nnz_u","nnz_per_row",
-//    "seconds":{"sampling","regions","eigensolve","kernel","total"},"peak_rss_mb"}.
+//    "seconds":{"sampling","regions","eigensolve","kernel","total"},"peak_rss_mb",
+//    "estimated_peak_mb"}.
+// estimated_peak_mb: EstimateBuildPeakBytes, what the daemon admits against its memory budget.
+// --coarse-dim C: a two-level basis (BuildTwoLevelBasis, the daemon's coarse_dimension).
 // "dim" counts all columns of U: the d local ones and the kernel columns (BasisOptions::
 // kernel_columns; --no-kernel-columns builds the paper's basis without them).
 // --weights FILE: one positive adaptivity weight per face, one per line.
@@ -41,7 +44,7 @@ namespace {
 constexpr char kUsage[] =
     "usage: fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] "
     "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] "
-    "[--tolerance T] [--no-kernel-columns]";
+    "[--tolerance T] [--no-kernel-columns] [--coarse-dim C]";
 
 absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -111,7 +114,8 @@ int RunBasis(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {"stats", "no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "threads", "weights", "save",
-                                  "export-mtx", "seed", "stats", "tolerance", "no-kernel-columns"});
+                                  "export-mtx", "seed", "stats", "tolerance", "no-kernel-columns",
+                                  "coarse-dim"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -130,8 +134,13 @@ int RunBasis(int argc, char** argv) {
   if (!seed.ok()) return ReportError(seed.status());
   auto tolerance = args->GetDouble("tolerance", BasisOptions().eigen_tolerance);
   if (!tolerance.ok()) return ReportError(tolerance.status());
+  auto coarse_dim = args->GetInt("coarse-dim", 0);
+  if (!coarse_dim.ok()) return ReportError(coarse_dim.status());
   if (*dim < 1 || *dim > (int64_t{1} << 31) - 1) {
     return ReportError(absl::InvalidArgumentError(absl::StrCat("--dim ", *dim, " out of range")));
+  }
+  if (*coarse_dim < 0 || *coarse_dim >= *dim) {
+    return ReportError(absl::InvalidArgumentError("--coarse-dim must be in [0, dim)"));
   }
   if (*threads < 0 || *threads > 4096) {
     return ReportError(
@@ -156,7 +165,7 @@ int RunBasis(int argc, char** argv) {
     if (!w.ok()) return ReportError(w.status());
     options.params.face_weights = std::move(*w);
   }
-  auto basis = BuildBasis(*mesh, *op, options);
+  auto basis = BuildTwoLevelBasis(*mesh, *op, options, static_cast<int32_t>(*coarse_dim));
   if (!basis.ok()) return ReportError(basis.status());
 
   if (const auto save = args->Get("save"); save.has_value()) {
@@ -186,7 +195,12 @@ int RunBasis(int argc, char** argv) {
       .Double("kernel", basis->timings.kernel_seconds)
       .Double("total", basis->timings.total_seconds)
       .EndObject()
-      .Double("peak_rss_mb", PeakRssMb());
+      .Double("peak_rss_mb", PeakRssMb())
+      .Double("estimated_peak_mb",
+              static_cast<double>(EstimateBuildPeakBytes(
+                  mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
+                  options.kernel_columns && basis->kernel_columns > 0, *coarse_dim > 0)) /
+                  (1 << 20));
   if (args->Has("stats")) {
     const BasisStats& st = basis->stats;
     json.BeginObject("stats")

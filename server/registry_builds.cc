@@ -113,7 +113,8 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
   }
   ASSIGN_OR_RETURN(
       WorkGrant grant,
-      AdmitWorkLocked(EstimateBuildPeakBytes(mesh.num_faces, key.field, key.dimension, key.sigma),
+      AdmitWorkLocked(EstimateBuildPeakBytes(mesh.num_faces, key.field, key.dimension, key.sigma,
+                                             key.kernel_columns, key.coarse_dimension > 0),
                       "this basis build"));
   auto job = std::make_shared<BuildJob>(pending);
   const bool submitted = pool_->Submit(

@@ -613,12 +613,18 @@ int64_t Basis::MemoryBytes() const {
 }
 
 int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
-                               double sigma) {
+                               double sigma, bool kernel_columns, bool two_level) {
   const double k = static_cast<double>(num_faces) * type.dofs_per_face();
+  const bool vector = type.kind == FieldKind::kVector;
   // Vector builds hold the factored Hodge form beside S, hence more bytes per nonzero of U.
-  const double bytes_per_nonzero = type.kind == FieldKind::kVector ? 26.0 : 19.0;
+  const double bytes_per_nonzero = vector ? 26.0 : 19.0;
   const double d = dimension;
-  return static_cast<int64_t>(bytes_per_nonzero * sigma * k + 8.0 * d * d);
+  // The kernel step: a vertex Poisson factor and 2 g dense candidates for vector fields; a few
+  // dense candidate columns otherwise.
+  const double kernel =
+      !kernel_columns ? 0.0 : (vector ? 400.0 * static_cast<double>(num_faces) : 32.0 * k);
+  const double levels = two_level ? 2.5 : 1.0;
+  return static_cast<int64_t>(levels * bytes_per_nonzero * sigma * k + 8.0 * d * d + kernel);
 }
 
 }  // namespace fieldspace

@@ -129,9 +129,13 @@ struct Basis {
 // operator, U, the reduced system's assembly and the threads' local problems, from the rule of
 // thumb of sigma nonzeros per row of U, calibrated on measured peaks (bench/RESULTS.md, basis
 // construction: 940-1020 bytes per DOF for vector fields, 720-730 for n-fields and tensors at
-// sigma 40), plus the d x d reduced matrices. For admission against a memory budget.
+// sigma 40), plus the d x d reduced matrices, plus, with kernel columns, what computing them
+// beside the local fields holds (for vector fields the P1 Poisson factorization and the candidate
+// fields: 470 MiB measured on 1.79M faces, counted as 400 bytes a face). For admission against a
+// memory budget. A two-level basis (BuildTwoLevelBasis with C > 0) holds both levels' U and the
+// stacked one, and the coarse level's large local problems: 2.5 times the nonzero term.
 int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
-                               double sigma);
+                               double sigma, bool kernel_columns, bool two_level);
 
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options);
