@@ -53,6 +53,14 @@ absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path) {
   return TriangleMesh::Create(std::move(arrays));
 }
 
+absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args) {
+  const auto quality = args.Get("quality");
+  if (!quality.has_value() || *quality == "paper") return BasisQuality::kPaper;
+  if (*quality == "low-modes") return BasisQuality::kLowModes;
+  return absl::InvalidArgumentError(
+      absl::StrCat("--quality must be paper or low-modes, got '", *quality, "'"));
+}
+
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
                                                              const FieldOperator& op,
                                                              const Args& args) {
@@ -70,12 +78,24 @@ absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh&
   if (*coarse_dim < 0 || *coarse_dim >= *dim) {
     return absl::InvalidArgumentError("--coarse-dim must be in [0, dim)");
   }
+  auto quality = QualityFromArgs(args);
+  if (!quality.ok()) return quality.status();
+  if (*quality != BasisQuality::kPaper && *coarse_dim > 0) {
+    return absl::InvalidArgumentError("--coarse-dim and --quality low-modes do not combine");
+  }
   BasisOptions options;
   options.params.dimension = static_cast<int32_t>(*dim);
   options.params.sigma = *sigma;
   options.params.seed = static_cast<uint64_t>(*seed);
   options.kernel_columns = !args.Has("no-kernel-columns");
-  auto basis = BuildTwoLevelBasis(mesh, op, options, static_cast<int32_t>(*coarse_dim));
+  absl::StatusOr<Basis> basis;
+  if (*quality == BasisQuality::kPaper) {
+    basis = BuildTwoLevelBasis(mesh, op, options, static_cast<int32_t>(*coarse_dim));
+  } else {
+    auto levels = QualityLevels(*quality, options.params.dimension, options.params.sigma);
+    if (!levels.ok()) return levels.status();
+    basis = BuildMultiLevelBasis(mesh, op, options, *levels);
+  }
   if (!basis.ok()) return basis.status();
   return std::shared_ptr<const Basis>(std::make_shared<Basis>(*std::move(basis)));
 }
@@ -100,7 +120,7 @@ int RunApprox(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {"no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "tests", "seed", "basis",
-                                  "min-constraints", "max-constraints", "coarse-dim",
+                                  "min-constraints", "max-constraints", "coarse-dim", "quality",
                                   "no-kernel-columns"});
       !st.ok()) {
     return ReportError(st);
@@ -109,7 +129,8 @@ int RunApprox(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench approx MESH --field vector|nfield|tensor [--n N] --dim D "
         "[--sigma S] --tests K --seed N [--basis local|eigen] [--min-constraints A] "
-        "[--max-constraints B] [--coarse-dim C] [--no-kernel-columns]"));
+        "[--max-constraints B] [--coarse-dim C] [--quality paper|low-modes] "
+        "[--no-kernel-columns]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());

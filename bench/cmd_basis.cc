@@ -1,12 +1,13 @@
 // `fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S]
 //   [--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats]
-//   [--tolerance T] [--no-kernel-columns] [--coarse-dim C]`:
+//   [--tolerance T] [--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes]`:
 // builds the locally supported basis (paper section 4) and prints one JSON object
 //   {"dim","regions","kernel_columns","dofs","nnz_u","nnz_per_row",
 //    "seconds":{"sampling","regions","eigensolve","kernel","total"},"peak_rss_mb",
 //    "estimated_peak_mb"}.
 // estimated_peak_mb: EstimateBuildPeakBytes, what the daemon admits against its memory budget.
 // --coarse-dim C: a two-level basis (BuildTwoLevelBasis, the daemon's coarse_dimension).
+// --quality low-modes: the three-level basis of BasisQuality::kLowModes (BuildMultiLevelBasis).
 // "dim" counts all columns of U: the d local ones and the kernel columns (BasisOptions::
 // kernel_columns; --no-kernel-columns builds the paper's basis without them).
 // --weights FILE: one positive adaptivity weight per face, one per line.
@@ -31,6 +32,7 @@
 #include "absl/strings/strip.h"
 #include "bench/bench_util.h"
 #include "bench/cmd_operator.h"
+#include "bench/cmd_subspace.h"
 #include "bench/commands.h"
 #include "core/basis/basis.h"
 #include "core/basis/basis_io.h"
@@ -44,7 +46,7 @@ namespace {
 constexpr char kUsage[] =
     "usage: fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] "
     "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] "
-    "[--tolerance T] [--no-kernel-columns] [--coarse-dim C]";
+    "[--tolerance T] [--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes]";
 
 absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -115,7 +117,7 @@ int RunBasis(int argc, char** argv) {
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "threads", "weights", "save",
                                   "export-mtx", "seed", "stats", "tolerance", "no-kernel-columns",
-                                  "coarse-dim"});
+                                  "coarse-dim", "quality"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -142,6 +144,12 @@ int RunBasis(int argc, char** argv) {
   if (*coarse_dim < 0 || *coarse_dim >= *dim) {
     return ReportError(absl::InvalidArgumentError("--coarse-dim must be in [0, dim)"));
   }
+  auto quality = QualityFromArgs(*args);
+  if (!quality.ok()) return ReportError(quality.status());
+  if (*quality != BasisQuality::kPaper && *coarse_dim > 0) {
+    return ReportError(
+        absl::InvalidArgumentError("--coarse-dim and --quality low-modes do not combine"));
+  }
   if (*threads < 0 || *threads > 4096) {
     return ReportError(
         absl::InvalidArgumentError(absl::StrCat("--threads ", *threads, " out of range")));
@@ -165,7 +173,14 @@ int RunBasis(int argc, char** argv) {
     if (!w.ok()) return ReportError(w.status());
     options.params.face_weights = std::move(*w);
   }
-  auto basis = BuildTwoLevelBasis(*mesh, *op, options, static_cast<int32_t>(*coarse_dim));
+  absl::StatusOr<Basis> basis;
+  if (*quality == BasisQuality::kPaper) {
+    basis = BuildTwoLevelBasis(*mesh, *op, options, static_cast<int32_t>(*coarse_dim));
+  } else {
+    auto levels = QualityLevels(*quality, options.params.dimension, options.params.sigma);
+    if (!levels.ok()) return ReportError(levels.status());
+    basis = BuildMultiLevelBasis(*mesh, *op, options, *levels);
+  }
   if (!basis.ok()) return ReportError(basis.status());
 
   if (const auto save = args->Get("save"); save.has_value()) {
@@ -196,11 +211,11 @@ int RunBasis(int argc, char** argv) {
       .Double("total", basis->timings.total_seconds)
       .EndObject()
       .Double("peak_rss_mb", PeakRssMb())
-      .Double("estimated_peak_mb",
-              static_cast<double>(EstimateBuildPeakBytes(
-                  mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
-                  options.kernel_columns && basis->kernel_columns > 0, *coarse_dim > 0)) /
-                  (1 << 20));
+      .Double("estimated_peak_mb", static_cast<double>(EstimateBuildPeakBytes(
+                                       mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
+                                       options.kernel_columns && basis->kernel_columns > 0,
+                                       *coarse_dim > 0 || *quality != BasisQuality::kPaper)) /
+                                       (1 << 20));
   if (args->Has("stats")) {
     const BasisStats& st = basis->stats;
     json.BeginObject("stats")

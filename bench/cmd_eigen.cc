@@ -37,7 +37,7 @@ int RunEigen(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {"full", "no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "count", "dim", "sigma", "seed", "method", "full",
-                                  "coarse-dim", "no-kernel-columns"});
+                                  "coarse-dim", "quality", "no-kernel-columns"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -45,6 +45,7 @@ int RunEigen(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench eigen MESH --field vector|nfield|tensor [--n N] --count K "
         "--dim D [--sigma S] [--seed N] [--method auto|dense|sparse] [--full] [--coarse-dim C] "
+        "[--quality paper|low-modes] "
         "[--no-kernel-columns]"));
   }
   auto type = FieldTypeFromArgs(*args);

@@ -58,8 +58,9 @@ absl::StatusOr<Eigen::VectorXd> SmoothingInput(const TriangleMesh& mesh, const F
 int RunSmooth(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {"scale-free", "no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "seed", "coarse-dim", "mu-s",
-                                  "mu-b", "mu-c", "repeat", "scale-free", "no-kernel-columns"});
+  if (auto st =
+          args->CheckKnown({"field", "n", "dim", "sigma", "seed", "coarse-dim", "mu-s", "mu-b",
+                            "mu-c", "repeat", "scale-free", "no-kernel-columns", "quality"});
       !st.ok()) {
     return ReportError(st);
   }

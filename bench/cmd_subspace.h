@@ -20,7 +20,11 @@ namespace fieldspace::bench {
 absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path);
 
 // BuildBasis with --dim (required), --sigma (default 40), --seed (default 0), --coarse-dim
-// (default 0: no coarse level; see StackBases) and kernel columns unless --no-kernel-columns.
+// (default 0: no coarse level; see StackBases), --quality paper|low-modes (default paper; see
+// BasisQuality) and kernel columns unless --no-kernel-columns.
+// --quality: paper (default) or low-modes (BasisQuality).
+absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args);
+
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
                                                              const FieldOperator& op,
                                                              const Args& args);

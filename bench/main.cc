@@ -30,10 +30,12 @@ constexpr Command kCommands[] = {
      "[--watch W] [--threads T] [--rate HZ] [--lifts L] [--server HOST:PORT]"},
     {"approx", fieldspace::bench::RunApprox,
      "approx MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] --tests K --seed N "
-     "[--basis local|eigen] [--min-constraints A] [--max-constraints B] [--no-kernel-columns]"},
+     "[--basis local|eigen] [--min-constraints A] [--max-constraints B] [--coarse-dim C] "
+     "[--quality paper|low-modes] [--no-kernel-columns]"},
     {"eigen", fieldspace::bench::RunEigen,
      "eigen MESH --field vector|nfield|tensor [--n N] --count K --dim D [--sigma S] [--seed N] "
-     "[--method auto|dense|sparse] [--full] [--no-kernel-columns]"},
+     "[--method auto|dense|sparse] [--full] [--coarse-dim C] [--quality paper|low-modes] "
+     "[--no-kernel-columns]"},
     {"design", fieldspace::bench::RunDesign,
      "design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S [--sigma S] "
      "[--max-constraints C] [--no-full] [--full-biharmonic] [--no-kernel-columns]"},
@@ -42,8 +44,8 @@ constexpr Command kCommands[] = {
     {"kernel", fieldspace::bench::RunKernel, "kernel MESH --field vector|nfield|tensor [--n N]"},
     {"smooth", fieldspace::bench::RunSmooth,
      "smooth MESH --field tensor|vector|nfield [--n N] --dim D [--sigma S] [--seed N] "
-     "[--coarse-dim C] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] [--scale-free] "
-     "[--no-kernel-columns]"},
+     "[--coarse-dim C] [--quality paper|low-modes] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] "
+     "[--scale-free] [--no-kernel-columns]"},
 };
 
 void PrintUsage() {

@@ -8,6 +8,7 @@
 #include <memory>
 #include <mutex>
 #include <numeric>
+#include <optional>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -554,24 +555,60 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
   return fine;
 }
 
-absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
-                                         const BasisOptions& options, int32_t coarse_dimension) {
-  const int32_t d = options.params.dimension;
-  if (coarse_dimension < 0 || coarse_dimension >= d) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("coarse dimension must be in [0, d = ", d, "), got ", coarse_dimension));
+absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int32_t dimension,
+                                                      double sigma) {
+  switch (quality) {
+    case BasisQuality::kPaper:
+      return std::vector<BasisLevel>{{dimension, sigma}};
+    case BasisQuality::kLowModes: {
+      if (dimension < 40) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("the low-modes quality level needs d >= 40 (its coarsest level has d / 40 "
+                         "fields), got ",
+                         dimension));
+      }
+      const double level_sigma = sigma * 5.0 / 8.0;
+      const int32_t coarse = dimension / 10;
+      const int32_t coarsest = dimension / 40;
+      return std::vector<BasisLevel>{{dimension - coarse - coarsest, level_sigma},
+                                     {coarse, level_sigma},
+                                     {coarsest, level_sigma}};
+    }
   }
-  if (coarse_dimension == 0) return BuildBasis(mesh, op, options);
-  BasisOptions level = options;
-  level.kernel_columns = false;
+  return absl::InvalidArgumentError(
+      absl::StrCat("unknown basis quality level ", static_cast<int>(quality)));
+}
+
+absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
+                                           const BasisOptions& options,
+                                           const std::vector<BasisLevel>& levels) {
+  if (levels.empty()) return absl::InvalidArgumentError("a basis needs at least one level");
+  int64_t total = 0;
+  for (const BasisLevel& level : levels) {
+    if (level.dimension < 1) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("each basis level needs at least one field, got ", level.dimension));
+    }
+    total += level.dimension;
+  }
+  if (total > std::numeric_limits<int32_t>::max()) {
+    return absl::InvalidArgumentError(absl::StrCat("levels total ", total, " fields"));
+  }
+  BasisOptions level_options = options;
+  if (levels.size() == 1) {
+    level_options.params.dimension = levels[0].dimension;
+    level_options.params.sigma = levels[0].sigma;
+    return BuildBasis(mesh, op, level_options);
+  }
+  level_options.kernel_columns = false;
   double start = 0;
-  double share = static_cast<double>(d - coarse_dimension) / d;
+  double share = 0;
   if (options.progress) {
-    level.progress = [&](BasisPhase phase, double fraction) {
+    level_options.progress = [&](BasisPhase phase, double fraction) {
       options.progress(phase, start + share * fraction);
     };
   }
-  // The kernel of S beside both levels, as in BuildBasis.
+  // The kernel of S beside the levels, as in BuildBasis.
   absl::StatusOr<Eigen::MatrixXd> kernel = Eigen::MatrixXd();
   tbb::task_group kernel_task;
   if (options.kernel_columns) {
@@ -581,17 +618,34 @@ absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOp
       kernel = ComputeKernelFields(mesh, op, kernel_options);
     });
   }
-  const auto levels = [&]() -> absl::StatusOr<Basis> {
-    level.params.dimension = d - coarse_dimension;
-    ASSIGN_OR_RETURN(Basis fine, BuildBasis(mesh, op, level));
-    start = share;
-    share = 1 - start;
-    level.params.dimension = coarse_dimension;
-    ASSIGN_OR_RETURN(Basis coarse, BuildBasis(mesh, op, level));
-    return StackBases(std::move(fine), coarse);
+  const auto started = std::chrono::steady_clock::now();
+  BasisTimings timings;  // of all levels
+  const auto build_levels = [&]() -> absl::StatusOr<Basis> {
+    std::optional<Basis> stacked;
+    for (const BasisLevel& level : levels) {
+      share = static_cast<double>(level.dimension) / static_cast<double>(total);
+      level_options.params.dimension = level.dimension;
+      level_options.params.sigma = level.sigma;
+      ASSIGN_OR_RETURN(Basis built, BuildBasis(mesh, op, level_options));
+      timings.sampling_seconds += built.timings.sampling_seconds;
+      timings.regions_seconds += built.timings.regions_seconds;
+      timings.eigensolve_seconds += built.timings.eigensolve_seconds;
+      if (stacked.has_value()) {
+        ASSIGN_OR_RETURN(Basis both, StackBases(*std::move(stacked), built));
+        stacked = std::move(both);
+      } else {
+        stacked = std::move(built);
+      }
+      start += share;
+    }
+    return *std::move(stacked);
   };
-  absl::StatusOr<Basis> stacked = levels();
+  absl::StatusOr<Basis> stacked = build_levels();
   const auto levels_done = std::chrono::steady_clock::now();
+  if (stacked.ok()) {
+    timings.total_seconds = SecondsSince(started);
+    stacked->timings = timings;
+  }
   kernel_task.wait();
   if (!stacked.ok() || !options.kernel_columns) return stacked;
   if (IsCancelled(options.cancel)) return ProgressTicker::CancelledError();
@@ -601,6 +655,19 @@ absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOp
   stacked->timings.total_seconds += stacked->timings.kernel_seconds;
   if (options.progress) options.progress(BasisPhase::kAssembly, 1.0);
   return stacked;
+}
+
+absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
+                                         const BasisOptions& options, int32_t coarse_dimension) {
+  const int32_t d = options.params.dimension;
+  if (coarse_dimension < 0 || coarse_dimension >= d) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("coarse dimension must be in [0, d = ", d, "), got ", coarse_dimension));
+  }
+  if (coarse_dimension == 0) return BuildBasis(mesh, op, options);
+  const double sigma = options.params.sigma;
+  return BuildMultiLevelBasis(mesh, op, options,
+                              {{d - coarse_dimension, sigma}, {coarse_dimension, sigma}});
 }
 
 int64_t Basis::MemoryBytes() const {

@@ -156,6 +156,41 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse);
 // counts differ, ResourceExhausted past 2^31 - 1 nonzeros.
 absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis);
 
+// One level of a multilevel basis: `dimension` local fields of the paper's construction with
+// overlap factor `sigma`.
+struct BasisLevel {
+  int32_t dimension = 0;
+  double sigma = 40.0;
+};
+
+// Named basis quality levels (docs/conventions.md, Basis quality; measured in bench/RESULTS.md,
+// "Session 10").
+enum class BasisQuality : uint8_t {
+  // One level: the paper's construction with params.dimension and params.sigma.
+  kPaper = 0,
+  // Three levels of d - d/10 - d/40, d/10 and d/40 fields, each with overlap sigma * 5/8: the
+  // coarse levels' wide fields represent smooth large-scale fields (the lowest eigenfields), which
+  // the fine level's small Dirichlet fields cannot combine into. At d = 2000, sigma 40: the lowest
+  // 50 non-zero reduced eigenvalues within 1.8-2.0% mean, 3.1-3.9% max (paper: 20-29%, 128-173%)
+  // at 1.7-1.9x the paper's nonzeros of U.
+  kLowModes = 1,
+};
+
+// The levels of `quality` for dimension d and overlap sigma: one level {d, sigma} for kPaper.
+// InvalidArgument for kLowModes with d < 40 (its coarsest level needs d / 40 >= 1 fields).
+absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int32_t dimension,
+                                                      double sigma);
+
+// The levels' bases (BuildBasis with options.params' dimension and sigma replaced by the level's)
+// stacked in order (StackBases), then the kernel columns when options.kernel_columns, computed
+// beside the levels as in BuildBasis. One level is BuildBasis with its dimension and sigma.
+// params.dimension of the result is the total of the levels' dimensions. Progress fractions cover
+// each level in proportion to its dimension. InvalidArgument for no levels or a level's
+// dimension < 1; otherwise errors as BuildBasis and StackBases.
+absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
+                                           const BasisOptions& options,
+                                           const std::vector<BasisLevel>& levels);
+
 // BuildBasis with a coarse second level of `coarse_dimension` = C columns: StackBases of the basis
 // of dimension d - C (d = options.params.dimension) and the basis of dimension C, both with the
 // other options as given; d local columns in all, then the kernel columns when

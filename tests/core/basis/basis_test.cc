@@ -498,6 +498,78 @@ TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
               StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
+TEST(BasisTest, MultiLevelBasisIsTheStackOfItsLevels) {
+  const TriangleMesh mesh = Icosphere(3);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 1;  // ignored: the levels give the dimensions and sigmas
+  const std::vector<BasisLevel> levels = {{60, 30.0}, {12, 25.0}, {4, 20.0}};
+  auto three = BuildMultiLevelBasis(mesh, op, options, levels);
+  ASSERT_TRUE(three.ok()) << three.status();
+  std::vector<Basis> built;
+  for (const BasisLevel& level : levels) {
+    options.params.dimension = level.dimension;
+    options.params.sigma = level.sigma;
+    auto b = BuildBasis(mesh, op, options);
+    ASSERT_TRUE(b.ok()) << b.status();
+    built.push_back(*std::move(b));
+  }
+  auto two = StackBases(built[0], built[1]);
+  ASSERT_TRUE(two.ok());
+  auto stacked = StackBases(*std::move(two), built[2]);
+  ASSERT_TRUE(stacked.ok());
+  EXPECT_EQ(three->dimension(), 76);
+  EXPECT_EQ(three->params.dimension, 76);
+  EXPECT_EQ(three->kernel_columns, 0);  // genus 0
+  EXPECT_EQ(Eigen::MatrixXf(three->U), Eigen::MatrixXf(stacked->U));
+  EXPECT_GT(three->timings.eigensolve_seconds, built[0].timings.eigensolve_seconds * 0.5);
+  // Bad levels.
+  EXPECT_THAT(BuildMultiLevelBasis(mesh, op, options, {}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(BuildMultiLevelBasis(mesh, op, options, {{60, 40.0}, {0, 40.0}}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
+TEST(BasisTest, MultiLevelBasisOnATorusEndsWithTheKernelColumns) {
+  const TriangleMesh mesh = testing::Torus(24, 12, 1.0, 0.4);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  BasisOptions options;
+  auto levels = QualityLevels(BasisQuality::kLowModes, 80, options.params.sigma);
+  ASSERT_TRUE(levels.ok()) << levels.status();
+  auto basis = BuildMultiLevelBasis(mesh, op, options, *levels);
+  ASSERT_TRUE(basis.ok()) << basis.status();
+  EXPECT_EQ(basis->kernel_columns, 2);  // 2 g
+  EXPECT_EQ(basis->dimension(), 82);
+}
+
+TEST(BasisTest, QualityLevels) {
+  auto paper = QualityLevels(BasisQuality::kPaper, 2000, 40.0);
+  ASSERT_TRUE(paper.ok());
+  ASSERT_EQ(paper->size(), 1u);
+  EXPECT_EQ((*paper)[0].dimension, 2000);
+  EXPECT_EQ((*paper)[0].sigma, 40.0);
+  auto low = QualityLevels(BasisQuality::kLowModes, 2000, 40.0);
+  ASSERT_TRUE(low.ok());
+  ASSERT_EQ(low->size(), 3u);
+  EXPECT_EQ((*low)[0].dimension, 1750);
+  EXPECT_EQ((*low)[1].dimension, 200);
+  EXPECT_EQ((*low)[2].dimension, 50);
+  for (const BasisLevel& level : *low) EXPECT_EQ(level.sigma, 25.0);
+  // The total is d for any d >= 40.
+  for (int32_t d : {40, 41, 99, 1001}) {
+    auto levels = QualityLevels(BasisQuality::kLowModes, d, 40.0);
+    ASSERT_TRUE(levels.ok());
+    int32_t total = 0;
+    for (const BasisLevel& level : *levels) {
+      EXPECT_GE(level.dimension, 1);
+      total += level.dimension;
+    }
+    EXPECT_EQ(total, d);
+  }
+  EXPECT_THAT(QualityLevels(BasisQuality::kLowModes, 39, 40.0),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
 TEST(BasisTest, InvalidParameters) {
   const TriangleMesh mesh = Icosphere(2);  // 320 faces, 640 DOFs
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
