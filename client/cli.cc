@@ -50,8 +50,8 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   mesh MESH_ID                        one mesh
   delete-mesh MESH_ID [--cascade]     delete a mesh (with --cascade: and its bases)
   build MESH_ID --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--seed S]
-        [--fields-per-region M] [--coarse-dim C] [--face-weights FILE] [--no-kernel-columns]
-        [--cancel-on-exit]
+        [--fields-per-region M] [--coarse-dim C] [--quality paper|low-modes]
+        [--face-weights FILE] [--no-kernel-columns] [--cancel-on-exit]
                                       build a basis: progress on stderr, BasisInfo ("id") on stdout;
                                       C > 0 adds a coarse level of C of the D columns; FILE: #F
                                       positive adaptivity weights (smaller regions where high);
@@ -364,6 +364,7 @@ void WriteBasisInfo(JsonWriter& j, const v1::BasisInfo& b) {
   j.Key("seed").Int(static_cast<int64_t>(b.seed()));
   j.Key("coarse_dimension").Int(b.coarse_dimension());
   j.Key("kernel_columns").Bool(b.kernel_columns());
+  j.Key("quality").String(b.quality() == v1::BASIS_QUALITY_LOW_MODES ? "low-modes" : "paper");
   j.Key("adaptive").Bool(b.adaptive());
   j.Key("state").String(b.state() == v1::BASIS_STATE_READY ? "ready" : "building");
   j.Key("dofs").Int(b.dofs());
@@ -541,7 +542,7 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"mesh", {{}, 1, &Cli::Mesh}},
         {"delete-mesh", {Flags({}, {"cascade"}), 1, &Cli::DeleteMesh}},
         {"build",
-         {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim",
+         {Flags({"field", "n", "dim", "sigma", "seed", "fields-per-region", "coarse-dim", "quality",
                  "face-weights"},
                 {"cancel-on-exit", "no-kernel-columns"}),
           1, &Cli::Build}},
@@ -753,6 +754,15 @@ int Cli::Build(const CommandLine& a) {
   const int64_t coarse = ParseInt(a, "coarse-dim", 0);
   if (coarse < 0 || coarse >= dim) throw UsageError("--coarse-dim must be in [0, --dim)");
   request.set_coarse_dimension(static_cast<int32_t>(coarse));
+  if (a.Has("quality")) {
+    const std::string quality = GetString(a, "quality");
+    if (quality == "low-modes") {
+      if (coarse != 0) throw UsageError("--coarse-dim and --quality low-modes do not combine");
+      request.set_quality(v1::BASIS_QUALITY_LOW_MODES);
+    } else if (quality != "paper") {
+      throw UsageError("--quality must be paper or low-modes");
+    }
+  }
   if (a.Has("face-weights")) {
     // Adaptivity (paper section 4.4, Fig. 9): more, smaller regions where the weights are high.
     absl::StatusOr<std::vector<double>> weights = ReadNumbersFile(GetString(a, "face-weights"));

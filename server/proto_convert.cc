@@ -113,6 +113,7 @@ void BasisInfoFromStatus(const BasisStatus& s, v1::BasisInfo* p) {
   p->set_seed(r.key.seed);
   p->set_coarse_dimension(r.key.coarse_dimension);
   p->set_kernel_columns(r.key.kernel_columns);
+  p->set_quality(static_cast<v1::BasisQuality>(r.key.quality));
   p->set_adaptive(r.key.weights_hash != 0);
   p->set_dofs(r.dofs);
   if (s.ready) {
@@ -152,6 +153,17 @@ absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& 
   build.key.seed = p.seed();
   build.key.coarse_dimension = p.coarse_dimension();
   build.key.kernel_columns = !p.has_kernel_columns() || p.kernel_columns();
+  switch (p.quality()) {
+    case v1::BASIS_QUALITY_PAPER:
+      build.key.quality = BasisQuality::kPaper;
+      break;
+    case v1::BASIS_QUALITY_LOW_MODES:
+      build.key.quality = BasisQuality::kLowModes;
+      break;
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat("unknown basis quality ", static_cast<int>(p.quality())));
+  }
   build.face_weights =
       Eigen::Map<const Eigen::VectorXd>(p.face_weights().data(), p.face_weights().size());
   return build;

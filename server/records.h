@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <string>
 
+#include "core/basis/basis.h"
 #include "core/operators/field_type.h"
 
 namespace fieldspace::server {
@@ -49,6 +50,8 @@ struct BasisKey {
   // Append the kernel of S (BasisOptions::kernel_columns). The registry clears it where the kernel
   // is certainly empty (vector fields on a genus-0 mesh), so that such bases keep their id.
   bool kernel_columns = false;
+  // The basis's levels (QualityLevels); kPaper is the one level above, with coarse_dimension.
+  BasisQuality quality = BasisQuality::kPaper;
 };
 
 // What the server knows about a built basis without loading it.

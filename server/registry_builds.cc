@@ -30,6 +30,11 @@ std::string Registry::BasisIdFor(const BasisKey& key) {
   if (key.coarse_dimension != 0) hasher.UpdateValue<int32_t>(key.coarse_dimension);
   // Likewise kernel columns: bases without them (the paper's construction) keep their old ids.
   if (key.kernel_columns) hasher.UpdateString("kernel-columns");
+  // And quality levels: the paper's keeps the ids of before.
+  if (key.quality != BasisQuality::kPaper) {
+    hasher.UpdateString("quality");
+    hasher.UpdateValue<uint8_t>(static_cast<uint8_t>(key.quality));
+  }
   return "b-" + Hex64(hasher.Digest());
 }
 
@@ -58,6 +63,13 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
   if (key.coarse_dimension < 0 || key.coarse_dimension >= key.dimension) {
     return absl::InvalidArgumentError(absl::StrCat("coarse_dimension must be in [0, dimension = ",
                                                    key.dimension, "), got ", key.coarse_dimension));
+  }
+  if (key.quality != BasisQuality::kPaper) {
+    if (key.coarse_dimension != 0) {
+      return absl::InvalidArgumentError(
+          "coarse_dimension must be 0 with a quality level other than PAPER (it sets the levels)");
+    }
+    RETURN_IF_ERROR(QualityLevels(key.quality, key.dimension, key.sigma).status());
   }
   if (!std::isfinite(key.sigma) || key.sigma <= 0 || key.sigma > 1e6) {
     return absl::InvalidArgumentError(
@@ -113,8 +125,9 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
   }
   ASSIGN_OR_RETURN(
       WorkGrant grant,
-      AdmitWorkLocked(EstimateBuildPeakBytes(mesh.num_faces, key.field, key.dimension, key.sigma,
-                                             key.kernel_columns, key.coarse_dimension > 0),
+      AdmitWorkLocked(EstimateBuildPeakBytes(
+                          mesh.num_faces, key.field, key.dimension, key.sigma, key.kernel_columns,
+                          key.coarse_dimension > 0 || key.quality != BasisQuality::kPaper),
                       "this basis build"));
   auto job = std::make_shared<BuildJob>(pending);
   const bool submitted = pool_->Submit(

@@ -75,7 +75,15 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
       context.progress(StageFor(phase), fraction);
     };
   }
-  ASSIGN_OR_RETURN(Basis basis, BuildTwoLevelBasis(mesh, op, options, key.coarse_dimension));
+  absl::StatusOr<Basis> built;
+  if (key.quality == BasisQuality::kPaper) {
+    built = BuildTwoLevelBasis(mesh, op, options, key.coarse_dimension);
+  } else {
+    ASSIGN_OR_RETURN(std::vector<BasisLevel> levels,
+                     QualityLevels(key.quality, key.dimension, key.sigma));
+    built = BuildMultiLevelBasis(mesh, op, options, levels);
+  }
+  ASSIGN_OR_RETURN(Basis basis, std::move(built));
   BuiltBasis out;
   out.basis = std::make_shared<const Basis>(std::move(basis));
   out.op = std::make_shared<const FieldOperator>(std::move(op));

@@ -157,10 +157,12 @@ std::string EncodeBasisRecord(const BasisRecord& r) {
   w.Put<double>(r.build_seconds);
   w.Put<int64_t>(r.created_unix_ms);
   // Appended fields: records written before them end here (C = 0, no kernel columns).
-  if (r.key.coarse_dimension != 0 || r.key.kernel_columns) {
+  const bool paper = r.key.quality == BasisQuality::kPaper;
+  if (r.key.coarse_dimension != 0 || r.key.kernel_columns || !paper) {
     w.Put<int32_t>(r.key.coarse_dimension);
   }
-  if (r.key.kernel_columns) w.Put<uint8_t>(1);
+  if (r.key.kernel_columns || !paper) w.Put<uint8_t>(r.key.kernel_columns ? 1 : 0);
+  if (!paper) w.Put<uint8_t>(static_cast<uint8_t>(r.key.quality));
   return std::move(w.bytes());
 }
 
@@ -186,8 +188,11 @@ bool DecodeBasisRecord(std::string_view bytes, BasisRecord* r) {
   r->key.coarse_dimension = in.Done() ? 0 : in.Get<int32_t>();
   const uint8_t kernel = in.Done() ? 0 : in.Get<uint8_t>();
   r->key.kernel_columns = kernel != 0;
+  const uint8_t quality = in.Done() ? 0 : in.Get<uint8_t>();
+  r->key.quality = static_cast<BasisQuality>(quality);
   return in.Done() && kind <= static_cast<uint8_t>(FieldKind::kTensor) && kernel <= 1 &&
-         r->key.coarse_dimension >= 0 &&
+         quality <= static_cast<uint8_t>(BasisQuality::kLowModes) &&
+         (quality == 0 || r->key.coarse_dimension == 0) && r->key.coarse_dimension >= 0 &&
          (r->key.coarse_dimension == 0 || r->key.coarse_dimension < r->key.dimension);
 }
 

@@ -208,6 +208,20 @@ class FieldTest(unittest.TestCase):
         with self.assertRaises(fs.InvalidArgument):
             CLIENT.build(SPHERE.id, "vector", 100, face_weights=weights[:-1], progress=False)
 
+    def test_low_modes_quality_level(self):
+        low = CLIENT.build(SPHERE.id, "vector", 100, quality="low-modes", progress=False)
+        self.assertNotEqual(low, VECTOR)
+        self.assertEqual(CLIENT.basis(low).quality, "low-modes")
+        self.assertEqual(CLIENT.basis(VECTOR).quality, "paper")
+        # The lowest modes (l = 1: 2 on the unit sphere, 6 of them) come out closer.
+        paper = CLIENT.eigen(VECTOR, 6).eigenvalues
+        levels = CLIENT.eigen(low, 6).eigenvalues
+        self.assertLess(np.mean(levels), np.mean(paper))
+        with self.assertRaises(ValueError):
+            CLIENT.build(SPHERE.id, "vector", 100, quality="best", progress=False)
+        with self.assertRaises(fs.InvalidArgument):
+            CLIENT.build(SPHERE.id, "vector", 39, quality="low-modes", progress=False)
+
     def test_eigen_and_smoothest(self):
         e = CLIENT.eigen(VECTOR, 8)
         self.assertEqual(e.eigenvalues.shape, (8,))

@@ -87,6 +87,14 @@ def main():
         check(nfield["field"] == "nfield4" and tensor["field"] == "tensor", "field types")
         check(len(cli.json("bases")["bases"]) == 3, "three bases")
         log("built %s %s %s" % (vector["id"], nfield["id"], tensor["id"]))
+        low = cli.json("build", mesh["id"], "--field", "vector", "--dim", "40",
+                       "--quality", "low-modes")
+        check(low["quality"] == "low-modes" and vector["quality"] == "paper", "quality %s" % low)
+        check(low["id"] != vector["id"] and low["columns"] == vector["columns"],
+              "a low-modes basis is another basis with as many columns")
+        rc, _, err = cli("build", mesh["id"], "--field", "vector", "--dim", "39",
+                         "--quality", "low-modes", expect=1)
+        check("d >= 40" in err, "low-modes below d = 40: rc %d, %r" % (rc, err[-300:]))
 
         # Project a constant ambient field.
         field_path = os.path.join(work, "const.txt")
@@ -246,6 +254,7 @@ def main():
         bases = {b["id"]: b for b in cli.json("bases")["bases"]}
         check({vector["id"], nfield["id"], tensor["id"]} <= set(bases), "bases survive")
         check(bases[vector["id"]]["nnz"] == vector["nnz"], "basis intact")
+        check(bases[low["id"]]["quality"] == "low-modes", "the quality level survives a restart")
         lifted_again = os.path.join(work, "lifted_again.txt")
         cli("lift", vector["id"], solve_json, "--out", lifted_again, "--encoding", "dof")
         check(open(lifted_again).read() == open(lifted_txt).read(),

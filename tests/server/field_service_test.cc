@@ -614,6 +614,32 @@ TEST_F(ServiceTest, BuildStreamsProgressAndIsIdempotent) {
   auto loaded_stacked = Loaded(stacked.basis().id());
   ASSERT_NE(loaded_stacked, nullptr);
   EXPECT_EQ(loaded_stacked->basis->dimension(), 60);
+  // The low-modes quality level: three levels, its own id, the core's BuildMultiLevelBasis.
+  v1::BuildBasisRequest low_modes = r;
+  low_modes.set_quality(v1::BASIS_QUALITY_LOW_MODES);
+  Built low = Build(stub(), low_modes);
+  ASSERT_TRUE(low.status.ok()) << low.status.error_message();
+  EXPECT_NE(low.basis().id(), fresh.basis().id());
+  EXPECT_NE(low.basis().id(), stacked.basis().id());
+  EXPECT_EQ(low.basis().quality(), v1::BASIS_QUALITY_LOW_MODES);
+  EXPECT_EQ(fresh.basis().quality(), v1::BASIS_QUALITY_PAPER);
+  EXPECT_EQ(low.basis().columns(), 60);
+  auto loaded_low = Loaded(low.basis().id());
+  ASSERT_NE(loaded_low, nullptr);
+  {
+    absl::StatusOr<TriangleMesh> mesh = TriangleMesh::Create(*mesh_);
+    ASSERT_TRUE(mesh.ok());
+    absl::StatusOr<FieldOperator> op = BuildFieldOperator(*mesh, FieldType::Vector());
+    ASSERT_TRUE(op.ok());
+    BasisOptions options;
+    options.params.seed = 5;
+    options.params.fields_per_region = 2;
+    auto levels = QualityLevels(BasisQuality::kLowModes, 60, 40.0);
+    ASSERT_TRUE(levels.ok());
+    auto expected = BuildMultiLevelBasis(*mesh, *op, options, *levels);
+    ASSERT_TRUE(expected.ok()) << expected.status();
+    EXPECT_EQ(Eigen::MatrixXf(loaded_low->basis->U), Eigen::MatrixXf(expected->U));
+  }
   // Listed, and removable.
   v1::ListBasesRequest lr;
   lr.set_mesh_id(*mesh_id_);
@@ -673,6 +699,16 @@ TEST_F(ServiceTest, BuildErrors) {
   r.set_coarse_dimension(-1);
   EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
   r.set_coarse_dimension(0);
+  r.set_quality(static_cast<v1::BasisQuality>(7));  // not a quality level
+  EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
+  r.set_quality(v1::BASIS_QUALITY_LOW_MODES);  // needs d >= 40
+  EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
+  r.set_dimension(40);
+  r.set_coarse_dimension(5);  // the quality level sets the levels
+  EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
+  r.set_dimension(10);
+  r.set_coarse_dimension(0);
+  r.set_quality(v1::BASIS_QUALITY_PAPER);
   r.set_fields_per_region(-2);
   EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
   r.set_fields_per_region(0);

@@ -183,6 +183,20 @@ TEST_F(StoreTest, BasisRoundTripConcatenatesPieces) {
     EXPECT_TRUE(loaded->record.key.kernel_columns);
     EXPECT_EQ(loaded->record.key.coarse_dimension, coarse);
     EXPECT_EQ(loaded->record.created_unix_ms, r.created_unix_ms);
+    EXPECT_EQ(loaded->record.key.quality, BasisQuality::kPaper);
+  }
+  // A quality level, with and without kernel columns.
+  for (bool kernel : {false, true}) {
+    r.id = kernel ? "b-00000000000000fb" : "b-00000000000000fa";
+    r.key.coarse_dimension = 0;
+    r.key.kernel_columns = kernel;
+    r.key.quality = BasisQuality::kLowModes;
+    ASSERT_TRUE(store_->SaveBasis(r, {"z"}).ok());
+    loaded = store_->LoadBasis(r.id);
+    ASSERT_TRUE(loaded.ok()) << loaded.status();
+    EXPECT_EQ(loaded->record.key.quality, BasisQuality::kLowModes);
+    EXPECT_EQ(loaded->record.key.kernel_columns, kernel);
+    EXPECT_EQ(loaded->record.key.coarse_dimension, 0);
   }
 }
 
@@ -198,6 +212,12 @@ TEST(BasisIdTest, KernelColumnsEnterTheIdOnlyWhenOn) {
   EXPECT_EQ(paper, "b-29bde9f6ed4f52da");
   key.kernel_columns = true;
   EXPECT_NE(Registry::BasisIdFor(key), paper);
+  // A quality level other than the paper's gives another id; the paper's keeps it.
+  const std::string with_kernel = Registry::BasisIdFor(key);
+  key.quality = BasisQuality::kLowModes;
+  EXPECT_NE(Registry::BasisIdFor(key), with_kernel);
+  key.quality = BasisQuality::kPaper;
+  EXPECT_EQ(Registry::BasisIdFor(key), with_kernel);
 }
 
 TEST_F(StoreTest, FlippedPayloadByteIsDataLoss) {

@@ -106,6 +106,7 @@ class BasisInfo:
     created_unix_ms: int
     phase: str
     fraction: float
+    quality: str = "paper"  # "paper" or "low-modes" (BuildBasisRequest.quality)
 
     @property
     def ready(self):
@@ -118,7 +119,8 @@ class BasisInfo:
         return cls(b.id, b.mesh_id, FieldType.from_proto(b.field), b.dimension, b.sigma,
                    b.fields_per_region, b.seed, b.coarse_dimension, b.adaptive, state, b.dofs,
                    b.columns, b.num_regions, b.radius, b.nnz, b.build_seconds, b.loaded,
-                   b.memory_bytes, b.created_unix_ms, phase_name(b.phase), b.fraction)
+                   b.memory_bytes, b.created_unix_ms, phase_name(b.phase), b.fraction,
+                   "low-modes" if b.quality == pb.BASIS_QUALITY_LOW_MODES else "paper")
 
 
 @dataclass(frozen=True)
