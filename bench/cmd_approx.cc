@@ -1,16 +1,21 @@
 // `fieldspace-bench approx MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S]
-//  --tests K --seed N [--basis local|eigen] [--min-constraints A] [--max-constraints B]`:
+//  --tests K --seed N [--basis local|eigen] [--min-constraints A] [--max-constraints B]
+//  [--coarse-dim C] [--quality paper|low-modes|smooth] [--design-mu-c X]`:
 // the approximation experiment of paper section 6 (Table 3) and, with --basis eigen, its
 // comparison with the global eigenbasis of section 7 (Table 5). The mesh is scaled to unit total
 // area first. Prints
 //   {"projection_error":{"mean","max"},"minimization_error":{"mean","max"},
-//    "biharmonic_model_error":{"mean","max"},"dim","nnz_u","basis","seconds":{...}}
+//    "biharmonic_model_error":{"mean","max"},
+//    "biharmonic_design_error":{"mean","max","mu_s","mu_b","mu_c"},"dim","nnz_u","basis",
+//    "seconds":{...}}
 // projection_error: eq. 13 on K random test fields (biharmonic interpolants of A..B random unit
 // constraints, default 10..50); minimization_error: the smoothing instance of eq. 8 for
 // lambda_j = 25 j (1^T M 1)/(1^T S 1), j = 1..5, full space vs subspace, ||X - U x||_M / ||X||_M,
 // averaged over j and the fields; biharmonic_model_error: the model problem with mu_S = 0,
 // mu_B = 1 and the test fields' hard constraints solved in the subspace against its full-space
-// solution, the test field (BiharmonicModelErrors).
+// solution, the test field (BiharmonicModelErrors); biharmonic_design_error: the same constraints
+// as soft ones at kBiharmonicDesignWeights (mu_S = 0, mu_B = 1, mu_C = 1e4 or --design-mu-c,
+// raw), subspace against full-space solution (BiharmonicDesignErrors).
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -57,8 +62,9 @@ absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args) {
   const auto quality = args.Get("quality");
   if (!quality.has_value() || *quality == "paper") return BasisQuality::kPaper;
   if (*quality == "low-modes") return BasisQuality::kLowModes;
+  if (*quality == "smooth") return BasisQuality::kSmooth;
   return absl::InvalidArgumentError(
-      absl::StrCat("--quality must be paper or low-modes, got '", *quality, "'"));
+      absl::StrCat("--quality must be paper, low-modes or smooth, got '", *quality, "'"));
 }
 
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
@@ -81,7 +87,7 @@ absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh&
   auto quality = QualityFromArgs(args);
   if (!quality.ok()) return quality.status();
   if (*quality != BasisQuality::kPaper && *coarse_dim > 0) {
-    return absl::InvalidArgumentError("--coarse-dim and --quality low-modes do not combine");
+    return absl::InvalidArgumentError("--coarse-dim combines only with --quality paper");
   }
   BasisOptions options;
   options.params.dimension = static_cast<int32_t>(*dim);
@@ -121,7 +127,7 @@ int RunApprox(int argc, char** argv) {
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "tests", "seed", "basis",
                                   "min-constraints", "max-constraints", "coarse-dim", "quality",
-                                  "no-kernel-columns"});
+                                  "design-mu-c", "no-kernel-columns"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -129,7 +135,8 @@ int RunApprox(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench approx MESH --field vector|nfield|tensor [--n N] --dim D "
         "[--sigma S] --tests K --seed N [--basis local|eigen] [--min-constraints A] "
-        "[--max-constraints B] [--coarse-dim C] [--quality paper|low-modes] "
+        "[--max-constraints B] [--coarse-dim C] [--quality paper|low-modes|smooth] "
+        "[--design-mu-c X] "
         "[--no-kernel-columns]"));
   }
   auto type = FieldTypeFromArgs(*args);
@@ -140,6 +147,11 @@ int RunApprox(int argc, char** argv) {
   auto max_constraints = args->GetInt("max-constraints", 50);
   for (const auto* v : {&tests, &seed, &min_constraints, &max_constraints}) {
     if (!v->ok()) return ReportError(v->status());
+  }
+  auto design_mu_c = args->GetDouble("design-mu-c", kBiharmonicDesignWeights.mu_c);
+  if (!design_mu_c.ok()) return ReportError(design_mu_c.status());
+  if (!(*design_mu_c > 0) || !std::isfinite(*design_mu_c)) {
+    return ReportError(absl::InvalidArgumentError("--design-mu-c must be finite and > 0"));
   }
   if (*tests < 1 || *tests > 100000) {
     return ReportError(absl::InvalidArgumentError("--tests must be in [1, 100000]"));
@@ -209,6 +221,14 @@ int RunApprox(int argc, char** argv) {
   const ErrorSummary biharmonic_error = Summarize(*biharmonic);
   const double biharmonic_seconds = biharmonic_watch.Seconds();
 
+  Stopwatch design_watch;
+  EnergyWeights design_weights = kBiharmonicDesignWeights;
+  design_weights.mu_c = *design_mu_c;
+  auto design = BiharmonicDesignErrors(*op, **system, *fields, design_weights);
+  if (!design.ok()) return ReportError(design.status());
+  const ErrorSummary design_error = Summarize(*design);
+  const double design_seconds = design_watch.Seconds();
+
   JsonWriter json;
   json.BeginObject()
       .BeginObject("projection_error")
@@ -223,6 +243,13 @@ int RunApprox(int argc, char** argv) {
       .Double("mean", biharmonic_error.mean)
       .Double("max", biharmonic_error.max)
       .EndObject()
+      .BeginObject("biharmonic_design_error")
+      .Double("mean", design_error.mean)
+      .Double("max", design_error.max)
+      .Double("mu_s", design_weights.mu_s)
+      .Double("mu_b", design_weights.mu_b)
+      .Double("mu_c", design_weights.mu_c)
+      .EndObject()
       .Int("dim", basis->dimension())
       .Int("nnz_u", basis->U.nonZeros())
       .String("basis", basis_kind)
@@ -234,6 +261,7 @@ int RunApprox(int argc, char** argv) {
       .Double("projection", projection_seconds)
       .Double("minimization", minimization_seconds)
       .Double("biharmonic_model", biharmonic_seconds)
+      .Double("biharmonic_design", design_seconds)
       .EndObject()
       .EndObject();
   std::printf("%s\n", json.str().c_str());

@@ -1,13 +1,14 @@
 // `fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S]
 //   [--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats]
-//   [--tolerance T] [--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes]`:
+//   [--tolerance T] [--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes|smooth]`:
 // builds the locally supported basis (paper section 4) and prints one JSON object
 //   {"dim","regions","kernel_columns","dofs","nnz_u","nnz_per_row",
 //    "seconds":{"sampling","regions","eigensolve","kernel","total"},"peak_rss_mb",
 //    "estimated_peak_mb"}.
 // estimated_peak_mb: EstimateBuildPeakBytes, what the daemon admits against its memory budget.
 // --coarse-dim C: a two-level basis (BuildTwoLevelBasis, the daemon's coarse_dimension).
-// --quality low-modes: the three-level basis of BasisQuality::kLowModes (BuildMultiLevelBasis).
+// --quality low-modes|smooth: the three-level bases of BasisQuality::kLowModes and kSmooth
+// (BuildMultiLevelBasis).
 // "dim" counts all columns of U: the d local ones and the kernel columns (BasisOptions::
 // kernel_columns; --no-kernel-columns builds the paper's basis without them).
 // --weights FILE: one positive adaptivity weight per face, one per line.
@@ -17,6 +18,7 @@
 // DIR/samples.txt (the sample face of each region, 0-based, one per line).
 // --tolerance T: residual tolerance of the local eigenproblems (BasisOptions::eigen_tolerance).
 // --stats adds "stats":{...} (how the local problems were solved; core/basis/basis.h BasisStats).
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -24,6 +26,7 @@
 #include <sstream>
 #include <string>
 #include <system_error>
+#include <thread>
 
 #include "absl/status/status.h"
 #include "absl/strings/numbers.h"
@@ -46,7 +49,7 @@ namespace {
 constexpr char kUsage[] =
     "usage: fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] "
     "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] "
-    "[--tolerance T] [--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes]";
+    "[--tolerance T] [--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes|smooth]";
 
 absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
@@ -148,7 +151,7 @@ int RunBasis(int argc, char** argv) {
   if (!quality.ok()) return ReportError(quality.status());
   if (*quality != BasisQuality::kPaper && *coarse_dim > 0) {
     return ReportError(
-        absl::InvalidArgumentError("--coarse-dim and --quality low-modes do not combine"));
+        absl::InvalidArgumentError("--coarse-dim combines only with --quality paper"));
   }
   if (*threads < 0 || *threads > 4096) {
     return ReportError(
@@ -166,6 +169,9 @@ int RunBasis(int argc, char** argv) {
   options.params.sigma = *sigma;
   options.params.seed = static_cast<uint64_t>(*seed);
   options.threads = static_cast<int32_t>(*threads);
+  const int32_t clamped_threads =
+      *threads > 0 ? static_cast<int32_t>(*threads)
+                   : std::max(1, static_cast<int32_t>(std::thread::hardware_concurrency()));
   options.eigen_tolerance = *tolerance;
   options.kernel_columns = !args->Has("no-kernel-columns");
   if (const auto weights = args->Get("weights"); weights.has_value()) {
@@ -214,7 +220,8 @@ int RunBasis(int argc, char** argv) {
       .Double("estimated_peak_mb", static_cast<double>(EstimateBuildPeakBytes(
                                        mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
                                        options.kernel_columns && basis->kernel_columns > 0,
-                                       *coarse_dim > 0 || *quality != BasisQuality::kPaper)) /
+                                       *coarse_dim > 0 || *quality != BasisQuality::kPaper,
+                                       *quality == BasisQuality::kSmooth ? clamped_threads : 0)) /
                                        (1 << 20));
   if (args->Has("stats")) {
     const BasisStats& st = basis->stats;

@@ -45,7 +45,7 @@ int RunEigen(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench eigen MESH --field vector|nfield|tensor [--n N] --count K "
         "--dim D [--sigma S] [--seed N] [--method auto|dense|sparse] [--full] [--coarse-dim C] "
-        "[--quality paper|low-modes] "
+        "[--quality paper|low-modes|smooth] "
         "[--no-kernel-columns]"));
   }
   auto type = FieldTypeFromArgs(*args);

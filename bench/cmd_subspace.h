@@ -20,9 +20,9 @@ namespace fieldspace::bench {
 absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path);
 
 // BuildBasis with --dim (required), --sigma (default 40), --seed (default 0), --coarse-dim
-// (default 0: no coarse level; see StackBases), --quality paper|low-modes (default paper; see
-// BasisQuality) and kernel columns unless --no-kernel-columns.
-// --quality: paper (default) or low-modes (BasisQuality).
+// (default 0: no coarse level; see StackBases), --quality paper|low-modes|smooth (default paper;
+// see BasisQuality) and kernel columns unless --no-kernel-columns.
+// --quality: paper (default), low-modes or smooth (BasisQuality).
 absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args);
 
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,

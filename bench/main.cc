@@ -31,10 +31,10 @@ constexpr Command kCommands[] = {
     {"approx", fieldspace::bench::RunApprox,
      "approx MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] --tests K --seed N "
      "[--basis local|eigen] [--min-constraints A] [--max-constraints B] [--coarse-dim C] "
-     "[--quality paper|low-modes] [--no-kernel-columns]"},
+     "[--quality paper|low-modes|smooth] [--design-mu-c X] [--no-kernel-columns]"},
     {"eigen", fieldspace::bench::RunEigen,
      "eigen MESH --field vector|nfield|tensor [--n N] --count K --dim D [--sigma S] [--seed N] "
-     "[--method auto|dense|sparse] [--full] [--coarse-dim C] [--quality paper|low-modes] "
+     "[--method auto|dense|sparse] [--full] [--coarse-dim C] [--quality paper|low-modes|smooth] "
      "[--no-kernel-columns]"},
     {"design", fieldspace::bench::RunDesign,
      "design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S [--sigma S] "
@@ -44,7 +44,8 @@ constexpr Command kCommands[] = {
     {"kernel", fieldspace::bench::RunKernel, "kernel MESH --field vector|nfield|tensor [--n N]"},
     {"smooth", fieldspace::bench::RunSmooth,
      "smooth MESH --field tensor|vector|nfield [--n N] --dim D [--sigma S] [--seed N] "
-     "[--coarse-dim C] [--quality paper|low-modes] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] "
+     "[--coarse-dim C] [--quality paper|low-modes|smooth] [--mu-s X] [--mu-b X] [--mu-c X] "
+     "[--repeat R] "
      "[--scale-free] [--no-kernel-columns]"},
 };
 

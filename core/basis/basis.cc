@@ -322,7 +322,10 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     absl::StatusOr<LocalEigenResult> res;
     for (double tau_scale : {1.0, 100.0, 1e4}) {
       std::unique_ptr<basis_internal::LocalOperator> local;
-      if (use_hodge) {
+      if (options.clamped_local_fields) {
+        local = std::make_unique<RestrictedLocalOperator>(
+            op, inv_sqrt_mass, faces, 0.01 * tau_scale * lambda * lambda, ws, /*clamped=*/true);
+      } else if (use_hodge) {
         local =
             std::make_unique<HodgeLocalOperator>(mesh, hodge, faces, 0.1 * tau_scale * lambda, ws);
       } else {
@@ -560,19 +563,21 @@ absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int3
   switch (quality) {
     case BasisQuality::kPaper:
       return std::vector<BasisLevel>{{dimension, sigma}};
-    case BasisQuality::kLowModes: {
+    case BasisQuality::kLowModes:
+    case BasisQuality::kSmooth: {
+      const bool clamped = quality == BasisQuality::kSmooth;
       if (dimension < 40) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("the low-modes quality level needs d >= 40 (its coarsest level has d / 40 "
-                         "fields), got ",
-                         dimension));
+        return absl::InvalidArgumentError(absl::StrCat(
+            "the ", clamped ? "smooth" : "low-modes",
+            " quality level needs d >= 40 (its coarsest level has d / 40 fields), got ",
+            dimension));
       }
       const double level_sigma = sigma * 5.0 / 8.0;
       const int32_t coarse = dimension / 10;
       const int32_t coarsest = dimension / 40;
-      return std::vector<BasisLevel>{{dimension - coarse - coarsest, level_sigma},
-                                     {coarse, level_sigma},
-                                     {coarsest, level_sigma}};
+      return std::vector<BasisLevel>{{dimension - coarse - coarsest, level_sigma, clamped},
+                                     {coarse, level_sigma, clamped},
+                                     {coarsest, level_sigma, clamped}};
     }
   }
   return absl::InvalidArgumentError(
@@ -598,6 +603,7 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
   if (levels.size() == 1) {
     level_options.params.dimension = levels[0].dimension;
     level_options.params.sigma = levels[0].sigma;
+    level_options.clamped_local_fields = levels[0].clamped;
     return BuildBasis(mesh, op, level_options);
   }
   level_options.kernel_columns = false;
@@ -626,6 +632,7 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
       share = static_cast<double>(level.dimension) / static_cast<double>(total);
       level_options.params.dimension = level.dimension;
       level_options.params.sigma = level.sigma;
+      level_options.clamped_local_fields = level.clamped;
       ASSIGN_OR_RETURN(Basis built, BuildBasis(mesh, op, level_options));
       timings.sampling_seconds += built.timings.sampling_seconds;
       timings.regions_seconds += built.timings.regions_seconds;
@@ -667,7 +674,8 @@ absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOp
   if (coarse_dimension == 0) return BuildBasis(mesh, op, options);
   const double sigma = options.params.sigma;
   return BuildMultiLevelBasis(mesh, op, options,
-                              {{d - coarse_dimension, sigma}, {coarse_dimension, sigma}});
+                              {{d - coarse_dimension, sigma, options.clamped_local_fields},
+                               {coarse_dimension, sigma, options.clamped_local_fields}});
 }
 
 int64_t Basis::MemoryBytes() const {
@@ -680,7 +688,8 @@ int64_t Basis::MemoryBytes() const {
 }
 
 int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
-                               double sigma, bool kernel_columns, bool two_level) {
+                               double sigma, bool kernel_columns, bool two_level,
+                               int32_t clamped_threads) {
   const double k = static_cast<double>(num_faces) * type.dofs_per_face();
   const bool vector = type.kind == FieldKind::kVector;
   // Vector builds hold the factored Hodge form beside S, hence more bytes per nonzero of U.
@@ -691,7 +700,10 @@ int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t
   const double kernel =
       !kernel_columns ? 0.0 : (vector ? 400.0 * static_cast<double>(num_faces) : 32.0 * k);
   const double levels = two_level ? 2.5 : 1.0;
-  return static_cast<int64_t>(levels * bytes_per_nonzero * sigma * k + 8.0 * d * d + kernel);
+  const double clamped_region = std::min(1.0, 25.0 * sigma / std::max(d, 1.0)) * k;
+  const double clamped = std::max(clamped_threads, 0) * 8192.0 * clamped_region;
+  return static_cast<int64_t>(levels * bytes_per_nonzero * sigma * k + 8.0 * d * d + kernel +
+                              clamped);
 }
 
 }  // namespace fieldspace

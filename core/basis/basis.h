@@ -54,6 +54,16 @@ struct BasisOptions {
   // fields of zero energy are represented exactly. They are global (dense) columns, M-orthonormal
   // among themselves. false builds the paper's construction exactly (identical U).
   bool kernel_columns = true;
+  // Clamped local fields: the m lowest eigenfields of the region's biharmonic energy
+  // B_bar = (S~ V)^T (S~ V), S~ = M^-1/2 S M^-1/2, over fields that vanish outside the region
+  // (its Laplacian's rows reach one ring of faces outside), instead of the paper's Dirichlet
+  // eigenfields of V^T S~ V. A clamped field and its slope vanish at the region's edge, so it has
+  // no kink there: its biharmonic energy in the full space, x^T S M^-1 S x, is exactly its local
+  // eigenvalue (the paper's fields put most of theirs into that kink). Local eigenvalues are then
+  // biharmonic (about the square of the Laplacian's). Same supports, so U has the same sparsity;
+  // the local problems' stencil reaches two rings instead of one (~2x the build's eigensolve
+  // time). Used by BasisQuality::kSmooth.
+  bool clamped_local_fields = false;
 };
 
 // Wall-clock seconds per phase. sampling: dual graph + farthest point sampling; regions: growing
@@ -134,8 +144,14 @@ struct Basis {
 // fields: 470 MiB measured on 1.79M faces, counted as 400 bytes a face). For admission against a
 // memory budget. A two-level basis (BuildTwoLevelBasis with C > 0) holds both levels' U and the
 // stacked one, and the coarse level's large local problems: 2.5 times the nonzero term.
+// `clamped_threads` > 0: the levels of BasisQuality::kSmooth solved by that many threads at once;
+// each holds the sparse Cholesky factor of a clamped local problem, whose two-ring stencil fills
+// in far more than the Dirichlet one: up to the coarsest level's regions, min(1, 25 sigma / d) of
+// the mesh, at 8 KiB per DOF (measured 6.1-7.1 KiB on 58k-173k DOFs; bench/RESULTS.md,
+// "Session 11").
 int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
-                               double sigma, bool kernel_columns, bool two_level);
+                               double sigma, bool kernel_columns, bool two_level,
+                               int32_t clamped_threads = 0);
 
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options);
@@ -157,10 +173,11 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse);
 absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis);
 
 // One level of a multilevel basis: `dimension` local fields of the paper's construction with
-// overlap factor `sigma`.
+// overlap factor `sigma`, clamped (BasisOptions::clamped_local_fields) or not.
 struct BasisLevel {
   int32_t dimension = 0;
   double sigma = 40.0;
+  bool clamped = false;
 };
 
 // Named basis quality levels (docs/conventions.md, Basis quality; measured in bench/RESULTS.md,
@@ -174,10 +191,16 @@ enum class BasisQuality : uint8_t {
   // 50 non-zero reduced eigenvalues within 1.8-2.0% mean, 3.1-3.9% max (paper: 20-29%, 128-173%)
   // at 1.7-1.9x the paper's nonzeros of U.
   kLowModes = 1,
+  // The levels of kLowModes with clamped local fields (BasisOptions::clamped_local_fields): no
+  // kinks at the regions' edges, so biharmonic energies in the subspace are those of the lifted
+  // fields and biharmonic design (mu_B > 0) follows the full space; projections are also closer.
+  // Same nonzeros as kLowModes; builds take about twice as long (bench/RESULTS.md, "Session 11").
+  kSmooth = 2,
 };
 
 // The levels of `quality` for dimension d and overlap sigma: one level {d, sigma} for kPaper.
-// InvalidArgument for kLowModes with d < 40 (its coarsest level needs d / 40 >= 1 fields).
+// InvalidArgument for kLowModes and kSmooth with d < 40 (the coarsest level needs d / 40 >= 1
+// fields).
 absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int32_t dimension,
                                                       double sigma);
 

@@ -85,7 +85,7 @@ uint64_t SplitMix64(uint64_t& state) {
 RestrictedLocalOperator::RestrictedLocalOperator(const FieldOperator& op,
                                                  const Eigen::VectorXd& inv_sqrt_mass,
                                                  const std::vector<int32_t>& faces, double tau,
-                                                 RegionWorkspace& ws)
+                                                 RegionWorkspace& ws, bool clamped)
     : tau_(tau), ws_(ws) {
   const int32_t dpf = op.type.dofs_per_face();
   const int32_t nfr = static_cast<int32_t>(faces.size());
@@ -99,7 +99,42 @@ RestrictedLocalOperator::RestrictedLocalOperator(const FieldOperator& op,
   outer_.assign(static_cast<size_t>(n_) + 1, 0);
   inner_.clear();
   values_.clear();
-  for (int32_t l = 0; l < n_; ++l) {
+  if (clamped) {
+    // E = S~ V: column l holds S~'s column of the region DOF l at all its rows, numbered region
+    // DOFs first (the dof_map) and then the outside rows in order of appearance; B_bar = E^T E.
+    if (ws.outer_map.size() != static_cast<size_t>(op.dofs())) ws.outer_map.assign(op.dofs(), -1);
+    std::vector<int32_t> outside;
+    std::vector<Eigen::Triplet<double>> entries;
+    for (int32_t l = 0; l < n_; ++l) {
+      const int64_t g = dpf * static_cast<int64_t>(faces[l / dpf]) + l % dpf;
+      const double sg = inv_sqrt_mass[g];
+      for (Eigen::SparseMatrix<double>::InnerIterator it(S, g); it; ++it) {
+        int32_t r = ws.dof_map[it.row()];
+        if (r < 0) {
+          int32_t& o = ws.outer_map[it.row()];
+          if (o < 0) {
+            o = static_cast<int32_t>(outside.size());
+            outside.push_back(static_cast<int32_t>(it.row()));
+          }
+          r = n_ + o;
+        }
+        entries.emplace_back(r, l, it.value() * inv_sqrt_mass[it.row()] * sg);
+      }
+    }
+    for (int32_t row : outside) ws.outer_map[row] = -1;
+    Eigen::SparseMatrix<double> E(n_ + static_cast<int32_t>(outside.size()), n_);
+    E.setFromTriplets(entries.begin(), entries.end());
+    Eigen::SparseMatrix<double> B = E.transpose() * E;
+    B.makeCompressed();
+    for (int32_t l = 0; l < n_; ++l) {
+      for (Eigen::SparseMatrix<double>::InnerIterator it(B, l); it; ++it) {
+        inner_.push_back(static_cast<int32_t>(it.row()));
+        values_.push_back(it.value());
+      }
+      outer_[l + 1] = static_cast<int32_t>(inner_.size());
+    }
+  }
+  for (int32_t l = 0; l < n_ && !clamped; ++l) {
     const int64_t g = dpf * static_cast<int64_t>(faces[l / dpf]) + l % dpf;
     const double sg = inv_sqrt_mass[g];
     for (Eigen::SparseMatrix<double>::InnerIterator it(S, g); it; ++it) {

@@ -31,7 +31,8 @@ struct RegionWorkspace {
   std::vector<int32_t> edge_map;    // #E
   LocalCholesky cholesky;
   std::vector<int32_t> touched;
-  std::vector<int32_t> marker;  // assembly scratch
+  std::vector<int32_t> marker;     // assembly scratch
+  std::vector<int32_t> outer_map;  // k, global DOF -> row of S~ V outside the region (clamped)
 };
 
 // The generic local problem (any field type): S_bar = V^T S V extracted from the global S by a
@@ -40,8 +41,13 @@ struct RegionWorkspace {
 class RestrictedLocalOperator final : public LocalOperator {
  public:
   // `faces`: the region, ascending. `inv_sqrt_mass`: k entries 1 / sqrt(M_ii). `tau` > 0.
+  // `clamped` (BasisOptions::clamped_local_fields): the local operator is the biharmonic energy
+  // of fields that vanish outside the region, B_bar = (S~ V)^T (S~ V) with S~ = M^-1/2 S M^-1/2
+  // and all of S~ V's rows (also those of the faces around the region), instead of V^T S~ V:
+  // its eigenfields' values and slopes vanish at the region's edge, so they carry no kink there.
   RestrictedLocalOperator(const FieldOperator& op, const Eigen::VectorXd& inv_sqrt_mass,
-                          const std::vector<int32_t>& faces, double tau, RegionWorkspace& ws);
+                          const std::vector<int32_t>& faces, double tau, RegionWorkspace& ws,
+                          bool clamped = false);
 
   int32_t size() const override { return n_; }
   void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;

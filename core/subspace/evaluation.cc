@@ -235,6 +235,70 @@ absl::StatusOr<Eigen::VectorXd> BiharmonicModelErrors(const ReducedSystem& syste
   return RelativeResiduals(system, tests.fields, x);
 }
 
+absl::StatusOr<Eigen::VectorXd> BiharmonicDesignErrors(const FieldOperator& op,
+                                                       const ReducedSystem& system,
+                                                       const TestFieldSet& tests,
+                                                       const EnergyWeights& weights) {
+  const int64_t m = tests.fields.cols();
+  if (static_cast<int64_t>(tests.constraints.size()) != m) {
+    return absl::InvalidArgumentError("BiharmonicDesignErrors: one constraint set per field");
+  }
+  if (op.dofs() != system.dofs()) {
+    return absl::InvalidArgumentError("BiharmonicDesignErrors: operator and subspace differ");
+  }
+  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(weights));
+  // Full space: (mu_s S + mu_b B + mu_c C^T C) X = mu_c C^T c. The energy's pattern (B's, which
+  // holds S's and the diagonal) never changes: one symbolic analysis, a numeric factorization per
+  // field with mu_c added on the constrained DOFs' diagonal.
+  const int64_t k = system.dofs();
+  const int32_t p = system.dofs_per_face();
+  Eigen::SparseMatrix<double> energy =
+      weights.mu_s * op.stiffness + weights.mu_b * BiharmonicMatrix(op);
+  energy.makeCompressed();
+  std::vector<int64_t> diagonal(k, -1);
+  for (int64_t col = 0; col < k; ++col) {
+    for (int64_t q = energy.outerIndexPtr()[col]; q < energy.outerIndexPtr()[col + 1]; ++q) {
+      if (energy.innerIndexPtr()[q] == col) diagonal[col] = q;
+    }
+    if (diagonal[col] < 0) {
+      return absl::InternalError("BiharmonicDesignErrors: the energy has no diagonal entry");
+    }
+  }
+  ASSIGN_OR_RETURN(std::shared_ptr<const SupernodalSymbolic> symbolic,
+                   SupernodalSymbolic::Analyze(energy));
+  std::optional<SupernodalFactor> factor;
+  Eigen::MatrixXd full(k, m);
+  Eigen::MatrixXd x(system.dimension(), m);
+  std::vector<double> values(energy.valuePtr(), energy.valuePtr() + energy.nonZeros());
+  for (int64_t j = 0; j < m; ++j) {
+    ModelProblem problem;
+    problem.weights = weights;
+    problem.constraints = tests.constraints[j];
+    std::copy(energy.valuePtr(), energy.valuePtr() + energy.nonZeros(), values.begin());
+    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(k);
+    for (FieldConstraint& c : problem.constraints) {
+      c.kind = ConstraintKind::kSoft;
+      c.weight = 1.0;
+      RETURN_IF_ERROR(ValidateConstraint(system, c));
+      for (int32_t i = 0; i < p; ++i) {
+        const int64_t dof = static_cast<int64_t>(c.face) * p + i;
+        values[diagonal[dof]] += weights.mu_c;
+        rhs[dof] += weights.mu_c * c.value[i];
+      }
+    }
+    if (!factor.has_value()) {
+      ASSIGN_OR_RETURN(SupernodalFactor f, SupernodalFactor::Factorize(symbolic, values));
+      factor.emplace(std::move(f));
+    } else {
+      RETURN_IF_ERROR(factor->Refactorize(values));
+    }
+    full.col(j) = factor->Solve(rhs);
+    ASSIGN_OR_RETURN(ReducedSolution solution, SolveReducedModelProblem(system, problem));
+    x.col(j) = solution.coefficients;
+  }
+  return RelativeResiduals(system, full, x);
+}
+
 ErrorSummary Summarize(const Eigen::Ref<const Eigen::MatrixXd>& errors) {
   ErrorSummary s;
   if (errors.size() == 0) return s;

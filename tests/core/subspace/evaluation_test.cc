@@ -159,6 +159,55 @@ TEST(EvaluationTest, BiharmonicModelErrorsAgainstADenseKktSolve) {
   }
 }
 
+TEST(EvaluationTest, BiharmonicDesignErrorsAgainstDenseSolves) {
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  TestFieldOptions options;
+  options.count = 2;
+  options.min_constraints = 4;
+  options.max_constraints = 6;
+  options.seed = 7;
+  auto tests = GenerateTestFields(op, options);
+  ASSERT_TRUE(tests.ok()) << tests.status();
+  const EnergyWeights weights = {/*mu_s=*/0.5, /*mu_b=*/1.0, /*mu_c=*/30.0};
+  // U = I: the subspace solution is the full-space one.
+  auto identity = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
+  ASSERT_TRUE(identity.ok());
+  auto zero = BiharmonicDesignErrors(op, **identity, *tests, weights);
+  ASSERT_TRUE(zero.ok()) << zero.status();
+  EXPECT_LT(zero->maxCoeff(), 1e-7);
+  // A random subspace against dense normal equations in both spaces:
+  // (mu_s S + mu_b B + mu_c C^T C) X = mu_c C^T c, and the same with X = U x.
+  auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 120, 30, 9);
+  auto sys = ReducedSystem::Build(basis, op);
+  ASSERT_TRUE(sys.ok());
+  auto errors = BiharmonicDesignErrors(op, **sys, *tests, weights);
+  ASSERT_TRUE(errors.ok()) << errors.status();
+  const Eigen::MatrixXd U = DenseU(*basis);
+  const Eigen::MatrixXd E = weights.mu_s * Eigen::MatrixXd(op.stiffness) +
+                            weights.mu_b * Eigen::MatrixXd(BiharmonicMatrix(op));
+  const Eigen::MatrixXd M = op.mass.asDiagonal();
+  for (int f = 0; f < 2; ++f) {
+    Eigen::MatrixXd A = E;
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(op.dofs());
+    for (const FieldConstraint& c : tests->constraints[f]) {
+      for (int i = 0; i < 2; ++i) {
+        A(2 * c.face + i, 2 * c.face + i) += weights.mu_c;
+        b[2 * c.face + i] += weights.mu_c * c.value[i];
+      }
+    }
+    const Eigen::VectorXd full = A.ldlt().solve(b);
+    const Eigen::VectorXd x = (U.transpose() * A * U).ldlt().solve(U.transpose() * b);
+    const Eigen::VectorXd res = full - U * x;
+    const double expected = std::sqrt(res.dot(M * res) / full.dot(M * full));
+    EXPECT_NEAR((*errors)[f], expected, 1e-6 * expected);
+    EXPECT_GT(expected, 1e-3);
+  }
+  // Weights the design needs: an energy.
+  EXPECT_THAT(BiharmonicDesignErrors(op, **sys, *tests, {0.0, 0.0, 1.0}),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
 TEST(EvaluationTest, InvalidTestFieldOptions) {
   const TriangleMesh mesh = Icosphere(1);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
