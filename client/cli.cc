@@ -50,7 +50,7 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   mesh MESH_ID                        one mesh
   delete-mesh MESH_ID [--cascade]     delete a mesh (with --cascade: and its bases)
   build MESH_ID --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--seed S]
-        [--fields-per-region M] [--coarse-dim C] [--quality paper|low-modes]
+        [--fields-per-region M] [--coarse-dim C] [--quality paper|low-modes|smooth]
         [--face-weights FILE] [--no-kernel-columns] [--cancel-on-exit]
                                       build a basis: progress on stderr, BasisInfo ("id") on stdout;
                                       C > 0 adds a coarse level of C of the D columns; FILE: #F
@@ -364,7 +364,9 @@ void WriteBasisInfo(JsonWriter& j, const v1::BasisInfo& b) {
   j.Key("seed").Int(static_cast<int64_t>(b.seed()));
   j.Key("coarse_dimension").Int(b.coarse_dimension());
   j.Key("kernel_columns").Bool(b.kernel_columns());
-  j.Key("quality").String(b.quality() == v1::BASIS_QUALITY_LOW_MODES ? "low-modes" : "paper");
+  j.Key("quality").String(b.quality() == v1::BASIS_QUALITY_LOW_MODES ? "low-modes"
+                          : b.quality() == v1::BASIS_QUALITY_SMOOTH  ? "smooth"
+                                                                     : "paper");
   j.Key("adaptive").Bool(b.adaptive());
   j.Key("state").String(b.state() == v1::BASIS_STATE_READY ? "ready" : "building");
   j.Key("dofs").Int(b.dofs());
@@ -756,11 +758,12 @@ int Cli::Build(const CommandLine& a) {
   request.set_coarse_dimension(static_cast<int32_t>(coarse));
   if (a.Has("quality")) {
     const std::string quality = GetString(a, "quality");
-    if (quality == "low-modes") {
-      if (coarse != 0) throw UsageError("--coarse-dim and --quality low-modes do not combine");
-      request.set_quality(v1::BASIS_QUALITY_LOW_MODES);
+    if (quality == "low-modes" || quality == "smooth") {
+      if (coarse != 0) throw UsageError("--coarse-dim combines only with --quality paper");
+      request.set_quality(quality == "smooth" ? v1::BASIS_QUALITY_SMOOTH
+                                              : v1::BASIS_QUALITY_LOW_MODES);
     } else if (quality != "paper") {
-      throw UsageError("--quality must be paper or low-modes");
+      throw UsageError("--quality must be paper, low-modes or smooth");
     }
   }
   if (a.Has("face-weights")) {

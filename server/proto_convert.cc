@@ -160,6 +160,9 @@ absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& 
     case v1::BASIS_QUALITY_LOW_MODES:
       build.key.quality = BasisQuality::kLowModes;
       break;
+    case v1::BASIS_QUALITY_SMOOTH:
+      build.key.quality = BasisQuality::kSmooth;
+      break;
     default:
       return absl::InvalidArgumentError(
           absl::StrCat("unknown basis quality ", static_cast<int>(p.quality())));

@@ -191,7 +191,7 @@ bool DecodeBasisRecord(std::string_view bytes, BasisRecord* r) {
   const uint8_t quality = in.Done() ? 0 : in.Get<uint8_t>();
   r->key.quality = static_cast<BasisQuality>(quality);
   return in.Done() && kind <= static_cast<uint8_t>(FieldKind::kTensor) && kernel <= 1 &&
-         quality <= static_cast<uint8_t>(BasisQuality::kLowModes) &&
+         quality <= static_cast<uint8_t>(BasisQuality::kSmooth) &&
          (quality == 0 || r->key.coarse_dimension == 0) && r->key.coarse_dimension >= 0 &&
          (r->key.coarse_dimension == 0 || r->key.coarse_dimension < r->key.dimension);
 }

@@ -221,6 +221,16 @@ class FieldTest(unittest.TestCase):
             CLIENT.build(SPHERE.id, "vector", 100, quality="best", progress=False)
         with self.assertRaises(fs.InvalidArgument):
             CLIENT.build(SPHERE.id, "vector", 39, quality="low-modes", progress=False)
+        # Smooth: the same levels with clamped fields; its lowest modes come closer still to
+        # the sphere's l = 1 eigenvalue 2.
+        smooth = CLIENT.build(SPHERE.id, "vector", 100, quality="smooth", progress=False)
+        self.assertNotIn(smooth, (low, VECTOR))
+        self.assertEqual(CLIENT.basis(smooth).quality, "smooth")
+        self.assertEqual(CLIENT.basis(smooth).nnz, CLIENT.basis(low).nnz)
+        clamped = CLIENT.eigen(smooth, 6).eigenvalues
+        self.assertLess(np.abs(clamped - 2).max(), np.abs(levels - 2).max())
+        with self.assertRaises(fs.InvalidArgument):
+            CLIENT.build(SPHERE.id, "vector", 39, quality="smooth", progress=False)
 
     def test_eigen_and_smoothest(self):
         e = CLIENT.eigen(VECTOR, 8)

@@ -95,6 +95,14 @@ def main():
         rc, _, err = cli("build", mesh["id"], "--field", "vector", "--dim", "39",
                          "--quality", "low-modes", expect=1)
         check("d >= 40" in err, "low-modes below d = 40: rc %d, %r" % (rc, err[-300:]))
+        smooth = cli.json("build", mesh["id"], "--field", "vector", "--dim", "40",
+                          "--quality", "smooth")
+        check(smooth["quality"] == "smooth" and smooth["id"] not in (low["id"], vector["id"])
+              and smooth["nnz"] == low["nnz"],
+              "a smooth basis: low-modes' sparsity, its own id: %s" % smooth)
+        rc, _, err = cli("build", mesh["id"], "--field", "vector", "--dim", "40",
+                         "--quality", "smoothest", expect=2)
+        check("paper, low-modes or smooth" in err, "unknown quality: rc %d, %r" % (rc, err[-300:]))
 
         # Project a constant ambient field.
         field_path = os.path.join(work, "const.txt")

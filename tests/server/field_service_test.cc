@@ -614,6 +614,18 @@ TEST_F(ServiceTest, BuildStreamsProgressAndIsIdempotent) {
   auto loaded_stacked = Loaded(stacked.basis().id());
   ASSERT_NE(loaded_stacked, nullptr);
   EXPECT_EQ(loaded_stacked->basis->dimension(), 60);
+  // The core's BuildMultiLevelBasis of a quality level, for the request r with seed 5.
+  const auto core_build = [&](BasisQuality quality) -> Eigen::MatrixXf {
+    absl::StatusOr<TriangleMesh> mesh = TriangleMesh::Create(*mesh_);
+    absl::StatusOr<FieldOperator> op = BuildFieldOperator(*mesh, FieldType::Vector());
+    BasisOptions options;
+    options.params.seed = 5;
+    options.params.fields_per_region = 2;
+    auto levels = QualityLevels(quality, 60, 40.0);
+    if (!mesh.ok() || !op.ok() || !levels.ok()) return Eigen::MatrixXf();
+    auto expected = BuildMultiLevelBasis(*mesh, *op, options, *levels);
+    return expected.ok() ? Eigen::MatrixXf(expected->U) : Eigen::MatrixXf();
+  };
   // The low-modes quality level: three levels, its own id, the core's BuildMultiLevelBasis.
   v1::BuildBasisRequest low_modes = r;
   low_modes.set_quality(v1::BASIS_QUALITY_LOW_MODES);
@@ -626,20 +638,26 @@ TEST_F(ServiceTest, BuildStreamsProgressAndIsIdempotent) {
   EXPECT_EQ(low.basis().columns(), 60);
   auto loaded_low = Loaded(low.basis().id());
   ASSERT_NE(loaded_low, nullptr);
-  {
-    absl::StatusOr<TriangleMesh> mesh = TriangleMesh::Create(*mesh_);
-    ASSERT_TRUE(mesh.ok());
-    absl::StatusOr<FieldOperator> op = BuildFieldOperator(*mesh, FieldType::Vector());
-    ASSERT_TRUE(op.ok());
-    BasisOptions options;
-    options.params.seed = 5;
-    options.params.fields_per_region = 2;
-    auto levels = QualityLevels(BasisQuality::kLowModes, 60, 40.0);
-    ASSERT_TRUE(levels.ok());
-    auto expected = BuildMultiLevelBasis(*mesh, *op, options, *levels);
-    ASSERT_TRUE(expected.ok()) << expected.status();
-    EXPECT_EQ(Eigen::MatrixXf(loaded_low->basis->U), Eigen::MatrixXf(expected->U));
-  }
+  const Eigen::MatrixXf low_u(loaded_low->basis->U);
+  const auto same = [](const Eigen::MatrixXf& a, const Eigen::MatrixXf& b) {
+    return a.rows() == b.rows() && a.cols() == b.cols() && a == b;
+  };
+  EXPECT_TRUE(same(low_u, core_build(BasisQuality::kLowModes)));
+  // The smooth quality level: low-modes' levels with clamped fields; another id, same sparsity.
+  v1::BuildBasisRequest smooth_request = r;
+  smooth_request.set_quality(v1::BASIS_QUALITY_SMOOTH);
+  Built smooth = Build(stub(), smooth_request);
+  ASSERT_TRUE(smooth.status.ok()) << smooth.status.error_message();
+  EXPECT_NE(smooth.basis().id(), low.basis().id());
+  EXPECT_NE(smooth.basis().id(), fresh.basis().id());
+  EXPECT_EQ(smooth.basis().quality(), v1::BASIS_QUALITY_SMOOTH);
+  EXPECT_EQ(smooth.basis().columns(), 60);
+  EXPECT_EQ(smooth.basis().nnz(), low.basis().nnz());
+  auto loaded_smooth = Loaded(smooth.basis().id());
+  ASSERT_NE(loaded_smooth, nullptr);
+  const Eigen::MatrixXf smooth_u(loaded_smooth->basis->U);
+  EXPECT_TRUE(same(smooth_u, core_build(BasisQuality::kSmooth)));
+  EXPECT_FALSE(same(smooth_u, low_u));
   // Listed, and removable.
   v1::ListBasesRequest lr;
   lr.set_mesh_id(*mesh_id_);
@@ -702,6 +720,8 @@ TEST_F(ServiceTest, BuildErrors) {
   r.set_quality(static_cast<v1::BasisQuality>(7));  // not a quality level
   EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
   r.set_quality(v1::BASIS_QUALITY_LOW_MODES);  // needs d >= 40
+  EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
+  r.set_quality(v1::BASIS_QUALITY_SMOOTH);  // so does smooth
   EXPECT_EQ(code(r), grpc::StatusCode::INVALID_ARGUMENT);
   r.set_dimension(40);
   r.set_coarse_dimension(5);  // the quality level sets the levels

@@ -185,18 +185,21 @@ TEST_F(StoreTest, BasisRoundTripConcatenatesPieces) {
     EXPECT_EQ(loaded->record.created_unix_ms, r.created_unix_ms);
     EXPECT_EQ(loaded->record.key.quality, BasisQuality::kPaper);
   }
-  // A quality level, with and without kernel columns.
-  for (bool kernel : {false, true}) {
-    r.id = kernel ? "b-00000000000000fb" : "b-00000000000000fa";
-    r.key.coarse_dimension = 0;
-    r.key.kernel_columns = kernel;
-    r.key.quality = BasisQuality::kLowModes;
-    ASSERT_TRUE(store_->SaveBasis(r, {"z"}).ok());
-    loaded = store_->LoadBasis(r.id);
-    ASSERT_TRUE(loaded.ok()) << loaded.status();
-    EXPECT_EQ(loaded->record.key.quality, BasisQuality::kLowModes);
-    EXPECT_EQ(loaded->record.key.kernel_columns, kernel);
-    EXPECT_EQ(loaded->record.key.coarse_dimension, 0);
+  // The quality levels, with and without kernel columns.
+  for (BasisQuality quality : {BasisQuality::kLowModes, BasisQuality::kSmooth}) {
+    for (bool kernel : {false, true}) {
+      r.id = absl::StrCat("b-00000000000000", quality == BasisQuality::kSmooth ? "e" : "f",
+                          kernel ? "b" : "a");
+      r.key.coarse_dimension = 0;
+      r.key.kernel_columns = kernel;
+      r.key.quality = quality;
+      ASSERT_TRUE(store_->SaveBasis(r, {"z"}).ok());
+      loaded = store_->LoadBasis(r.id);
+      ASSERT_TRUE(loaded.ok()) << loaded.status();
+      EXPECT_EQ(loaded->record.key.quality, quality);
+      EXPECT_EQ(loaded->record.key.kernel_columns, kernel);
+      EXPECT_EQ(loaded->record.key.coarse_dimension, 0);
+    }
   }
 }
 
@@ -215,7 +218,11 @@ TEST(BasisIdTest, KernelColumnsEnterTheIdOnlyWhenOn) {
   // A quality level other than the paper's gives another id; the paper's keeps it.
   const std::string with_kernel = Registry::BasisIdFor(key);
   key.quality = BasisQuality::kLowModes;
+  const std::string low_modes = Registry::BasisIdFor(key);
+  EXPECT_NE(low_modes, with_kernel);
+  key.quality = BasisQuality::kSmooth;
   EXPECT_NE(Registry::BasisIdFor(key), with_kernel);
+  EXPECT_NE(Registry::BasisIdFor(key), low_modes);
   key.quality = BasisQuality::kPaper;
   EXPECT_EQ(Registry::BasisIdFor(key), with_kernel);
 }

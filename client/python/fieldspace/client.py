@@ -326,7 +326,9 @@ class Client:
                 columns (default); False gives the paper's basis exactly.
             quality: ``"paper"`` (default: one level, the paper's construction) or
                 ``"low-modes"`` (three levels: low eigenvalues and smooth fields within ~2% at
-                d = 2000, for ~1.8x the nonzeros; needs d >= 40 and coarse_dimension 0).
+                d = 2000, for ~1.8x the nonzeros; needs d >= 40 and coarse_dimension 0) or
+                ``"smooth"`` (low-modes' levels with clamped local fields: biharmonic design,
+                mu_b > 0, follows the full space; about twice low-modes' build time).
             progress: a tqdm progress bar on stderr: None (default) shows it when stderr is a
                 terminal, True always, False never.
             on_progress: called with every BuildProgress (the last one carries ``basis``).
@@ -340,9 +342,11 @@ class Client:
             mesh_id=_id(mesh), field=fld.field_type_proto(field, n, what),
             dimension=int(dimension), seed=int(seed), fields_per_region=int(fields_per_region),
             coarse_dimension=int(coarse_dimension), kernel_columns=bool(kernel_columns))
-        qualities = {"paper": pb.BASIS_QUALITY_PAPER, "low-modes": pb.BASIS_QUALITY_LOW_MODES}
+        qualities = {"paper": pb.BASIS_QUALITY_PAPER, "low-modes": pb.BASIS_QUALITY_LOW_MODES,
+                     "smooth": pb.BASIS_QUALITY_SMOOTH}
         if quality not in qualities:
-            raise ValueError(f"{what}: quality must be 'paper' or 'low-modes', got {quality!r}")
+            raise ValueError(
+                f"{what}: quality must be 'paper', 'low-modes' or 'smooth', got {quality!r}")
         request.quality = qualities[quality]
         if sigma is not None:
             request.sigma = float(sigma)

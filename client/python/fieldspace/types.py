@@ -106,7 +106,7 @@ class BasisInfo:
     created_unix_ms: int
     phase: str
     fraction: float
-    quality: str = "paper"  # "paper" or "low-modes" (BuildBasisRequest.quality)
+    quality: str = "paper"  # "paper", "low-modes" or "smooth" (BuildBasisRequest.quality)
 
     @property
     def ready(self):
@@ -120,7 +120,8 @@ class BasisInfo:
                    b.fields_per_region, b.seed, b.coarse_dimension, b.adaptive, state, b.dofs,
                    b.columns, b.num_regions, b.radius, b.nnz, b.build_seconds, b.loaded,
                    b.memory_bytes, b.created_unix_ms, phase_name(b.phase), b.fraction,
-                   "low-modes" if b.quality == pb.BASIS_QUALITY_LOW_MODES else "paper")
+                   {pb.BASIS_QUALITY_LOW_MODES: "low-modes",
+                    pb.BASIS_QUALITY_SMOOTH: "smooth"}.get(b.quality, "paper"))
 
 
 @dataclass(frozen=True)
