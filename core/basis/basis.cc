@@ -281,7 +281,9 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   t0 = std::chrono::steady_clock::now();
   Eigen::VectorXd inv_sqrt_mass = op.mass.cwiseSqrt().cwiseInverse();
   HodgeFactorData hodge;
-  if (op.type.kind == FieldKind::kVector && options.use_factored_vector_operator) {
+  // (Clamped local problems are always factored in the generic form.)
+  if (op.type.kind == FieldKind::kVector && options.use_factored_vector_operator &&
+      !options.clamped_local_fields) {
     hodge = basis_internal::BuildHodgeFactorData(mesh);
     absl::StatusOr<bool> matches = basis_internal::HodgeFactorMatches(mesh, op, hodge, cancel);
     if (!matches.ok()) return matches.status();
