@@ -61,8 +61,9 @@ struct BasisOptions {
   // no kink there: its biharmonic energy in the full space, x^T S M^-1 S x, is exactly its local
   // eigenvalue (the paper's fields put most of theirs into that kink). Local eigenvalues are then
   // biharmonic (about the square of the Laplacian's). Same supports, so U has the same sparsity;
-  // the local problems' stencil reaches two rings instead of one (~2x the build's eigensolve
-  // time). Used by BasisQuality::kSmooth.
+  // the local problems' stencil reaches two rings instead of one and is factored in the generic
+  // form, so large regions cost far more time and memory (EstimateBuildPeakBytes). Used by
+  // BasisQuality::kSmooth.
   bool clamped_local_fields = false;
 };
 
@@ -194,7 +195,8 @@ enum class BasisQuality : uint8_t {
   // The levels of kLowModes with clamped local fields (BasisOptions::clamped_local_fields): no
   // kinks at the regions' edges, so biharmonic energies in the subspace are those of the lifted
   // fields and biharmonic design (mu_B > 0) follows the full space; projections are also closer.
-  // Same nonzeros as kLowModes; builds take about twice as long (bench/RESULTS.md, "Session 11").
+  // Same nonzeros as kLowModes; builds take 7-9x as long and ~4x the memory (bench/RESULTS.md,
+  // "Session 11").
   kSmooth = 2,
 };
 

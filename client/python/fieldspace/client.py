@@ -328,7 +328,7 @@ class Client:
                 ``"low-modes"`` (three levels: low eigenvalues and smooth fields within ~2% at
                 d = 2000, for ~1.8x the nonzeros; needs d >= 40 and coarse_dimension 0) or
                 ``"smooth"`` (low-modes' levels with clamped local fields: biharmonic design,
-                mu_b > 0, follows the full space; about twice low-modes' build time).
+                mu_b > 0, follows the full space; 7-9x low-modes' build time, ~4x its memory).
             progress: a tqdm progress bar on stderr: None (default) shows it when stderr is a
                 terminal, True always, False never.
             on_progress: called with every BuildProgress (the last one carries ``basis``).
