@@ -18,7 +18,6 @@
 // DIR/samples.txt (the sample face of each region, 0-based, one per line).
 // --tolerance T: residual tolerance of the local eigenproblems (BasisOptions::eigen_tolerance).
 // --stats adds "stats":{...} (how the local problems were solved; core/basis/basis.h BasisStats).
-#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -26,7 +25,6 @@
 #include <sstream>
 #include <string>
 #include <system_error>
-#include <thread>
 
 #include "absl/status/status.h"
 #include "absl/strings/numbers.h"
@@ -169,9 +167,6 @@ int RunBasis(int argc, char** argv) {
   options.params.sigma = *sigma;
   options.params.seed = static_cast<uint64_t>(*seed);
   options.threads = static_cast<int32_t>(*threads);
-  const int32_t clamped_threads =
-      *threads > 0 ? static_cast<int32_t>(*threads)
-                   : std::max(1, static_cast<int32_t>(std::thread::hardware_concurrency()));
   options.eigen_tolerance = *tolerance;
   options.kernel_columns = !args->Has("no-kernel-columns");
   if (const auto weights = args->Get("weights"); weights.has_value()) {
@@ -221,7 +216,7 @@ int RunBasis(int argc, char** argv) {
                                        mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
                                        options.kernel_columns && basis->kernel_columns > 0,
                                        *coarse_dim > 0 || *quality != BasisQuality::kPaper,
-                                       *quality == BasisQuality::kSmooth ? clamped_threads : 0)) /
+                                       *quality == BasisQuality::kSmooth, options.threads)) /
                                        (1 << 20));
   if (args->Has("stats")) {
     const BasisStats& st = basis->stats;

@@ -1,7 +1,6 @@
 // Registry: basis builds (ids, starting, running, cancelling). The rest of the registry is in
 // registry.cc.
 
-#include <algorithm>
 #include <chrono>
 #include <iostream>
 #include <thread>
@@ -124,17 +123,12 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
     out.joined = true;
     return out;
   }
-  // Threads solving local problems at once (0: all cores).
-  const int32_t build_threads =
-      options_.build_threads > 0
-          ? options_.build_threads
-          : std::max(1, static_cast<int32_t>(std::thread::hardware_concurrency()));
   ASSIGN_OR_RETURN(
       WorkGrant grant,
       AdmitWorkLocked(EstimateBuildPeakBytes(
                           mesh.num_faces, key.field, key.dimension, key.sigma, key.kernel_columns,
                           key.coarse_dimension > 0 || key.quality != BasisQuality::kPaper,
-                          key.quality == BasisQuality::kSmooth ? build_threads : 0),
+                          key.quality == BasisQuality::kSmooth, options_.build_threads),
                       "this basis build"));
   auto job = std::make_shared<BuildJob>(pending);
   const bool submitted = pool_->Submit(

@@ -690,8 +690,8 @@ int64_t Basis::MemoryBytes() const {
 }
 
 int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
-                               double sigma, bool kernel_columns, bool two_level,
-                               int32_t clamped_threads) {
+                               double sigma, bool kernel_columns, bool two_level, bool clamped,
+                               int32_t threads) {
   const double k = static_cast<double>(num_faces) * type.dofs_per_face();
   const bool vector = type.kind == FieldKind::kVector;
   // Vector builds hold the factored Hodge form beside S, hence more bytes per nonzero of U.
@@ -702,10 +702,12 @@ int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t
   const double kernel =
       !kernel_columns ? 0.0 : (vector ? 400.0 * static_cast<double>(num_faces) : 32.0 * k);
   const double levels = two_level ? 2.5 : 1.0;
+  // As the build resolves BasisOptions::threads.
+  const int32_t local_threads = threads > 0 ? threads : tbb::this_task_arena::max_concurrency();
   const double clamped_region = std::min(1.0, 25.0 * sigma / std::max(d, 1.0)) * k;
-  const double clamped = std::max(clamped_threads, 0) * 8192.0 * clamped_region;
+  const double clamped_factors = clamped ? local_threads * 8192.0 * clamped_region : 0.0;
   return static_cast<int64_t>(levels * bytes_per_nonzero * sigma * k + 8.0 * d * d + kernel +
-                              clamped);
+                              clamped_factors);
 }
 
 }  // namespace fieldspace

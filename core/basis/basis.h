@@ -145,14 +145,14 @@ struct Basis {
 // fields: 470 MiB measured on 1.79M faces, counted as 400 bytes a face). For admission against a
 // memory budget. A two-level basis (BuildTwoLevelBasis with C > 0) holds both levels' U and the
 // stacked one, and the coarse level's large local problems: 2.5 times the nonzero term.
-// `clamped_threads` > 0: the levels of BasisQuality::kSmooth solved by that many threads at once;
-// each holds the sparse Cholesky factor of a clamped local problem, whose two-ring stencil fills
-// in far more than the Dirichlet one: up to the coarsest level's regions, min(1, 25 sigma / d) of
-// the mesh, at 8 KiB per DOF (measured 6.1-7.1 KiB on 58k-173k DOFs; bench/RESULTS.md,
-// "Session 11").
+// `clamped`: the levels of BasisQuality::kSmooth, built with `threads` threads
+// (BasisOptions::threads: 0 is all available cores); each thread holds the sparse Cholesky factor
+// of a clamped local problem, whose two-ring stencil fills in far more than the Dirichlet one: up
+// to the coarsest level's regions, min(1, 25 sigma / d) of the mesh, at 8 KiB per DOF (measured
+// 6.2-7.2 KiB on 58k-173k DOFs; bench/RESULTS.md, "Session 11").
 int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
                                double sigma, bool kernel_columns, bool two_level,
-                               int32_t clamped_threads = 0);
+                               bool clamped = false, int32_t threads = 0);
 
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options);

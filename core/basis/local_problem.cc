@@ -133,17 +133,18 @@ RestrictedLocalOperator::RestrictedLocalOperator(const FieldOperator& op,
       }
       outer_[l + 1] = static_cast<int32_t>(inner_.size());
     }
-  }
-  for (int32_t l = 0; l < n_ && !clamped; ++l) {
-    const int64_t g = dpf * static_cast<int64_t>(faces[l / dpf]) + l % dpf;
-    const double sg = inv_sqrt_mass[g];
-    for (Eigen::SparseMatrix<double>::InnerIterator it(S, g); it; ++it) {
-      const int32_t r = ws.dof_map[it.row()];
-      if (r < 0) continue;
-      inner_.push_back(r);
-      values_.push_back(it.value() * inv_sqrt_mass[it.row()] * sg);
+  } else {
+    for (int32_t l = 0; l < n_; ++l) {
+      const int64_t g = dpf * static_cast<int64_t>(faces[l / dpf]) + l % dpf;
+      const double sg = inv_sqrt_mass[g];
+      for (Eigen::SparseMatrix<double>::InnerIterator it(S, g); it; ++it) {
+        const int32_t r = ws.dof_map[it.row()];
+        if (r < 0) continue;
+        inner_.push_back(r);
+        values_.push_back(it.value() * inv_sqrt_mass[it.row()] * sg);
+      }
+      outer_[l + 1] = static_cast<int32_t>(inner_.size());
     }
-    outer_[l + 1] = static_cast<int32_t>(inner_.size());
   }
   for (int32_t i = 0; i < nfr; ++i) {
     for (int32_t c = 0; c < dpf; ++c) ws.dof_map[dpf * static_cast<int64_t>(faces[i]) + c] = -1;

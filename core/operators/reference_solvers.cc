@@ -107,15 +107,8 @@ SpMat BiharmonicMatrix(const FieldOperator& op) {
   return symmetric;
 }
 
-absl::StatusOr<ModelSystem> AssembleModelSystem(const FieldOperator& op,
-                                                const ModelProblem& problem) {
-  RETURN_IF_ERROR(CheckOperator(op));
-  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
-  if (problem.scale_free) {
-    return absl::InvalidArgumentError(
-        "scale-free weights are defined relative to a subspace (each soft constraint's face "
-        "stiffness in span(U)); the full-space model problem takes raw weights");
-  }
+absl::StatusOr<SoftConstraintTerms> AssembleSoftConstraints(const FieldOperator& op,
+                                                            const ModelProblem& problem) {
   const EnergyWeights& w = problem.weights;
   const int64_t k = op.dofs();
   const int32_t p = op.type.dofs_per_face();
@@ -128,26 +121,43 @@ absl::StatusOr<ModelSystem> AssembleModelSystem(const FieldOperator& op,
           c.weight));
     }
   }
-  ModelSystem system;
-  system.A.resize(k, k);
-  if (w.mu_s > 0.0) system.A = w.mu_s * op.stiffness;
-  if (w.mu_b > 0.0) system.A += w.mu_b * BiharmonicMatrix(op);
   // C^T C is diagonal: each soft constraint adds its weight to its face's DOFs.
-  Eigen::VectorXd ctc = Eigen::VectorXd::Zero(k);
-  system.b = Eigen::VectorXd::Zero(k);
+  SoftConstraintTerms terms;
+  terms.diagonal = Eigen::VectorXd::Zero(k);
+  terms.b = Eigen::VectorXd::Zero(k);
   if (w.mu_c > 0.0) {
     for (const FieldConstraint& c : problem.constraints) {
       if (c.hard()) continue;
       for (int32_t d = 0; d < p; ++d) {
         const int64_t i = static_cast<int64_t>(p) * c.face + d;
-        ctc[i] += w.mu_c * c.weight;
-        system.b[i] += w.mu_c * c.weight * c.value[d];
+        terms.diagonal[i] += w.mu_c * c.weight;
+        terms.b[i] += w.mu_c * c.weight * c.value[d];
       }
     }
   }
+  return terms;
+}
+
+absl::StatusOr<ModelSystem> AssembleModelSystem(const FieldOperator& op,
+                                                const ModelProblem& problem) {
+  RETURN_IF_ERROR(CheckOperator(op));
+  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
+  if (problem.scale_free) {
+    return absl::InvalidArgumentError(
+        "scale-free weights are defined relative to a subspace (each soft constraint's face "
+        "stiffness in span(U)); the full-space model problem takes raw weights");
+  }
+  const EnergyWeights& w = problem.weights;
+  const int64_t k = op.dofs();
+  ASSIGN_OR_RETURN(SoftConstraintTerms soft, AssembleSoftConstraints(op, problem));
+  ModelSystem system;
+  system.A.resize(k, k);
+  if (w.mu_s > 0.0) system.A = w.mu_s * op.stiffness;
+  if (w.mu_b > 0.0) system.A += w.mu_b * BiharmonicMatrix(op);
+  system.b = std::move(soft.b);
   std::vector<Eigen::Triplet<double>> diagonal;
   for (int64_t i = 0; i < k; ++i) {
-    if (ctc[i] != 0.0) diagonal.emplace_back(i, i, ctc[i]);
+    if (soft.diagonal[i] != 0.0) diagonal.emplace_back(i, i, soft.diagonal[i]);
   }
   if (!diagonal.empty()) {
     SpMat D(k, k);

@@ -103,6 +103,17 @@ struct ModelSystem {
 absl::StatusOr<ModelSystem> AssembleModelSystem(const FieldOperator& op,
                                                 const ModelProblem& problem);
 
+// The soft constraints' share of those normal equations: C^T C is diagonal, mu_c times each soft
+// constraint's weight on its face's DOFs (`diagonal`, k), and b = mu_c C^T c (k). For solvers that
+// keep the energy's factorization pattern and add the constraints per problem. InvalidArgument for
+// a bad face, value or weight of a soft constraint (hard ones are ignored).
+struct SoftConstraintTerms {
+  Eigen::VectorXd diagonal;
+  Eigen::VectorXd b;
+};
+absl::StatusOr<SoftConstraintTerms> AssembleSoftConstraints(const FieldOperator& op,
+                                                            const ModelProblem& problem);
+
 // Solves the model problem in the full space: the free DOFs satisfy A_ff X_f = b_f - A_fh X_h
 // (hard-constrained DOFs X_h eliminated), hard-constrained DOFs take their values exactly.
 // Returns X (k, DOF order of op). InvalidArgument for bad weights, faces or values (including a

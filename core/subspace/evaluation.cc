@@ -246,15 +246,14 @@ absl::StatusOr<Eigen::VectorXd> BiharmonicDesignErrors(const FieldOperator& op,
   if (op.dofs() != system.dofs()) {
     return absl::InvalidArgumentError("BiharmonicDesignErrors: operator and subspace differ");
   }
-  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(weights));
-  // Full space: (mu_s S + mu_b B + mu_c C^T C) X = mu_c C^T c. The energy's pattern (B's, which
-  // holds S's and the diagonal) never changes: one symbolic analysis, a numeric factorization per
-  // field with mu_c added on the constrained DOFs' diagonal.
+  // Full space: (mu_s S + mu_b B + mu_c C^T C) X = mu_c C^T c (AssembleModelSystem's). The
+  // energy's pattern (B's, which holds S's and the diagonal) never changes: one symbolic
+  // analysis, a numeric factorization per field with the soft constraints' diagonal added.
   const int64_t k = system.dofs();
-  const int32_t p = system.dofs_per_face();
-  Eigen::SparseMatrix<double> energy =
-      weights.mu_s * op.stiffness + weights.mu_b * BiharmonicMatrix(op);
-  energy.makeCompressed();
+  ModelProblem energy_only;
+  energy_only.weights = weights;
+  ASSIGN_OR_RETURN(ModelSystem energy_system, AssembleModelSystem(op, energy_only));
+  const Eigen::SparseMatrix<double>& energy = energy_system.A;
   std::vector<int64_t> diagonal(k, -1);
   for (int64_t col = 0; col < k; ++col) {
     for (int64_t q = energy.outerIndexPtr()[col]; q < energy.outerIndexPtr()[col + 1]; ++q) {
@@ -274,25 +273,20 @@ absl::StatusOr<Eigen::VectorXd> BiharmonicDesignErrors(const FieldOperator& op,
     ModelProblem problem;
     problem.weights = weights;
     problem.constraints = tests.constraints[j];
-    std::copy(energy.valuePtr(), energy.valuePtr() + energy.nonZeros(), values.begin());
-    Eigen::VectorXd rhs = Eigen::VectorXd::Zero(k);
     for (FieldConstraint& c : problem.constraints) {
       c.kind = ConstraintKind::kSoft;
       c.weight = 1.0;
-      RETURN_IF_ERROR(ValidateConstraint(system, c));
-      for (int32_t i = 0; i < p; ++i) {
-        const int64_t dof = static_cast<int64_t>(c.face) * p + i;
-        values[diagonal[dof]] += weights.mu_c;
-        rhs[dof] += weights.mu_c * c.value[i];
-      }
     }
+    ASSIGN_OR_RETURN(SoftConstraintTerms soft, AssembleSoftConstraints(op, problem));
+    std::copy(energy.valuePtr(), energy.valuePtr() + energy.nonZeros(), values.begin());
+    for (int64_t i = 0; i < k; ++i) values[diagonal[i]] += soft.diagonal[i];
     if (!factor.has_value()) {
       ASSIGN_OR_RETURN(SupernodalFactor f, SupernodalFactor::Factorize(symbolic, values));
       factor.emplace(std::move(f));
     } else {
       RETURN_IF_ERROR(factor->Refactorize(values));
     }
-    full.col(j) = factor->Solve(rhs);
+    full.col(j) = factor->Solve(soft.b);
     ASSIGN_OR_RETURN(ReducedSolution solution, SolveReducedModelProblem(system, problem));
     x.col(j) = solution.coefficients;
   }

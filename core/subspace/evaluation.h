@@ -74,8 +74,9 @@ inline constexpr EnergyWeights kBiharmonicDesignWeights = {/*mu_s=*/0.0, /*mu_b=
                                                            /*mu_c=*/1e4};
 
 // The model problem of design with a biharmonic energy (eq. 8 with soft constraints, each of
-// weight 1, at each test field's constrained faces and values): solved in the full space
-// (SolveModelProblem) and in the subspace (SolveReducedModelProblem), raw weights;
+// weight 1, at each test field's constrained faces and values): solved in the full space (the
+// normal equations of AssembleModelSystem, one symbolic analysis for all fields) and in the
+// subspace (SolveReducedModelProblem), raw weights;
 // ||X - U x||_M / ||X||_M per field, X the full-space solution. `op` is the operator `system`
 // was built for. InvalidArgument for invalid weights or a mismatch; errors of the solvers.
 absl::StatusOr<Eigen::VectorXd> BiharmonicDesignErrors(

@@ -714,12 +714,16 @@ TEST(BasisTest, BuildPeakEstimateCoversMeasuredPeaks) {
   // The smooth quality level with 2 threads (bench/RESULTS.md, "Session 11"): kitten_29k
   // (28,944 faces) peaked at 553 MiB, fertility_60k (60,012) at 1051 MiB and armadillo_86k at
   // 1523 MiB; the clamped term is what covers them.
-  const int64_t kitten = EstimateBuildPeakBytes(28944, vector, 2000, 40.0, false, true, 2);
+  const int64_t kitten =
+      EstimateBuildPeakBytes(28944, vector, 2000, 40.0, false, true, /*clamped=*/true, 2);
   EXPECT_GE(kitten, 553 * kMiB);
   EXPECT_LT(EstimateBuildPeakBytes(28944, vector, 2000, 40.0, false, true), 553 * kMiB);
-  EXPECT_GE(EstimateBuildPeakBytes(60012, vector, 2000, 40.0, false, true, 2), 1051 * kMiB);
-  EXPECT_GE(EstimateBuildPeakBytes(86482, vector, 2000, 40.0, false, true, 2), 1523 * kMiB);
-  EXPECT_LE(EstimateBuildPeakBytes(86482, vector, 2000, 40.0, false, true, 2), 2 * 1523 * kMiB);
+  EXPECT_GE(EstimateBuildPeakBytes(60012, vector, 2000, 40.0, false, true, /*clamped=*/true, 2),
+            1051 * kMiB);
+  EXPECT_GE(EstimateBuildPeakBytes(86482, vector, 2000, 40.0, false, true, /*clamped=*/true, 2),
+            1523 * kMiB);
+  EXPECT_LE(EstimateBuildPeakBytes(86482, vector, 2000, 40.0, false, true, /*clamped=*/true, 2),
+            2 * 1523 * kMiB);
 }
 
 }  // namespace
