@@ -1,14 +1,17 @@
-// `fieldspace-bench kernel MESH --field vector|nfield|tensor [--n N]`: the kernel of the field's
+// `fieldspace-bench kernel MESH --field vector|nfield|tensor [--n N]
+//  [--poisson multigrid|cholesky]`: the kernel of the field's
 // Laplacian (ComputeKernelFields, core/operators/kernel_fields.h: harmonic fields for vector
 // fields, parallel fields otherwise), as the basis construction appends it by default. Prints
 //   {"columns","candidates","expected_harmonic","max_rayleigh","min_rejected",
-//    "kernel_residual","orthonormality_error",
+//    "kernel_residual","orthonormality_error","poisson_solver","poisson_iterations",
+//    "poisson_fallback",
 //    "seconds":{"operator","candidates","poisson","ritz","kernel"},"peak_rss_mb"}
 // kernel_residual: max over columns of ||S x||_{M^-1} / (lambda_ref ||x||_M),
 // lambda_ref = trace(S) / trace(M); orthonormality_error: max |X^T M X - I|.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <string>
 
 #include "absl/status/status.h"
 #include "bench/bench_util.h"
@@ -22,10 +25,18 @@ namespace fieldspace::bench {
 int RunKernel(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {});
   if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n"}); !st.ok()) return ReportError(st);
+  if (auto st = args->CheckKnown({"field", "n", "poisson"}); !st.ok()) return ReportError(st);
   if (args->positional().size() != 1) {
     return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench kernel MESH --field vector|nfield|tensor [--n N]"));
+        "usage: fieldspace-bench kernel MESH --field vector|nfield|tensor [--n N] "
+        "[--poisson multigrid|cholesky]"));
+  }
+  const std::string poisson = args->Get("poisson").value_or("multigrid");
+  KernelFieldOptions options;
+  if (poisson == "cholesky") {
+    options.poisson_solver = PoissonSolver::kCholesky;
+  } else if (poisson != "multigrid") {
+    return ReportError(absl::InvalidArgumentError("--poisson must be multigrid or cholesky"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());
@@ -36,7 +47,7 @@ int RunKernel(int argc, char** argv) {
   if (!op.ok()) return ReportError(op.status());
   const double op_seconds = op_watch.Seconds();
   KernelFieldStats stats;
-  auto X = ComputeKernelFields(*mesh, *op, {}, &stats);
+  auto X = ComputeKernelFields(*mesh, *op, options, &stats);
   if (!X.ok()) return ReportError(X.status());
   double residual = 0, orthonormality = 0;
   if (X->cols() > 0) {
@@ -58,6 +69,9 @@ int RunKernel(int argc, char** argv) {
       .Double("min_rejected", stats.min_rejected)
       .Double("kernel_residual", residual)
       .Double("orthonormality_error", orthonormality)
+      .String("poisson_solver", poisson)
+      .Int("poisson_iterations", stats.poisson_iterations)
+      .Bool("poisson_fallback", stats.poisson_fallback)
       .BeginObject("seconds")
       .Double("operator", op_seconds)
       .Double("candidates", stats.candidate_seconds)

@@ -469,8 +469,8 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
   tbb::task_arena arena(threads);
   absl::StatusOr<Basis> result;
   arena.execute([&] {
-    // The kernel of S is computed beside the local fields: most of it is one sparse Cholesky
-    // factorization on one thread, and the local fields keep the other threads busy meanwhile.
+    // The kernel of S is computed beside the local fields: most of it is one multigrid Poisson
+    // solve (mostly on one thread), and the local fields keep the other threads busy meanwhile.
     // (It cannot stop early when the local fields fail; it does when the build is cancelled.)
     absl::StatusOr<Eigen::MatrixXd> kernel = Eigen::MatrixXd();
     tbb::task_group kernel_task;
@@ -697,8 +697,8 @@ int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t
   // Vector builds hold the factored Hodge form beside S, hence more bytes per nonzero of U.
   const double bytes_per_nonzero = vector ? 26.0 : 19.0;
   const double d = dimension;
-  // The kernel step: a vertex Poisson factor and 2 g dense candidates for vector fields; a few
-  // dense candidate columns otherwise.
+  // The kernel step: the vertex Poisson solve's hierarchy and vectors and 2 g dense candidates
+  // for vector fields; a few dense candidate columns otherwise.
   const double kernel =
       !kernel_columns ? 0.0 : (vector ? 400.0 * static_cast<double>(num_faces) : 32.0 * k);
   const double levels = two_level ? 2.5 : 1.0;

@@ -141,11 +141,11 @@ struct Basis {
 // thumb of sigma nonzeros per row of U, calibrated on measured peaks (bench/RESULTS.md, basis
 // construction: 940-1020 bytes per DOF for vector fields, 720-730 for n-fields and tensors at
 // sigma 40), plus the d x d reduced matrices, plus, with kernel columns, what computing them
-// beside the local fields holds (for vector fields the P1 Poisson factorization and the candidate
-// fields: 470 MiB measured on 1.79M faces, counted as 400 bytes a face). For admission against a
-// memory budget. A two-level basis (BuildTwoLevelBasis with C > 0) holds both levels' U and the
-// stacked one, and the coarse level's large local problems: 2.5 times the nonzero term.
-// `clamped`: the levels of BasisQuality::kSmooth, built with `threads` threads
+// beside the local fields holds (for vector fields the P1 Poisson solve's multigrid hierarchy and
+// vectors and the candidate fields: 560 MiB measured on 1.79M faces, counted as 400 bytes a face).
+// For admission against a memory budget. A two-level basis (BuildTwoLevelBasis with C > 0) holds
+// both levels' U and the stacked one, and the coarse level's large local problems: 2.5 times the
+// nonzero term. `clamped`: the levels of BasisQuality::kSmooth, built with `threads` threads
 // (BasisOptions::threads: 0 is all available cores); each thread holds the sparse Cholesky factor
 // of a clamped local problem, whose two-ring stencil fills in far more than the Dirichlet one: up
 // to the coarsest level's regions, min(1, 25 sigma / d) of the mesh, at 8 KiB per DOF (measured

@@ -11,6 +11,7 @@
 #include "Eigen/SparseCore"
 #include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
+#include "core/linalg/multigrid.h"
 #include "core/linalg/sparse_cholesky.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
@@ -19,7 +20,12 @@
 namespace fieldspace {
 namespace {
 
-using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+using RowMatrix = MultigridRowMatrix;
+
+// Relative residual of the multigrid Poisson solve. A residual r leaves the harmonic candidate
+// an exact part whose Rayleigh quotient is about ||r||^2 / ||b||^2 times the candidate's exact
+// part's, far below accept_tolerance (measured in docs/conventions.md, Kernel fields).
+constexpr double kPoissonTolerance = 1e-12;
 
 absl::Status Cancelled() { return absl::CancelledError("kernel field computation cancelled"); }
 
@@ -61,8 +67,8 @@ double EdgeSign(const TriangleMesh& mesh, int32_t f, int k) {
 
 // The candidate fields of the vector Hodge Laplacian's kernel (see the header): one harmonic
 // field per tree-cotree generator. Columns of a k x (generators) matrix.
-absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, const CancelFlag* cancel,
-                                             KernelFieldStats* stats) {
+absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, PoissonSolver solver,
+                                             const CancelFlag* cancel, KernelFieldStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
   const int32_t nv = mesh.num_vertices();
   const int32_t ne = mesh.num_edges();
@@ -87,14 +93,14 @@ absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, const Can
     }
   }
   std::vector<uint8_t> in_tree(ne, 0), seen_vertex(nv, 0);
-  std::vector<int32_t> queue;
+  std::vector<int32_t> queue;  // ends up holding every vertex in BFS order
   queue.reserve(nv);
   for (int32_t root = 0; root < nv; ++root) {
     if (seen_vertex[root]) continue;
     seen_vertex[root] = 1;
-    queue.clear();
+    const size_t start = queue.size();
     queue.push_back(root);
-    for (size_t head = 0; head < queue.size(); ++head) {
+    for (size_t head = start; head < queue.size(); ++head) {
       const int32_t v = queue[head];
       for (int64_t q = offset[v]; q < offset[v + 1]; ++q) {
         const int32_t e = incident[q];
@@ -235,10 +241,13 @@ absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, const Can
     const int32_t c = mesh.face_component()[f];
     if (pinned_of[c] < 0) pinned_of[c] = F(f, 0);
   }
+  // Unknowns numbered in BFS order, so that neighbours sit close in memory (the multigrid's
+  // sweeps gather neighbour rows; meshes refined by subdivision number new vertices far from
+  // their neighbours).
   std::vector<int32_t> index(nv, 0);
   for (int32_t c = 0; c < nc; ++c) index[pinned_of[c]] = -1;
   int32_t n = 0;
-  for (int32_t v = 0; v < nv; ++v) index[v] = index[v] < 0 ? -1 : n++;
+  for (int32_t v : queue) index[v] = index[v] < 0 ? -1 : n++;
   std::vector<double> edge_value(ne, 0.0), vertex_value(nv, 0.0);
   RowMatrix rhs = RowMatrix::Zero(n, ng);
   for (int32_t f = 0; f < nf; ++f) {
@@ -257,17 +266,18 @@ absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, const Can
     }
   }
   if (n > 0) {
+    // Both triangles: the multigrid reads rows, CHOLMOD accepts either.
     Eigen::SparseMatrix<double> L(n, n);
     {
-      // Column index[v]: rows index[w] for the neighbours w < v (same order as v), then v.
+      // Column index[v]: rows index[w] for the neighbours w (ascending), and v.
       int64_t nnz = 0;
-      for (int32_t v = 0; v < nv; ++v) {
+      for (int32_t v : queue) {
         if (index[v] < 0) continue;
         ++nnz;
         for (int64_t q = offset[v]; q < offset[v + 1]; ++q) {
           const int32_t e = incident[q];
           const int32_t w = E(e, 0) == v ? E(e, 1) : E(e, 0);
-          nnz += (w < v && index[w] >= 0) ? 1 : 0;
+          nnz += index[w] >= 0 ? 1 : 0;
         }
       }
       L.resizeNonZeros(static_cast<Eigen::Index>(nnz));
@@ -276,7 +286,7 @@ absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, const Can
       double* value = L.valuePtr();
       int64_t pos = 0;
       std::vector<std::pair<int32_t, double>> column;
-      for (int32_t v = 0; v < nv; ++v) {
+      for (int32_t v : queue) {  // columns in the order of their index
         const int32_t iv = index[v];
         if (iv < 0) continue;
         outer[iv] = static_cast<int32_t>(pos);
@@ -284,25 +294,45 @@ absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, const Can
         for (int64_t q = offset[v]; q < offset[v + 1]; ++q) {
           const int32_t e = incident[q];
           const int32_t w = E(e, 0) == v ? E(e, 1) : E(e, 0);
-          if (w < v && index[w] >= 0) column.emplace_back(index[w], edge_value[e]);
+          if (index[w] >= 0) column.emplace_back(index[w], edge_value[e]);
         }
+        column.emplace_back(iv, vertex_value[v]);
         std::sort(column.begin(), column.end());
         for (const auto& [row, x] : column) {
           inner[pos] = row;
           value[pos++] = x;
         }
-        inner[pos] = iv;
-        value[pos++] = vertex_value[v];
       }
       outer[n] = static_cast<int32_t>(pos);
     }
     if (IsCancelled(cancel)) return Cancelled();
-    CholeskyOptions cholesky;
-    cholesky.check_input = false;  // symmetric by construction (upper triangle only)
-    ASSIGN_OR_RETURN(SparseCholesky factor, SparseCholesky::Factorize(L, cholesky));
-    if (IsCancelled(cancel)) return Cancelled();
-    ASSIGN_OR_RETURN(Eigen::MatrixXd u_cols, factor.SolveMatrix(Eigen::MatrixXd(rhs)));
-    const RowMatrix u = u_cols;
+    RowMatrix u;
+    bool solved = false;
+    if (solver == PoissonSolver::kMultigrid) {
+      MultigridOptions mg;
+      mg.tolerance = kPoissonTolerance;
+      mg.max_iterations = 100;
+      mg.cancel = cancel;
+      MultigridStats ms;
+      absl::StatusOr<RowMatrix> mu = SolveMultigridCg(L, rhs, mg, &ms);
+      stats->poisson_iterations = ms.iterations;
+      if (mu.ok()) {
+        u = *std::move(mu);
+        solved = true;
+      } else if (absl::IsFailedPrecondition(mu.status())) {
+        stats->poisson_fallback = true;  // a mesh the hierarchy does not suit: factorize
+      } else {
+        return mu.status();
+      }
+    }
+    if (!solved) {
+      CholeskyOptions cholesky;
+      cholesky.check_input = false;  // symmetric by construction
+      ASSIGN_OR_RETURN(SparseCholesky factor, SparseCholesky::Factorize(L, cholesky));
+      if (IsCancelled(cancel)) return Cancelled();
+      ASSIGN_OR_RETURN(Eigen::MatrixXd u_cols, factor.SolveMatrix(Eigen::MatrixXd(rhs)));
+      u = u_cols;
+    }
     for (int32_t f = 0; f < nf; ++f) {
       for (int r = 0; r < 3; ++r) {
         const int32_t i = index[F(f, r)];
@@ -503,7 +533,7 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   const bool vector = op.type.kind == FieldKind::kVector;
   RowMatrix H;
   if (vector) {
-    ASSIGN_OR_RETURN(H, HarmonicCandidates(mesh, options.cancel, &st));
+    ASSIGN_OR_RETURN(H, HarmonicCandidates(mesh, options.poisson_solver, options.cancel, &st));
     for (const MeshComponent& c : mesh.components()) {
       if (c.num_boundary_loops == 0) st.expected_harmonic += 2 - c.euler_characteristic;
     }

@@ -696,15 +696,15 @@ TEST(BasisTest, DimensionEqualToDofCountIsAllowed) {
 }
 
 // The admission estimate covers the peaks measured with `fieldspace-bench basis ... --stats`
-// (bench/RESULTS.md, "Session 10"): a vector build with kernel columns on
-// fertility_loop3_1789k (1,789,056 faces, d = 2000) peaked at 3872 MiB and a two-level build
+// (bench/RESULTS.md, "Session 10" and "Session 12"): a vector build with kernel columns on
+// fertility_loop3_1789k (1,789,056 faces, d = 2000) peaked at 3958 MiB and a two-level build
 // (--coarse-dim 200) on armadillo_86k (86,482 faces) at 442 MiB; one-level armadillo at 181 MiB.
 TEST(BasisTest, BuildPeakEstimateCoversMeasuredPeaks) {
   constexpr int64_t kMiB = int64_t{1} << 20;
   const FieldType vector = FieldType::Vector();
   EXPECT_GE(EstimateBuildPeakBytes(1789056, vector, 2000, 40.0, /*kernel_columns=*/true,
                                    /*two_level=*/false),
-            3872 * kMiB);
+            3958 * kMiB);
   EXPECT_GE(EstimateBuildPeakBytes(86482, vector, 2000, 40.0, false, /*two_level=*/true),
             442 * kMiB);
   const int64_t one_level = EstimateBuildPeakBytes(86482, vector, 2000, 40.0, false, false);

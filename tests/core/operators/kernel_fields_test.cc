@@ -107,6 +107,32 @@ TEST_P(KernelFieldsTest, ColumnsSpanTheKernelOfEveryFieldKind) {
   }
 }
 
+// The multigrid Poisson solve (the default) and the CHOLMOD one give the same harmonic fields:
+// the columns of each lie in the span of the other's to 1e-9 in the M-norm.
+TEST_P(KernelFieldsTest, MultigridAndCholeskyPoissonSolvesAgree) {
+  const testing::MeshCase& c = GetParam();
+  if (c.genus == 0 && c.boundary_loops <= 1) GTEST_SKIP() << c.name << ": no generators";
+  const FieldOperator op = MustBuildOperator(mesh(), FieldType::Vector());
+  KernelFieldStats mg_stats, ch_stats;
+  KernelFieldOptions cholesky;
+  cholesky.poisson_solver = PoissonSolver::kCholesky;
+  absl::StatusOr<Eigen::MatrixXd> X = ComputeKernelFields(mesh(), op, {}, &mg_stats);
+  absl::StatusOr<Eigen::MatrixXd> Y = ComputeKernelFields(mesh(), op, cholesky, &ch_stats);
+  ASSERT_TRUE(X.ok()) << X.status();
+  ASSERT_TRUE(Y.ok()) << Y.status();
+  ASSERT_EQ(X->cols(), Y->cols());
+  EXPECT_FALSE(mg_stats.poisson_fallback) << c.name;
+  EXPECT_GT(mg_stats.poisson_iterations, 0) << c.name;
+  EXPECT_LE(mg_stats.poisson_iterations, 40) << c.name;
+  EXPECT_EQ(ch_stats.poisson_iterations, 0);
+  // Y - X (X^T M Y): what of Y lies outside span(X).
+  const Eigen::MatrixXd C = X->transpose() * op.mass.asDiagonal() * *Y;
+  const Eigen::MatrixXd outside = *Y - *X * C;
+  for (Eigen::Index j = 0; j < outside.cols(); ++j) {
+    EXPECT_LT(std::sqrt(outside.col(j).cwiseAbs2().dot(op.mass)), 1e-9) << c.name << " " << j;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(BuiltIn, KernelFieldsTest,
                          ::testing::ValuesIn(testing::BuiltInMeshCases()), testing::MeshCaseName);
 INSTANTIATE_TEST_SUITE_P(Shared, KernelFieldsTest, ::testing::ValuesIn(testing::SharedMeshCases()),
