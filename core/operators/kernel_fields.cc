@@ -67,8 +67,10 @@ double EdgeSign(const TriangleMesh& mesh, int32_t f, int k) {
 
 // The candidate fields of the vector Hodge Laplacian's kernel (see the header): one harmonic
 // field per tree-cotree generator. Columns of a k x (generators) matrix.
-absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, PoissonSolver solver,
-                                             const CancelFlag* cancel, KernelFieldStats* stats) {
+absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh,
+                                             const KernelFieldOptions& options,
+                                             KernelFieldStats* stats) {
+  const CancelFlag* cancel = options.cancel;
   const auto t0 = std::chrono::steady_clock::now();
   const int32_t nv = mesh.num_vertices();
   const int32_t ne = mesh.num_edges();
@@ -308,10 +310,10 @@ absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh, PoissonSo
     if (IsCancelled(cancel)) return Cancelled();
     RowMatrix u;
     bool solved = false;
-    if (solver == PoissonSolver::kMultigrid) {
+    if (options.poisson_solver == PoissonSolver::kMultigrid) {
       MultigridOptions mg;
       mg.tolerance = kPoissonTolerance;
-      mg.max_iterations = 100;
+      mg.max_iterations = options.poisson_max_iterations;
       mg.cancel = cancel;
       MultigridStats ms;
       absl::StatusOr<RowMatrix> mu = SolveMultigridCg(L, rhs, mg, &ms);
@@ -527,13 +529,16 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   if (!(options.accept_tolerance > 0) || !std::isfinite(options.accept_tolerance)) {
     return absl::InvalidArgumentError("accept_tolerance must be finite and > 0");
   }
+  if (options.poisson_max_iterations < 1) {
+    return absl::InvalidArgumentError("poisson_max_iterations must be >= 1");
+  }
   KernelFieldStats local_stats;
   KernelFieldStats& st = stats != nullptr ? *stats : local_stats;
   st = KernelFieldStats();
   const bool vector = op.type.kind == FieldKind::kVector;
   RowMatrix H;
   if (vector) {
-    ASSIGN_OR_RETURN(H, HarmonicCandidates(mesh, options.poisson_solver, options.cancel, &st));
+    ASSIGN_OR_RETURN(H, HarmonicCandidates(mesh, options, &st));
     for (const MeshComponent& c : mesh.components()) {
       if (c.num_boundary_loops == 0) st.expected_harmonic += 2 - c.euler_characteristic;
     }

@@ -30,6 +30,8 @@ struct KernelFieldOptions {
   // 1e-5..1e-4 lambda_ref, and shrink like 1 / #F.
   double accept_tolerance = 1e-12;
   PoissonSolver poisson_solver = PoissonSolver::kMultigrid;
+  // Multigrid iterations before CHOLMOD takes over (the shared meshes need 14-23; >= 1).
+  int32_t poisson_max_iterations = 100;
   const CancelFlag* cancel = nullptr;
 };
 

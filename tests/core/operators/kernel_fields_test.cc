@@ -184,6 +184,31 @@ TEST(KernelFieldsTest, RejectsAnOperatorOfAnotherMesh) {
   EXPECT_THAT(ComputeKernelFields(b, op), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
+// When the multigrid does not converge within poisson_max_iterations, CHOLMOD solves instead and
+// the harmonic fields are the same (here the genus-2 surface, 4 right-hand sides, 1 iteration).
+TEST(KernelFieldsTest, FallsBackToCholeskyWhenTheMultigridDoesNotConverge) {
+  const TriangleMesh mesh = MustCreate(MakeGenusSurface(2, 6));
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  KernelFieldOptions one_iteration;
+  one_iteration.poisson_max_iterations = 1;
+  KernelFieldStats fallback_stats, stats;
+  absl::StatusOr<Eigen::MatrixXd> X = ComputeKernelFields(mesh, op, one_iteration, &fallback_stats);
+  absl::StatusOr<Eigen::MatrixXd> Y = ComputeKernelFields(mesh, op, {}, &stats);
+  ASSERT_TRUE(X.ok()) << X.status();
+  ASSERT_TRUE(Y.ok()) << Y.status();
+  EXPECT_TRUE(fallback_stats.poisson_fallback);
+  EXPECT_FALSE(stats.poisson_fallback);
+  EXPECT_GT(stats.poisson_iterations, 1);
+  ASSERT_EQ(X->cols(), 4);
+  ASSERT_EQ(Y->cols(), 4);
+  EXPECT_LT(KernelResidual(op, *X), 1e-10);
+  const Eigen::MatrixXd outside = *Y - *X * (X->transpose() * op.mass.asDiagonal() * *Y);
+  EXPECT_LT(std::sqrt(outside.cwiseAbs2().colwise().sum().maxCoeff() * op.mass.maxCoeff()), 1e-9);
+  KernelFieldOptions zero;
+  zero.poisson_max_iterations = 0;
+  EXPECT_THAT(ComputeKernelFields(mesh, op, zero), StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
 TEST(KernelFieldsTest, Cancels) {
   const TriangleMesh mesh = MustCreate(MakeTorus(1.0, 0.4, 32, 16));
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
