@@ -20,7 +20,7 @@ namespace {
 
 constexpr int32_t kMaxLevels = 25;
 // Right-hand sides go through the solver in panels of at most this many columns (the width of
-// the V-cycle's single-precision rows: one AVX register).
+// the cycle's single-precision rows: one AVX register).
 constexpr int kPanel = 8;
 
 // A compressed sparse row matrix; the finest level's points into the caller's matrix.
@@ -43,7 +43,7 @@ struct Csr {
   }
 };
 
-// The single-precision copy the V-cycle runs on (it halves the memory traffic of its sweeps; the
+// The single-precision copy the cycle runs on (it halves the memory traffic of its sweeps; the
 // conjugate gradient recurrence and its products with A stay in double). Takes over `x`'s index
 // storage when it owns it.
 Csr<float> ToFloat(Csr<double>&& x) {
@@ -182,7 +182,7 @@ struct Level {
   std::vector<float> inv_diag;
   Csr<float> P;                      // n x (next level's n); empty on the coarsest
   Csr<float> R;                      // P^T
-  std::vector<float> x, b, r, save;  // n x q work arrays of the V-cycle
+  std::vector<float> x, b, r, save;  // n x kPanel work arrays of the cycle
 };
 
 // Aggregates of the strength graph of A (Vanek, Mandel, Brezina 1996, section 5): first, every
