@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -42,6 +43,18 @@ struct Csr {
     value = value_store.data();
   }
 };
+
+// The caller's matrix as a Csr (no copy): a symmetric compressed column-major matrix's columns
+// are its rows.
+Csr<double> View(const Eigen::SparseMatrix<double>& A) {
+  Csr<double> v;
+  v.rows = static_cast<int32_t>(A.rows());
+  v.cols = static_cast<int32_t>(A.cols());
+  v.outer = A.outerIndexPtr();
+  v.index = A.innerIndexPtr();
+  v.value = A.valuePtr();
+  return v;
+}
 
 // The single-precision copy the cycle runs on (it halves the memory traffic of its sweeps; the
 // conjugate gradient recurrence and its products with A stay in double). Takes over `x`'s index
@@ -334,11 +347,7 @@ void GaussSeidel(const Level& l, bool forward, float* x, const float* b) {
 class Hierarchy {
  public:
   absl::Status Build(const Eigen::SparseMatrix<double>& A, const MultigridOptions& options) {
-    Csr<double> current;  // the level being coarsened, in double
-    current.rows = current.cols = static_cast<int32_t>(A.rows());
-    current.outer = A.outerIndexPtr();
-    current.index = A.innerIndexPtr();
-    current.value = A.valuePtr();
+    Csr<double> current = View(A);  // the level being coarsened, in double
     fine_nonzeros_ = current.nonzeros();
     while (true) {
       auto level = std::make_unique<Level>();
@@ -351,9 +360,13 @@ class Hierarchy {
           if (current.index[p] == i) diag[i] += current.value[p];
         }
         if (!(diag[i] > 0) || !std::isfinite(diag[i])) {
-          return absl::InvalidArgumentError(
+          // The caller's matrix is wrong; a coarse one is the hierarchy's failure (a caller
+          // may fall back to a factorization).
+          const std::string message =
               absl::StrFormat("multigrid: diagonal entry %d of level %d is %g, not positive", i,
-                              levels_.size(), diag[i]));
+                              levels_.size(), diag[i]);
+          return levels_.empty() ? absl::InvalidArgumentError(message)
+                                 : absl::FailedPreconditionError(message);
         }
       }
       std::vector<double> inv_diag(n);
@@ -617,11 +630,7 @@ absl::StatusOr<MultigridRowMatrix> SolveMultigridCg(const Eigen::SparseMatrix<do
   const auto t1 = std::chrono::steady_clock::now();
   st.setup_seconds = std::chrono::duration<double>(t1 - t0).count();
 
-  Csr<double> Ac;
-  Ac.rows = Ac.cols = n;
-  Ac.outer = A.outerIndexPtr();
-  Ac.index = A.innerIndexPtr();
-  Ac.value = A.valuePtr();
+  const Csr<double> Ac = View(A);
   for (int32_t first = 0; first < q; first += kPanel) {
     const int32_t cols = std::min(kPanel, q - first);
     const int width = cols == 1 ? 1 : cols == 2 ? 2 : cols <= 4 ? 4 : 8;

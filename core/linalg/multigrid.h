@@ -49,9 +49,9 @@ using MultigridRowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic,
 // what the aggregates' constant prolongation assumes). B: n x q, row-major; returns X likewise.
 // Converges in a number of iterations nearly independent of n for such Laplacians on meshes;
 // costs O(nnz(A) q) per iteration and O(nnz(A)) memory for the hierarchy.
-// InvalidArgument on mismatched sizes, non-finite entries or a non-positive diagonal;
-// FailedPrecondition when max_iterations pass first (or the coarsest matrix is not positive
-// definite); Cancelled.
+// InvalidArgument on mismatched sizes, non-finite entries or a non-positive diagonal of A;
+// FailedPrecondition when max_iterations pass first or a coarse matrix is not positive definite;
+// Cancelled.
 absl::StatusOr<MultigridRowMatrix> SolveMultigridCg(const Eigen::SparseMatrix<double>& A,
                                                     const MultigridRowMatrix& B,
                                                     const MultigridOptions& options = {},

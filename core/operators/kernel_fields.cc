@@ -235,8 +235,7 @@ absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh,
 
   // 3. Remove the exact part: L u = G_V^T M X with L = G_V^T M G_V (cotan Laplacian, #V x #V,
   // symmetric PSD, constants per component in its kernel), one vertex per component pinned.
-  // Assembled per edge (off-diagonal) and vertex (diagonal), upper triangle only (all CHOLMOD
-  // reads).
+  // Assembled per edge (off-diagonal) and vertex (diagonal), both triangles.
   const FaceMatrix& F = mesh.faces();
   std::vector<int32_t> pinned_of(nc, -1);
   for (int32_t f = 0; f < nf; ++f) {
