@@ -21,6 +21,16 @@ using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
 using ::fieldspace::testing::StatusIs;
 
+// Two test fields on `op` with 4-6 constraints each (the model-error tests' set).
+absl::StatusOr<TestFieldSet> TwoConstrainedFields(const FieldOperator& op, uint64_t seed) {
+  TestFieldOptions options;
+  options.count = 2;
+  options.min_constraints = 4;
+  options.max_constraints = 6;
+  options.seed = seed;
+  return GenerateTestFields(op, options);
+}
+
 TEST(EvaluationTest, TestFieldsAreConstrainedBiharmonicMinimizers) {
   const TriangleMesh mesh = Icosphere(2);
   for (const FieldType& type : {FieldType::Vector(), FieldType::NField(2), FieldType::Tensor()}) {
@@ -114,12 +124,7 @@ TEST(EvaluationTest, SmoothingErrorsAgainstIndependentComputations) {
 TEST(EvaluationTest, BiharmonicModelErrorsAgainstADenseKktSolve) {
   const TriangleMesh mesh = Icosphere(2);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
-  TestFieldOptions options;
-  options.count = 2;
-  options.min_constraints = 4;
-  options.max_constraints = 6;
-  options.seed = 5;
-  auto tests = GenerateTestFields(op, options);
+  auto tests = TwoConstrainedFields(op, 5);
   ASSERT_TRUE(tests.ok()) << tests.status();
   // U = I: the reduced problem is the full one, whose minimizer is the test field.
   auto identity = ReducedSystem::Build(IdentityBasis(FieldType::Vector(), op.dofs()), op);
@@ -162,12 +167,7 @@ TEST(EvaluationTest, BiharmonicModelErrorsAgainstADenseKktSolve) {
 TEST(EvaluationTest, BiharmonicDesignErrorsAgainstDenseSolves) {
   const TriangleMesh mesh = Icosphere(2);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
-  TestFieldOptions options;
-  options.count = 2;
-  options.min_constraints = 4;
-  options.max_constraints = 6;
-  options.seed = 7;
-  auto tests = GenerateTestFields(op, options);
+  auto tests = TwoConstrainedFields(op, 7);
   ASSERT_TRUE(tests.ok()) << tests.status();
   const EnergyWeights weights = {/*mu_s=*/0.5, /*mu_b=*/1.0, /*mu_c=*/30.0};
   // U = I: the subspace solution is the full-space one.
