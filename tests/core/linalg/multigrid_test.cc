@@ -1,7 +1,8 @@
 // SolveMultigridCg: solutions to the tolerance that agree with a sparse Cholesky, iteration counts
-// that do not grow with the grid (what a multigrid preconditioner is for; plain or diagonally
-// preconditioned CG would need about 4x more iterations at 4x the grid width), any number of
-// right-hand sides, and the error paths.
+// that do not grow with the grid (what a multigrid preconditioner is for; by the usual bound,
+// plain or diagonally preconditioned CG needs iterations proportional to the square root of the
+// condition number, i.e. to the grid width), any number of right-hand sides, and the error
+// paths.
 
 #include "core/linalg/multigrid.h"
 
