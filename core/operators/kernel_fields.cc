@@ -29,19 +29,19 @@ constexpr double kPoissonTolerance = 1e-12;
 
 absl::Status Cancelled() { return absl::CancelledError("kernel field computation cancelled"); }
 
-// Face f's edge vectors t_k (opposite corner k, counter-clockwise: corner k+1 to k+2) in frame
+// Face f's edge vector t_k (opposite corner k, counter-clockwise: corner k+1 to k+2) in frame
 // coordinates.
-Eigen::Matrix<double, 2, 3> FrameEdges(const TriangleMesh& mesh, int32_t f) {
+Eigen::Vector2d FrameEdge(const TriangleMesh& mesh, int32_t f, int k) {
   const FaceMatrix& F = mesh.faces();
-  const Eigen::Vector3d x = mesh.frame_x().row(f).transpose();
-  const Eigen::Vector3d y = mesh.frame_y().row(f).transpose();
+  const Eigen::Vector3d e = mesh.vertices().row(F(f, (k + 2) % 3)).transpose() -
+                            mesh.vertices().row(F(f, (k + 1) % 3)).transpose();
+  return {e.dot(mesh.frame_x().row(f).transpose()), e.dot(mesh.frame_y().row(f).transpose())};
+}
+
+// All three, as columns.
+Eigen::Matrix<double, 2, 3> FrameEdges(const TriangleMesh& mesh, int32_t f) {
   Eigen::Matrix<double, 2, 3> t;
-  for (int k = 0; k < 3; ++k) {
-    const Eigen::Vector3d e = mesh.vertices().row(F(f, (k + 2) % 3)).transpose() -
-                              mesh.vertices().row(F(f, (k + 1) % 3)).transpose();
-    t(0, k) = e.dot(x);
-    t(1, k) = e.dot(y);
-  }
+  for (int k = 0; k < 3; ++k) t.col(k) = FrameEdge(mesh, f, k);
   return t;
 }
 
@@ -433,19 +433,20 @@ Eigen::MatrixXd MassGram(const Eigen::VectorXd& mass, const RowMatrix& X) {
   return 0.5 * (gram + gram.transpose());
 }
 
-// X A (k x q') for a row-major k x q X and a small q x q' A, in parallel over rows.
-RowMatrix RowTimes(const RowMatrix& X, const Eigen::MatrixXd& A) {
+// X A (k x q') for a row-major k x q X and a small q x q' A, in parallel over rows; `Out` row-
+// or column-major (the latter for a result handed out as Eigen::MatrixXd without another copy).
+template <typename Out = RowMatrix>
+Out RowTimes(const RowMatrix& X, const Eigen::MatrixXd& A) {
   const Eigen::Index q = X.cols(), q2 = A.cols();
-  RowMatrix out(X.rows(), q2);
+  Out out(X.rows(), q2);
   tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, X.rows(), 1 << 14),
                     [&](const tbb::blocked_range<Eigen::Index>& r) {
                       for (Eigen::Index i = r.begin(); i != r.end(); ++i) {
                         const double* x = X.data() + i * q;
-                        double* o = out.data() + i * q2;
                         for (Eigen::Index b = 0; b < q2; ++b) {
                           double v = 0;
                           for (Eigen::Index a = 0; a < q; ++a) v += x[a] * A(a, b);
-                          o[b] = v;
+                          out(i, b) = v;
                         }
                       }
                     });
@@ -481,16 +482,15 @@ Eigen::MatrixXd StiffnessGram(const Eigen::SparseMatrix<double>& S, const RowMat
 // Z^T S Z for the vector Hodge Laplacian through its factored form (docs/conventions.md, Vector
 // Hodge Laplacian): x^T S x = sum_v (1 / Mv_v) (sum_{f at v} area_f grad phi_v . x_f)^2
 // + sum_e (1 / Me_e) (sum_{f at e} t_{f,e} . x_f)^2, O(#F q^2) instead of a pass over S's nonzeros
-// with random reads of Z.
+// with random reads of Z. The divergence part scatters into a #V x q array; the curl part is
+// summed edge by edge from the edge's one or two faces, without a #E x q array.
 Eigen::MatrixXd HodgeGram(const TriangleMesh& mesh, const RowMatrix& Z) {
   const Eigen::Index q = Z.cols();
   const int32_t nf = mesh.num_faces();
   const FaceMatrix& F = mesh.faces();
   const FaceMatrix& FE = mesh.face_edges();
   RowMatrix div = RowMatrix::Zero(mesh.num_vertices(), q);
-  RowMatrix curl = RowMatrix::Zero(mesh.num_edges(), q);
   Eigen::VectorXd vertex_mass = Eigen::VectorXd::Zero(mesh.num_vertices());
-  Eigen::VectorXd edge_mass = Eigen::VectorXd::Zero(mesh.num_edges());
   for (int32_t f = 0; f < nf; ++f) {
     const Eigen::Matrix<double, 2, 3> t = FrameEdges(mesh, f);
     const double third = mesh.face_areas()[f] / 3.0;
@@ -500,16 +500,39 @@ Eigen::MatrixXd HodgeGram(const TriangleMesh& mesh, const RowMatrix& Z) {
       // area_f grad phi_k = J t_k / 2.
       const double ag0 = -0.5 * t(1, k), ag1 = 0.5 * t(0, k);
       double* dv = div.data() + static_cast<Eigen::Index>(F(f, k)) * q;
-      double* ce = curl.data() + static_cast<Eigen::Index>(FE(f, k)) * q;
-      for (Eigen::Index j = 0; j < q; ++j) {
-        dv[j] += ag0 * z0[j] + ag1 * z1[j];
-        ce[j] += t(0, k) * z0[j] + t(1, k) * z1[j];
-      }
+      for (Eigen::Index j = 0; j < q; ++j) dv[j] += ag0 * z0[j] + ag1 * z1[j];
       vertex_mass[F(f, k)] += third;
-      edge_mass[FE(f, k)] += third;
     }
   }
-  return MassGram(vertex_mass.cwiseInverse(), div) + MassGram(edge_mass.cwiseInverse(), curl);
+  const PairMatrix& EF = mesh.edge_faces();
+  Eigen::MatrixXd curl = tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<int32_t>(0, mesh.num_edges(), 1 << 14), Eigen::MatrixXd::Zero(q, q).eval(),
+      [&](const tbb::blocked_range<int32_t>& r, Eigen::MatrixXd acc) {
+        std::vector<double> c(q);
+        for (int32_t e = r.begin(); e != r.end(); ++e) {
+          std::fill(c.begin(), c.end(), 0.0);
+          double mass = 0;
+          for (int side = 0; side < 2; ++side) {
+            const int32_t f = EF(e, side);
+            if (f < 0) continue;
+            const int k = FE(f, 0) == e ? 0 : (FE(f, 1) == e ? 1 : 2);
+            const Eigen::Vector2d t = FrameEdge(mesh, f, k);
+            const double t0 = t[0], t1 = t[1];
+            const double* z0 = Z.data() + 2 * static_cast<Eigen::Index>(f) * q;
+            const double* z1 = z0 + q;
+            for (Eigen::Index j = 0; j < q; ++j) c[j] += t0 * z0[j] + t1 * z1[j];
+            mass += mesh.face_areas()[f] / 3.0;
+          }
+          const double w = 1.0 / mass;
+          for (Eigen::Index b = 0; b < q; ++b) {
+            const double wc = w * c[b];
+            for (Eigen::Index a = 0; a < q; ++a) acc(a, b) += wc * c[a];
+          }
+        }
+        return acc;
+      },
+      [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) -> Eigen::MatrixXd { return a + b; });
+  return MassGram(vertex_mass.cwiseInverse(), div) + 0.5 * (curl + curl.transpose());
 }
 
 }  // namespace
@@ -598,7 +621,7 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
     if (llt.info() == Eigen::Success) {
       const Eigen::MatrixXd Linv_t =
           llt.matrixL().solve(Eigen::MatrixXd::Identity(R.cols(), R.cols())).transpose();
-      result = RowTimes(ZR, Linv_t);
+      result = RowTimes<Eigen::MatrixXd>(ZR, Linv_t);
     } else {
       result = ZR;
     }
