@@ -479,11 +479,14 @@ Eigen::MatrixXd StiffnessGram(const Eigen::SparseMatrix<double>& S, const RowMat
   return 0.5 * (gram + gram.transpose());
 }
 
-// Z^T S Z for the vector Hodge Laplacian through its factored form (docs/conventions.md, Vector
-// Hodge Laplacian): x^T S x = sum_v (1 / Mv_v) (sum_{f at v} area_f grad phi_v . x_f)^2
-// + sum_e (1 / Me_e) (sum_{f at e} t_{f,e} . x_f)^2, O(#F q^2) instead of a pass over S's nonzeros
-// with random reads of Z. The divergence part scatters into a #V x q array; the curl part is
-// summed edge by edge from the edge's one or two faces, without a #E x q array.
+}  // namespace
+
+// Through S's factored form (docs/conventions.md, Vector Hodge Laplacian):
+//   x^T S x = sum_v (1 / Mv_v) (sum_{f at v} area_f grad phi_v . x_f)^2
+//           + sum_e (1 / Me_e) (sum_{f at e} t_{f,e} . x_f)^2,
+// O(#F q^2) instead of a pass over S's nonzeros with random reads of Z. The divergence part
+// scatters into a #V x q array; the curl part is summed edge by edge from the edge's one or two
+// faces, without a #E x q array.
 Eigen::MatrixXd HodgeGram(const TriangleMesh& mesh, const RowMatrix& Z) {
   const Eigen::Index q = Z.cols();
   const int32_t nf = mesh.num_faces();
@@ -534,8 +537,6 @@ Eigen::MatrixXd HodgeGram(const TriangleMesh& mesh, const RowMatrix& Z) {
       [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) -> Eigen::MatrixXd { return a + b; });
   return MassGram(vertex_mass.cwiseInverse(), div) + 0.5 * (curl + curl.transpose());
 }
-
-}  // namespace
 
 absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
                                                     const FieldOperator& op,

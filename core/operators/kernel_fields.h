@@ -6,6 +6,7 @@
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/common/cancel.h"
+#include "core/linalg/multigrid.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_operator.h"
 #include "core/operators/field_type.h"
@@ -92,6 +93,10 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
 // The same, building the operator of `type` first.
 absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh, const FieldType& type,
                                                     const KernelFieldOptions& options = {});
+
+// Z^T S Z (q x q) for the vector Hodge Laplacian S of `mesh` and a k x q matrix Z in its DOF order,
+// without S: the Rayleigh-Ritz step of ComputeKernelFields. Internal; exposed for its test.
+Eigen::MatrixXd HodgeGram(const TriangleMesh& mesh, const MultigridRowMatrix& Z);
 
 }  // namespace fieldspace
 

@@ -133,6 +133,18 @@ TEST_P(KernelFieldsTest, MultigridAndCholeskyPoissonSolvesAgree) {
   }
 }
 
+// HodgeGram (the Ritz step's Z^T S Z through the factored form, divergence part per vertex and
+// curl part per edge) against the assembled S, for random Z: the harmonic candidates are
+// curl-free, so the kernel tests above would not see a wrong curl sum.
+TEST_P(KernelFieldsTest, HodgeGramEqualsTheAssembledStiffnessGram) {
+  const testing::MeshCase& c = GetParam();
+  const FieldOperator op = MustBuildOperator(mesh(), FieldType::Vector());
+  const Eigen::MatrixXd Z = Eigen::MatrixXd::Random(op.dofs(), 5);
+  const Eigen::MatrixXd expected = Z.transpose() * (op.stiffness * Z);
+  const Eigen::MatrixXd gram = HodgeGram(mesh(), MultigridRowMatrix(Z));
+  EXPECT_LT((gram - expected).norm(), 1e-12 * expected.norm()) << c.name;
+}
+
 INSTANTIATE_TEST_SUITE_P(BuiltIn, KernelFieldsTest,
                          ::testing::ValuesIn(testing::BuiltInMeshCases()), testing::MeshCaseName);
 INSTANTIATE_TEST_SUITE_P(Shared, KernelFieldsTest, ::testing::ValuesIn(testing::SharedMeshCases()),
