@@ -66,6 +66,20 @@ struct FieldConstraint {
   bool hard() const { return kind == ConstraintKind::kHard; }
 };
 
+// How a reduced solver (SolveReducedModelProblem, DesignSession) discretizes the biharmonic energy
+// X^T B X, B = S M^-1 S, in a subspace X = U x (docs/conventions.md, "Biharmonic form"). In the
+// full space (U = I) both forms are B itself, so the full-space solvers accept either.
+enum class BiharmonicForm : uint8_t {
+  // x^T U^T S M^-1 S U x: the paper's (eq. 10), the energy of the lifted field exactly. It also
+  // charges the kinks where local fields overlap or end, which a smooth minimizer never has.
+  kExact = 0,
+  // x^T K Mr^-1 K x with K = U^T S U and Mr = U^T M U: the biharmonic energy of the subspace's own
+  // Laplacian (the M-projection of M^-1 S U x onto span(U)), never more than the exact form.
+  // Closer to the full-space minimizer with local bases (bench/RESULTS.md), solved by conjugate
+  // gradients preconditioned by the exact form's factorization: a few to a few dozen iterations.
+  kMixed = 1,
+};
+
 // The model problem (eq. 8), optionally with hard constraints:
 //   min mu_s X^T S X + mu_b X^T B X + mu_c sum_soft weight_j ||X_{face_j} - value_j||^2
 //   subject to X_{face} = value for every hard constraint (at most one per face),
@@ -81,6 +95,8 @@ struct ModelProblem {
   // solvers (SolveReducedModelProblem, DesignSession) take it; the full-space ones answer
   // InvalidArgument. false: the paper's raw weights.
   bool scale_free = false;
+  // The biharmonic term's form in a subspace (reduced solvers only; no effect when mu_b = 0).
+  BiharmonicForm biharmonic = BiharmonicForm::kExact;
 };
 
 // Normal equations of eq. 9 before hard constraints are applied:

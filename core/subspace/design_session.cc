@@ -132,7 +132,7 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
   session->UpdateDataRhs();
   session->kkt_ = std::make_unique<KktSolver>(session->system_->dimension(),
                                               session->system_->dofs_per_face(), options.solve);
-  session->kkt_->SetMatrix(session->energy_->A.get(), session->energy_->factor.get());
+  session->AttachEnergy(weights);
   RETURN_IF_ERROR(session->kkt_->FactorizeSchur());
   session->Resolve();
   return session;
@@ -158,6 +158,14 @@ absl::StatusOr<double> DesignSession::Stiffness(const std::vector<SparseRow>& ro
   // With a data term the kernel columns have energy (its mass) like the others.
   const bool data_energy = has_data_term() && weights_.mu_a > 0;
   return FaceStiffness(*system_, *energy_->factor, rows, /*skip_kernel_columns=*/!data_energy);
+}
+
+void DesignSession::AttachEnergy(const EnergyWeights& weights) {
+  kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
+  const double mu_b = options_.biharmonic == BiharmonicForm::kMixed
+                          ? EffectiveEnergyWeights(*system_, weights, options_.scale_free).mu_b
+                          : 0.0;
+  kkt_->SetMixedBiharmonic(system_.get(), mu_b);
 }
 
 void DesignSession::UpdateDataRhs() {
@@ -334,7 +342,7 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
     UpdateDataRhs();
     if (energy_changed) {
       energy_ = old_energy;
-      kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
+      AttachEnergy(old_weights);
       verified_since_factorization_ = false;
     }
     for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
@@ -345,7 +353,7 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
   if (energy_changed) {
     ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> energy, Energy(weights));
     energy_ = std::move(energy);
-    kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
+    AttachEnergy(weights);
     verified_since_factorization_ = false;
     weights_ = weights;  // Stiffness() reads mu_a; restore() puts the old weights back
     // Scale-free soft weights are relative to the faces' stiffness under the new energy.
@@ -393,6 +401,7 @@ ModelProblem DesignSession::problem() const {
   problem.weights = weights_;
   problem.weights.mu_a = 0;  // the data term is the session's own
   problem.scale_free = options_.scale_free;
+  problem.biharmonic = options_.biharmonic;
   for (const auto& [id, slot] : slot_by_id_) problem.constraints.push_back(records_[slot]);
   return problem;
 }

@@ -94,6 +94,10 @@ struct DesignSessionOptions {
   // constraint's weight divided by its face's stiffness (FaceStiffness), a data term's mu_A
   // divided by the total area (as SmoothingOptions::scale_free).
   bool scale_free = false;
+  // The biharmonic term's form (ModelProblem::biharmonic). kMixed keeps the exact form's
+  // factorization as the preconditioner of a conjugate gradient solve per edit (see
+  // KktSolver::Solve): an edit then costs that many solves with the factorization.
+  BiharmonicForm biharmonic = BiharmonicForm::kExact;
   // A data (alignment) term mu_A (X - X0)^T W M (X - X0) in the energy (paper section 8, Fig. 16:
   // a field aligned to curvature, then interpolation constraints on top), with X0, W and their
   // passes over U from the smoother (of the same system; its own scale_free is not used). Null:
@@ -198,6 +202,8 @@ class DesignSession {
   }
   // 1 with raw weights; else FaceStiffness of `rows` under the current energy factorization.
   absl::StatusOr<double> Stiffness(const std::vector<SparseRow>& rows) const;
+  // Hands energy_ to the KKT solver, with the mixed biharmonic's weight for `weights`.
+  void AttachEnergy(const EnergyWeights& weights);
   // mu_A' U^T W M X0 for the current weights (empty without a data term).
   void UpdateDataRhs();
   void Resolve();

@@ -238,7 +238,8 @@ absl::StatusOr<Eigen::VectorXd> BiharmonicModelErrors(const ReducedSystem& syste
 absl::StatusOr<Eigen::VectorXd> BiharmonicDesignErrors(const FieldOperator& op,
                                                        const ReducedSystem& system,
                                                        const TestFieldSet& tests,
-                                                       const EnergyWeights& weights) {
+                                                       const EnergyWeights& weights,
+                                                       BiharmonicForm form) {
   const int64_t m = tests.fields.cols();
   if (static_cast<int64_t>(tests.constraints.size()) != m) {
     return absl::InvalidArgumentError("BiharmonicDesignErrors: one constraint set per field");
@@ -287,6 +288,7 @@ absl::StatusOr<Eigen::VectorXd> BiharmonicDesignErrors(const FieldOperator& op,
       RETURN_IF_ERROR(factor->Refactorize(values));
     }
     full.col(j) = factor->Solve(soft.b);
+    problem.biharmonic = form;
     ASSIGN_OR_RETURN(ReducedSolution solution, SolveReducedModelProblem(system, problem));
     x.col(j) = solution.coefficients;
   }

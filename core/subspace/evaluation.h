@@ -76,12 +76,13 @@ inline constexpr EnergyWeights kBiharmonicDesignWeights = {/*mu_s=*/0.0, /*mu_b=
 // The model problem of design with a biharmonic energy (eq. 8 with soft constraints, each of
 // weight 1, at each test field's constrained faces and values): solved in the full space (the
 // normal equations of AssembleModelSystem, one symbolic analysis for all fields) and in the
-// subspace (SolveReducedModelProblem), raw weights;
+// subspace (SolveReducedModelProblem with the biharmonic term in `form`), raw weights;
 // ||X - U x||_M / ||X||_M per field, X the full-space solution. `op` is the operator `system`
 // was built for. InvalidArgument for invalid weights or a mismatch; errors of the solvers.
 absl::StatusOr<Eigen::VectorXd> BiharmonicDesignErrors(
     const FieldOperator& op, const ReducedSystem& system, const TestFieldSet& tests,
-    const EnergyWeights& weights = kBiharmonicDesignWeights);
+    const EnergyWeights& weights = kBiharmonicDesignWeights,
+    BiharmonicForm form = BiharmonicForm::kExact);
 
 struct ErrorSummary {
   double mean = 0;

@@ -153,6 +153,12 @@ void KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* fac
   K_.topLeftCorner(r, r).noalias() = W_.leftCols(r).transpose() * W_.leftCols(r);
 }
 
+void KktSolver::SetMixedBiharmonic(const ReducedSystem* system, double mu_b) {
+  const bool on = system != nullptr && mu_b > 0;
+  mixed_system_ = on ? system : nullptr;
+  mixed_mu_b_ = on ? mu_b : 0.0;
+}
+
 void KktSolver::Append(std::vector<SparseRow> rows, const Eigen::VectorXd& target, double e,
                        bool hard) {
   const int32_t g = num_groups_;
@@ -313,19 +319,125 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
     factor_->BackwardInPlace(u);
     *dx = factor_->PermuteOut(u);
   };
+  // The true matrix times v: A, or with the mixed biharmonic A - mu_b U^T B U + mu_b K Mr^-1 K.
+  const auto apply_A = [&](const Eigen::VectorXd& v) {
+    Eigen::VectorXd out = A_->Multiply(v);
+    if (mixed_system_ != nullptr) {
+      const ReducedSystem& system = *mixed_system_;
+      const Eigen::VectorXd mr_kv = system.mass_factor().Solve(system.stiffness() * v);
+      out.noalias() += mixed_mu_b_ * (system.stiffness() * mr_kv);
+      out.noalias() -= mixed_mu_b_ * (system.bilaplacian() * v);
+    }
+    return out;
+  };
+  const double tiny = std::numeric_limits<double>::min();
   const Eigen::VectorXd t = t_.head(r);
   const Eigen::VectorXd e = e_.head(r);
   Eigen::VectorXd x, nu;
   solve_kkt(b, t, &x, &nu);
+  if (mixed_system_ != nullptr) {
+    // Conjugate gradients on A_s = A + R_s^T E_s^-1 R_s (soft rows eliminated) restricted to the
+    // null space of the hard rows R_h, preconditioned by the KKT solve with F (which returns a
+    // correction z with R_h z = 0 and a hard multiplier w: F_s z + R_h^T w = res), starting from
+    // the preconditioner's own solution. The residual res = b_s - A_s x - R_h^T y is kept free of
+    // the hard rows' range by moving each w into the multipliers y (Gould, Hribar and Nocedal's
+    // residual update), so that at the end res is the first block residual of the saddle-point
+    // system at (x, nu) with nu_soft = E_s^-1 (R_s x - t_s), nu_hard = y.
+    Eigen::VectorXd inv_e = Eigen::VectorXd::Zero(r);
+    Eigen::VectorXd hard_rows = Eigen::VectorXd::Zero(r);
+    for (int64_t i = 0; i < r; ++i) {
+      if (hard_[i / p_]) {
+        hard_rows[i] = 1;
+      } else {
+        inv_e[i] = 1.0 / e[i];
+      }
+    }
+    const Eigen::VectorXd zero_rows = Eigen::VectorXd::Zero(r);
+    const auto apply_soft = [&](const Eigen::VectorXd& v) {
+      return apply_Rt(inv_e.cwiseProduct(apply_R(v)));
+    };
+    Eigen::VectorXd bs = apply_Rt(inv_e.cwiseProduct(t));
+    if (b != nullptr) bs += *b;
+    Eigen::VectorXd y = hard_rows.cwiseProduct(nu);
+    Eigen::VectorXd Ax, res;
+    // The backward error at (x, y) for the true products Ax and the residual res (either the
+    // recursively updated one or recomputed).
+    const auto backward_error = [&]() {
+      const Eigen::VectorXd Rx = apply_R(x);
+      const Eigen::VectorXd full_nu = y + inv_e.cwiseProduct(Rx - t);
+      const Eigen::VectorXd Enu = e.cwiseProduct(full_nu);
+      const double scale1 = Ax.norm() + apply_Rt(full_nu).norm() + (b != nullptr ? b->norm() : 0.0);
+      const double scale2 = t.norm() + Rx.norm() + Enu.norm();
+      const double eta1 = res.norm() / (scale1 + tiny);
+      const double eta2 = (t - Rx + Enu).norm() / (scale2 + tiny);
+      return std::max(eta1, eta2);
+    };
+    const auto recompute = [&]() {
+      Ax = apply_A(x);
+      res = bs - Ax - apply_soft(x) - apply_Rt(y);
+    };
+    const auto precondition = [&](Eigen::VectorXd* z) {
+      Eigen::VectorXd w;
+      solve_kkt(&res, zero_rows, z, &w);
+      w = hard_rows.cwiseProduct(w);
+      y += w;
+      res -= apply_Rt(w);
+    };
+    recompute();
+    double eta = backward_error();
+    int32_t iterations = 0;
+    // Restarts from the recomputed residual when the recursive one has drifted; stops when a
+    // cycle no longer halves the backward error (rounding level).
+    while (eta > options_.tolerance && iterations < options_.max_iterations) {
+      // The corrections keep R_h x fixed, so its rounding error (large when F is nearly singular,
+      // e.g. regularized in a kernel direction) is removed by a refinement step first.
+      const Eigen::VectorXd hard_residual = hard_rows.cwiseProduct(t - apply_R(x));
+      if (hard_residual.norm() > options_.tolerance * (t.norm() + tiny)) {
+        Eigen::VectorXd dx, dnu;
+        solve_kkt(&res, hard_residual, &dx, &dnu);
+        x += dx;
+        y += hard_rows.cwiseProduct(dnu);
+        recompute();
+      }
+      Eigen::VectorXd z;
+      precondition(&z);
+      Eigen::VectorXd p = z;
+      double rz = res.dot(z);
+      while (iterations < options_.max_iterations) {
+        const Eigen::VectorXd Ap = apply_A(p);
+        const Eigen::VectorXd q = Ap + apply_soft(p);
+        const double pq = p.dot(q);
+        if (!(rz > 0) || !(pq > 0)) break;  // converged to rounding
+        const double alpha = rz / pq;
+        x.noalias() += alpha * p;
+        Ax.noalias() += alpha * Ap;
+        res.noalias() -= alpha * q;
+        ++iterations;
+        if (backward_error() <= options_.tolerance) break;
+        precondition(&z);
+        const double rz_next = res.dot(z);
+        p = z + (rz_next / rz) * p;
+        rz = rz_next;
+      }
+      recompute();
+      const double next = backward_error();
+      const bool progress = next < 0.5 * eta;
+      eta = next;
+      if (!progress) break;
+    }
+    sol.backward_error = eta;
+    sol.refinement_steps = iterations;
+    sol.coefficients = std::move(x);
+    return sol;
+  }
   if (!verify) {
     sol.backward_error = std::numeric_limits<double>::quiet_NaN();
     sol.coefficients = std::move(x);
     return sol;
   }
-  const double tiny = std::numeric_limits<double>::min();
   for (int32_t step = 0;; ++step) {
     // Residuals of the true system and the normwise backward error.
-    const Eigen::VectorXd Ax = A_->Multiply(x);
+    const Eigen::VectorXd Ax = apply_A(x);
     const Eigen::VectorXd Rtnu = apply_Rt(nu);
     const Eigen::VectorXd Rx = apply_R(x);
     Eigen::VectorXd r1 = -Ax - Rtnu;

@@ -87,6 +87,14 @@ class KktSolver {
   // and unchanged until the next call. Recomputes W and K for all constraints.
   void SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor);
 
+  // The mixed biharmonic (BiharmonicForm::kMixed) with weight mu_b (> 0; 0 turns it off): the
+  // true matrix becomes A - mu_b U^T B U + mu_b K Mr^-1 K (K = U^T S U, Mr = U^T M U of
+  // `system`, which must stay alive), with A the matrix of SetMatrix (holding mu_b U^T B U).
+  // Since the mixed term never exceeds the exact one, the factorization of A bounds the true
+  // matrix from above and preconditions Solve's conjugate gradients (see Solve). Survives
+  // SetMatrix.
+  void SetMixedBiharmonic(const ReducedSystem* system, double mu_b);
+
   int32_t num_groups() const { return num_groups_; }
   // Appends a constraint (rows: p sparse rows; target: p values; e >= 0, 0 for hard). Before the
   // first SetMatrix() this only records it (SetMatrix solves for all groups at once).
@@ -109,7 +117,11 @@ class KktSolver {
 
   // The solution x (d) for right-hand side b (nullptr: b = 0). Precondition: FactorizeSchur()
   // succeeded since the last change. verify = false skips the residual of the true system (and
-  // with it any refinement): backward_error is then NaN.
+  // with it any refinement): backward_error is then NaN. With the mixed biharmonic the solve is
+  // always verified: the soft rows eliminated (A_s = A + R_s^T E_s^-1 R_s), conjugate gradients
+  // on A_s in the null space of the hard rows, each step preconditioned by the KKT solve with F
+  // (a constraint preconditioner, which keeps every iterate on the hard constraints), until the
+  // saddle-point system's backward error is below the tolerance or max_iterations.
   ReducedSolution Solve(const Eigen::VectorXd* b, bool verify = true) const;
   // The smallest pivot of the last factorization of the scaled H (unit diagonal, so in (0, 1]):
   // near 0 when constraints are nearly dependent in the subspace. 1 without constraints.
@@ -128,6 +140,8 @@ class KktSolver {
   ReducedSolveOptions options_;
   const SupernodalMatrix* A_ = nullptr;
   const SupernodalFactor* factor_ = nullptr;
+  const ReducedSystem* mixed_system_ = nullptr;  // with mixed_mu_b_ > 0: see SetMixedBiharmonic
+  double mixed_mu_b_ = 0;
   int32_t num_groups_ = 0;
   std::vector<std::vector<SparseRow>> rows_;  // per group, p rows
   std::vector<char> hard_;                    // per group

@@ -48,10 +48,11 @@ EnergyWeights EffectiveEnergyWeights(const ReducedSystem& system, const EnergyWe
 absl::Status ValidateSolveOptions(const ReducedSolveOptions& o) {
   if (!(o.regularization >= 0) || !(o.max_regularization >= o.regularization) ||
       !std::isfinite(o.max_regularization) || !(o.tolerance >= 0) || o.max_refinement_steps < 0 ||
-      !(o.dependence_tolerance > 0) || !(o.dependence_tolerance < 1)) {
+      o.max_iterations < 1 || !(o.dependence_tolerance > 0) || !(o.dependence_tolerance < 1)) {
     return absl::InvalidArgumentError(
         "ReducedSolveOptions: need 0 <= regularization <= max_regularization < inf, "
-        "tolerance >= 0, max_refinement_steps >= 0 and 0 < dependence_tolerance < 1");
+        "tolerance >= 0, max_refinement_steps >= 0, max_iterations >= 1 and "
+        "0 < dependence_tolerance < 1");
   }
   return absl::OkStatus();
 }
@@ -173,6 +174,7 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   }
   if (IsCancelled(options.cancel)) return cancelled_error;
   kkt.SetMatrix(&A_panels, &factor);
+  if (problem.biharmonic == BiharmonicForm::kMixed) kkt.SetMixedBiharmonic(&system, w.mu_b);
   if (IsCancelled(options.cancel)) return cancelled_error;
   RETURN_IF_ERROR(kkt.FactorizeSchur());
   if (IsCancelled(options.cancel)) return cancelled_error;
@@ -196,7 +198,8 @@ int64_t SolveWorkingBytes(const ReducedSystem& system, int64_t soft, int64_t har
   bytes += h * d * 8 + 2 * h * h * 8;
   // Each FieldConstraint: face, kind, weight and a heap vector of p doubles (with its header).
   bytes += (soft + hard) * (static_cast<int64_t>(sizeof(FieldConstraint)) + 8 * p + 16);
-  return bytes + 4 * d * 8;
+  // Working vectors (about 16 with the mixed biharmonic's conjugate gradients).
+  return bytes + 16 * d * 8;
 }
 
 }  // namespace fieldspace

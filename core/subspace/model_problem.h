@@ -47,6 +47,10 @@ struct ReducedSolveOptions {
   // below `tolerance` or after max_refinement_steps corrections.
   double tolerance = 1e-12;
   int32_t max_refinement_steps = 4;
+  // With the mixed biharmonic (BiharmonicForm::kMixed, mu_b > 0) the solve is a conjugate
+  // gradient iteration to the same `tolerance` instead of the refinement: at most this many
+  // iterations (measured: ~15 with the smooth basis, ~70 with low-modes at d = 2000).
+  int32_t max_iterations = 400;
   // Hard constraints are linearly dependent when, after scaling to unit diagonal, the Schur
   // complement G A^-1 G^T has a pivot below this (the sine squared of the angle between a
   // constraint row and the span of the others): FailedPrecondition.
@@ -58,7 +62,7 @@ struct ReducedSolveOptions {
 };
 
 // InvalidArgument unless 0 <= regularization <= max_regularization (finite), tolerance >= 0,
-// max_refinement_steps >= 0 and 0 < dependence_tolerance < 1.
+// max_refinement_steps >= 0, max_iterations >= 1 and 0 < dependence_tolerance < 1.
 absl::Status ValidateSolveOptions(const ReducedSolveOptions& options);
 
 struct ReducedSolution {
@@ -66,12 +70,15 @@ struct ReducedSolution {
   // Of the final iterate (see ReducedSolveOptions::tolerance); NaN when the solve was not checked
   // against the true system (DesignSessionOptions::verify_interval).
   double backward_error = 0;
+  // Refinement steps, or with the mixed biharmonic the conjugate gradient iterations.
   int32_t refinement_steps = 0;
   double regularization = 0;  // the diagonal shift the factorization needed
 };
 
 // Solves the reduced problem (eq. 10, 11) from scratch: factorizes
 //   U^T (mu_s S + mu_b B) U + mu_c sum_soft w_i U_i^T U_i   (U_i: the rows of U at face f(i))
+// (with problem.biharmonic = kMixed and mu_b > 0 that matrix preconditions conjugate gradients on
+// the same matrix with U^T B U replaced by K Mr^-1 K, in the null space of the hard constraints)
 // (with problem.scale_free: mu_b times the total area and w_i / g_i, g_i = FaceStiffness of the
 // face from a factorization of the energy alone) and imposes the hard constraints U_h x = c_h with
 // a Schur complement on that factorization. Use DesignSession for repeated solves with changing

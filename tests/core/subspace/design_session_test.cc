@@ -68,6 +68,60 @@ class DesignSessionTest : public ::testing::TestWithParam<FieldType> {
     }
   }
 
+  // Random adds, moves, removals and weight changes, each checked against a fresh solve.
+  void RandomEdits(DesignSession& s, int steps) const {
+    EXPECT_EQ(s.coefficients().norm(), 0.0);  // no constraints: the zero field
+    std::mt19937_64 rng(GetParam().dofs_per_face() * 101 + GetParam().n);
+    std::map<int64_t, ConstraintKind> live;
+    int64_t next_id = 100;
+    int hard_failures = 0;
+    for (int step = 0; step < steps; ++step) {
+      const uint64_t action = rng() % 10;
+      if (live.empty() || action < 4) {
+        const ConstraintKind kind = rng() % 3 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft;
+        const absl::Status st = s.AddConstraint(next_id, As(kind, RandomConstraint(rng)));
+        if (st.ok()) {
+          live[next_id] = kind;
+        } else {
+          // Only a hard constraint landing on an already hard-constrained face may fail.
+          EXPECT_THAT(st, StatusIs(absl::StatusCode::kFailedPrecondition)) << st;
+          EXPECT_EQ(kind, ConstraintKind::kHard);
+          ++hard_failures;
+        }
+        ++next_id;
+      } else if (action < 6) {
+        auto it = std::next(live.begin(), static_cast<int64_t>(rng() % live.size()));
+        FieldConstraint c = RandomConstraint(rng);
+        if (rng() % 2 == 0) {  // same face, new value and weight: no solve with A
+          auto current = s.GetConstraint(it->first);
+          ASSERT_TRUE(current.ok());
+          c.face = current->face;
+        }
+        const absl::Status st = s.MoveConstraint(it->first, c);
+        if (!st.ok()) {
+          EXPECT_THAT(st, StatusIs(absl::StatusCode::kFailedPrecondition)) << st;
+        }
+      } else if (action < 8) {
+        auto it = std::next(live.begin(), static_cast<int64_t>(rng() % live.size()));
+        ASSERT_TRUE(s.RemoveConstraint(it->first).ok());
+        live.erase(it);
+      } else if (action == 8) {
+        std::uniform_real_distribution<double> u(0.0, 1.0);
+        ASSERT_TRUE(s.SetWeights({0.1 + u(rng), rng() % 2 ? 0.0 : u(rng), 0.5 + 5 * u(rng)}).ok());
+      } else {
+        EnergyWeights w = s.weights();
+        w.mu_c *= 3.0;  // mu_C only: no refactorization of A
+        ASSERT_TRUE(s.SetWeights(w).ok());
+      }
+      EXPECT_EQ(s.num_constraints(), static_cast<int32_t>(live.size()));
+      int32_t hard = 0;
+      for (const auto& [id, kind] : live) hard += kind == ConstraintKind::kHard;
+      EXPECT_EQ(s.num_hard_constraints(), hard);
+      ExpectMatchesFreshSolve(s);
+    }
+    EXPECT_GT(live.size(), 0u);
+  }
+
   std::unique_ptr<TriangleMesh> mesh_;
   FieldOperator op_;
   std::shared_ptr<Basis> basis_;
@@ -77,57 +131,31 @@ class DesignSessionTest : public ::testing::TestWithParam<FieldType> {
 TEST_P(DesignSessionTest, RandomEditSequencesMatchFreshFactorizations) {
   auto session = DesignSession::Create(sys_, {1.0, 0.05, 4.0});
   ASSERT_TRUE(session.ok()) << session.status();
-  DesignSession& s = **session;
-  EXPECT_EQ(s.coefficients().norm(), 0.0);  // no constraints: the zero field
-  std::mt19937_64 rng(GetParam().dofs_per_face() * 101 + GetParam().n);
-  std::map<int64_t, ConstraintKind> live;
-  int64_t next_id = 100;
-  int hard_failures = 0;
-  for (int step = 0; step < 60; ++step) {
-    const uint64_t action = rng() % 10;
-    if (live.empty() || action < 4) {
-      const ConstraintKind kind = rng() % 3 == 0 ? ConstraintKind::kHard : ConstraintKind::kSoft;
-      const absl::Status st = s.AddConstraint(next_id, As(kind, RandomConstraint(rng)));
-      if (st.ok()) {
-        live[next_id] = kind;
-      } else {
-        // Only a hard constraint landing on an already hard-constrained face may fail.
-        EXPECT_THAT(st, StatusIs(absl::StatusCode::kFailedPrecondition)) << st;
-        EXPECT_EQ(kind, ConstraintKind::kHard);
-        ++hard_failures;
-      }
-      ++next_id;
-    } else if (action < 6) {
-      auto it = std::next(live.begin(), static_cast<int64_t>(rng() % live.size()));
-      FieldConstraint c = RandomConstraint(rng);
-      if (rng() % 2 == 0) {  // same face, new value and weight: no solve with A
-        auto current = s.GetConstraint(it->first);
-        ASSERT_TRUE(current.ok());
-        c.face = current->face;
-      }
-      const absl::Status st = s.MoveConstraint(it->first, c);
-      if (!st.ok()) {
-        EXPECT_THAT(st, StatusIs(absl::StatusCode::kFailedPrecondition)) << st;
-      }
-    } else if (action < 8) {
-      auto it = std::next(live.begin(), static_cast<int64_t>(rng() % live.size()));
-      ASSERT_TRUE(s.RemoveConstraint(it->first).ok());
-      live.erase(it);
-    } else if (action == 8) {
-      std::uniform_real_distribution<double> u(0.0, 1.0);
-      ASSERT_TRUE(s.SetWeights({0.1 + u(rng), rng() % 2 ? 0.0 : u(rng), 0.5 + 5 * u(rng)}).ok());
-    } else {
-      EnergyWeights w = s.weights();
-      w.mu_c *= 3.0;  // mu_C only: no refactorization of A
-      ASSERT_TRUE(s.SetWeights(w).ok());
-    }
-    EXPECT_EQ(s.num_constraints(), static_cast<int32_t>(live.size()));
-    int32_t hard = 0;
-    for (const auto& [id, kind] : live) hard += kind == ConstraintKind::kHard;
-    EXPECT_EQ(s.num_hard_constraints(), hard);
+  RandomEdits(**session, 60);
+}
+
+TEST_P(DesignSessionTest, MixedBiharmonicEditSequencesMatchFreshSolves) {
+  for (const bool scale_free : {false, true}) {
+    DesignSessionOptions options;
+    options.biharmonic = BiharmonicForm::kMixed;
+    options.scale_free = scale_free;
+    auto session = DesignSession::Create(sys_, {1.0, 0.05, 4.0}, options);
+    ASSERT_TRUE(session.ok()) << session.status();
+    RandomEdits(**session, 40);
+    DesignSession& s = **session;
+    ASSERT_TRUE(s.SetWeights({0.2, 1.0, 4.0}).ok());
+    ASSERT_GT(s.num_constraints(), 0);
+    EXPECT_EQ(s.problem().biharmonic, BiharmonicForm::kMixed);
+    EXPECT_GT(s.last_refinement_steps(), 0);  // conjugate gradient iterations
+    EXPECT_LE(s.last_backward_error(), 1e-12);
     ExpectMatchesFreshSolve(s);
+    // Another minimizer than the exact form's.
+    ModelProblem exact = s.problem();
+    exact.biharmonic = BiharmonicForm::kExact;
+    auto other = SolveReducedModelProblem(*sys_, exact);
+    ASSERT_TRUE(other.ok());
+    EXPECT_GT(RelativeDifference(s.coefficients(), other->coefficients), 1e-3);
   }
-  EXPECT_GT(live.size(), 0u);
 }
 
 TEST_P(DesignSessionTest, MovingWithinAFaceAndAcrossFaces) {

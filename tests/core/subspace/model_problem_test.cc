@@ -58,6 +58,8 @@ ModelProblem RandomProblem(int32_t num_faces, int32_t p, int soft, int hard, uin
 
 // The reduced minimizer computed densely and independently: the KKT system
 // [A G^T; G 0] [x; l] = [b; c] with A = U^T (mu_s S + mu_b B + mu_c C^T W C) U.
+// With problem.biharmonic = kMixed the biharmonic block is K Mr^-1 K (K = U^T S U,
+// Mr = U^T M U) instead of U^T B U.
 Eigen::VectorXd DenseReducedSolution(const FieldOperator& op, const Basis& basis,
                                      const ModelProblem& problem) {
   const Eigen::MatrixXd U = DenseU(basis);
@@ -66,7 +68,14 @@ Eigen::VectorXd DenseReducedSolution(const FieldOperator& op, const Basis& basis
   const int p = op.type.dofs_per_face();
   const int64_t d = U.cols();
   const EnergyWeights& w = problem.weights;
-  Eigen::MatrixXd A = U.transpose() * (w.mu_s * S + w.mu_b * B) * U;
+  Eigen::MatrixXd A = U.transpose() * (w.mu_s * S) * U;
+  if (problem.biharmonic == BiharmonicForm::kMixed) {
+    const Eigen::MatrixXd K = U.transpose() * S * U;
+    const Eigen::MatrixXd Mr = U.transpose() * op.mass.asDiagonal() * U;
+    A += w.mu_b * K * Mr.llt().solve(K);
+  } else {
+    A += w.mu_b * U.transpose() * B * U;
+  }
   Eigen::VectorXd b = Eigen::VectorXd::Zero(d);
   std::vector<FieldConstraint> hard;
   for (const FieldConstraint& c : problem.constraints) {
@@ -90,6 +99,17 @@ Eigen::VectorXd DenseReducedSolution(const FieldOperator& op, const Basis& basis
     rhs.segment(d + i * p, p) = hard[i].value;
   }
   return K.fullPivLu().solve(rhs).head(d);
+}
+
+// Hard constraints hold exactly in the lifted field U x.
+void ExpectHardConstraintsHold(const Basis& basis, const ModelProblem& problem,
+                               const Eigen::VectorXd& x) {
+  for (const FieldConstraint& c : problem.constraints) {
+    if (!c.hard()) continue;
+    auto values = LiftFaces(basis, x, std::vector<int32_t>{c.face});
+    ASSERT_TRUE(values.ok());
+    EXPECT_LT((*values - c.value).norm(), 1e-9);
+  }
 }
 
 TEST(ModelProblemTest, IdentityBasisReproducesTheFullSpaceSolve) {
@@ -146,15 +166,91 @@ TEST(ModelProblemTest, RandomBasisMatchesDenseKkt) {
       ASSERT_TRUE(reduced.ok()) << reduced.status();
       const Eigen::VectorXd expected = DenseReducedSolution(op, *basis, problem);
       EXPECT_LT(RelativeDifference(reduced->coefficients, expected), 1e-8) << type.ToString();
-      // Hard constraints hold exactly in the lifted field.
-      for (const FieldConstraint& c : problem.constraints) {
-        if (!c.hard()) continue;
-        auto values = LiftFaces(*basis, reduced->coefficients, std::vector<int32_t>{c.face});
-        ASSERT_TRUE(values.ok());
-        EXPECT_LT((*values - c.value).norm(), 1e-9);
-      }
+      ExpectHardConstraintsHold(*basis, problem, reduced->coefficients);
     }
   }
+}
+
+TEST(ModelProblemTest, MixedBiharmonicWithIdentityBasisIsTheFullSpaceBiharmonic) {
+  // U = I: K Mr^-1 K = S M^-1 S = B, so the mixed form solves the full-space problem too.
+  const TriangleMesh mesh = Icosphere(2);
+  for (const FieldType& type : {FieldType::Vector(), FieldType::Tensor()}) {
+    const FieldOperator op = MustBuildOperator(mesh, type);
+    auto sys = ReducedSystem::Build(IdentityBasis(type, op.dofs()), op);
+    ASSERT_TRUE(sys.ok()) << sys.status();
+    const int p = type.dofs_per_face();
+    for (ModelProblem problem : {RandomProblem(mesh.num_faces(), p, 0, 7, 2, 0.0, 1.0, 1.0),
+                                 RandomProblem(mesh.num_faces(), p, 5, 4, 3, 0.5, 0.02, 3.0)}) {
+      problem.biharmonic = BiharmonicForm::kMixed;
+      auto full = SolveModelProblem(op, problem);
+      ASSERT_TRUE(full.ok()) << full.status();
+      auto reduced = SolveReducedModelProblem(**sys, problem);
+      ASSERT_TRUE(reduced.ok()) << reduced.status();
+      EXPECT_LT(RelativeDifference(reduced->coefficients, *full), 1e-8) << type.ToString();
+      EXPECT_LE(reduced->backward_error, 1e-12);
+    }
+  }
+}
+
+TEST(ModelProblemTest, MixedBiharmonicMatchesDenseKktAndNeverExceedsTheExactForm) {
+  const TriangleMesh mesh = Icosphere(2);
+  int seed = 20;
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
+    const FieldOperator op = MustBuildOperator(mesh, type);
+    auto basis = RandomBasis(type, op.dofs(), 90, 30, 5 + seed);
+    auto sys = ReducedSystem::Build(basis, op);
+    ASSERT_TRUE(sys.ok());
+    // x^T K Mr^-1 K x <= x^T U^T B U x for every x (the mixed form is the biharmonic energy of
+    // the M-projection of M^-1 S U x onto span(U)), strictly for a generic x.
+    const Eigen::MatrixXd K((*sys)->stiffness());
+    const Eigen::MatrixXd Mr((*sys)->mass_matrix());
+    const Eigen::MatrixXd Bl((*sys)->bilaplacian());
+    const Eigen::MatrixXd mixed = K * Mr.llt().solve(K);
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<double> normal;
+    for (int trial = 0; trial < 5; ++trial) {
+      Eigen::VectorXd x(K.cols());
+      for (int64_t i = 0; i < x.size(); ++i) x[i] = normal(rng);
+      const double exact_energy = x.dot(Bl * x);
+      EXPECT_LT(x.dot(mixed * x), (1 - 1e-3) * exact_energy) << type.ToString();
+      EXPECT_GT(x.dot(mixed * x), 0.0);
+    }
+    const int p = type.dofs_per_face();
+    for (ModelProblem problem : {RandomProblem(mesh.num_faces(), p, 8, 0, ++seed, 1.0, 0.1, 5.0),
+                                 RandomProblem(mesh.num_faces(), p, 3, 5, ++seed, 0.3, 0.5, 1.0),
+                                 RandomProblem(mesh.num_faces(), p, 0, 6, ++seed, 0.0, 2.0, 1.0)}) {
+      problem.biharmonic = BiharmonicForm::kMixed;
+      auto reduced = SolveReducedModelProblem(**sys, problem);
+      ASSERT_TRUE(reduced.ok()) << reduced.status();
+      EXPECT_LE(reduced->backward_error, 1e-12);
+      EXPECT_GT(reduced->refinement_steps, 0);  // conjugate gradient iterations
+      const Eigen::VectorXd expected = DenseReducedSolution(op, *basis, problem);
+      EXPECT_LT(RelativeDifference(reduced->coefficients, expected), 1e-8) << type.ToString();
+      // Not the exact form's solution.
+      ModelProblem exact = problem;
+      exact.biharmonic = BiharmonicForm::kExact;
+      EXPECT_GT(RelativeDifference(DenseReducedSolution(op, *basis, exact), expected), 1e-3);
+      ExpectHardConstraintsHold(*basis, problem, reduced->coefficients);
+    }
+  }
+}
+
+TEST(ModelProblemTest, MixedBiharmonicStopsAtTheIterationLimit) {
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  auto sys = ReducedSystem::Build(RandomBasis(FieldType::Vector(), op.dofs(), 90, 30, 3), op);
+  ASSERT_TRUE(sys.ok());
+  ModelProblem problem = RandomProblem(mesh.num_faces(), 2, 4, 3, 8, 0.0, 1.0, 1.0);
+  problem.biharmonic = BiharmonicForm::kMixed;
+  ReducedSolveOptions options;
+  options.max_iterations = 1;
+  auto one = SolveReducedModelProblem(**sys, problem, options);
+  ASSERT_TRUE(one.ok()) << one.status();
+  EXPECT_EQ(one->refinement_steps, 1);
+  EXPECT_GT(one->backward_error, 1e-12);
+  options.max_iterations = 0;
+  EXPECT_THAT(SolveReducedModelProblem(**sys, problem, options),
+              StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
 TEST(ModelProblemTest, InvalidProblems) {
