@@ -65,11 +65,13 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   cancel BASIS_ID                     cancel a running build
   project BASIS_ID FIELD_FILE         coefficients and relative error of the projection
   solve BASIS_ID --constraints FILE [--mu-s X] [--mu-b X] [--mu-c X] [--out FIELD_FILE]
-        [--encoding ambient|dof] [--singularities] [--raw-weights]
+        [--encoding ambient|dof] [--singularities] [--raw-weights] [--biharmonic exact|mixed]
                                       the model problem with soft/hard constraints (defaults
                                       1, 0, 1; scale-free: a soft constraint alone pulls its
                                       face >= mu_c w / (1 + mu_c w) of the way, unless
-                                      --raw-weights); --singularities: also the singular vertices
+                                      --raw-weights); --singularities: also the singular vertices;
+                                      --biharmonic mixed: the mu_b term as the subspace's own
+                                      (closer to the full space, ~10-70x the solve time)
   lift BASIS_ID COEFFS_FILE (--out FIELD_FILE | --faces F1,F2,...) [--encoding ambient|dof]
         [--mode K]                    --mode K: eigenfield K of `eigen --coefficients` output
   eigen BASIS_ID --count K [--coefficients]
@@ -90,7 +92,7 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
   singularities BASIS_ID COEFFS_FILE [--zero-tolerance T] [--mode K]
                                       vertex indices (in turns) of the lifted field
   design BASIS_ID --script EDITS.jsonl [--mu-s X] [--mu-b X] [--mu-c X] [--watch F1,F2,...]
-        [--no-coefficients] [--singularities] [--raw-weights]
+        [--no-coefficients] [--singularities] [--raw-weights] [--biharmonic exact|mixed]
         [--align-curvature [--estimator E] | --data FIELD_FILE [--face-weights FILE]] [--mu-a X]
                                       stream edits; one JSON line per update (--singularities:
                                       how the singular vertices changed, in each); weights as
@@ -554,14 +556,14 @@ int Cli::Run(const std::vector<std::string>& args) {
         {"cancel", {{}, 1, &Cli::Cancel}},
         {"project", {{}, 2, &Cli::Project}},
         {"solve",
-         {Flags({"constraints", "mu-s", "mu-b", "mu-c", "out", "encoding"},
+         {Flags({"constraints", "mu-s", "mu-b", "mu-c", "out", "encoding", "biharmonic"},
                 {"singularities", "raw-weights"}),
           1, &Cli::Solve}},
         {"lift", {Flags({"out", "faces", "encoding", "mode"}), 2, &Cli::Lift}},
         {"eigen", {Flags({"count"}, {"coefficients"}), 1, &Cli::Eigen}},
         {"design",
          {Flags({"script", "mu-s", "mu-b", "mu-c", "mu-a", "watch", "data", "face-weights",
-                 "estimator"},
+                 "estimator", "biharmonic"},
                 {"no-coefficients", "singularities", "raw-weights", "align-curvature"}),
           1, &Cli::Design}},
         {"curvature", {Flags({"out", "encoding", "estimator", "principal"}), 1, &Cli::Curvature}},
@@ -959,6 +961,15 @@ int Cli::LiftToFile(const std::string& basis_id, const std::vector<double>& coef
   return 0;
 }
 
+// --biharmonic exact|mixed (default exact).
+v1::BiharmonicForm BiharmonicFormFlag(const CommandLine& a) {
+  if (!a.Has("biharmonic")) return v1::BIHARMONIC_FORM_EXACT;
+  const std::string form = GetString(a, "biharmonic");
+  if (form == "exact") return v1::BIHARMONIC_FORM_EXACT;
+  if (form == "mixed") return v1::BIHARMONIC_FORM_MIXED;
+  throw UsageError(absl::StrCat("--biharmonic must be exact or mixed, got '", form, "'"));
+}
+
 int Cli::Solve(const CommandLine& a) {
   if (!a.Has("constraints")) throw UsageError("solve needs --constraints FILE");
   const std::string constraints_path = GetString(a, "constraints");
@@ -973,6 +984,7 @@ int Cli::Solve(const CommandLine& a) {
   request.set_basis_id(a.positional()[0]);
   SetWeights(a, "mu-s", request.mutable_weights());
   request.set_raw_weights(a.Has("raw-weights"));
+  request.set_biharmonic(BiharmonicFormFlag(a));
   request.set_singularities(a.Has("singularities"));
   for (v1::Constraint& c : *constraints) *request.add_constraints() = std::move(c);
   absl::StatusOr<v1::SolveResponse> response = client_->Solve(request);
@@ -1280,6 +1292,7 @@ int Cli::Design(const CommandLine& a) {
   o->set_basis_id(a.positional()[0]);
   SetWeights(a, "mu-s", o->mutable_weights());
   o->set_raw_weights(a.Has("raw-weights"));
+  o->set_biharmonic(BiharmonicFormFlag(a));
   if (a.Has("align-curvature") && a.Has("data")) {
     throw UsageError("design takes one data term: --align-curvature or --data FIELD_FILE");
   }

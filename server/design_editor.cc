@@ -123,6 +123,7 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   const EnergyWeights weights = WeightsFromProto(
       open.weights(), data_term ? kDefaultDataTermSessionWeights : EnergyWeights{});
   RETURN_IF_ERROR(data_term ? ValidateWeights(weights) : ValidateWeightsWithoutDataTerm(weights));
+  ASSIGN_OR_RETURN(const BiharmonicForm biharmonic, BiharmonicFormFromProto(open.biharmonic()));
   if (open.singularities() && basis->basis->type.kind == FieldKind::kTensor) {
     return absl::InvalidArgumentError(
         "singularities are defined for vector and n-field bases, not tensor bases");
@@ -141,6 +142,7 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   options.energy_cache = basis_->energy_cache;
   options.verify_interval = options_.verify_interval;
   options.scale_free = !open.raw_weights();
+  options.biharmonic = biharmonic;
   if (data_term) {
     absl::StatusOr<std::shared_ptr<const ReducedSmoother>> data = DataTerm(open.data());
     if (!data.ok()) {

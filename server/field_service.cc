@@ -242,6 +242,7 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* /*con
         ModelProblem problem;
         problem.weights = WeightsFromProto(request->weights(), EnergyWeights{});
         problem.scale_free = !request->raw_weights();
+        ASSIGN_OR_RETURN(problem.biharmonic, BiharmonicFormFromProto(request->biharmonic()));
         RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
         if (request->constraints_size() > kMaxConstraints) {
           return absl::ResourceExhaustedError(

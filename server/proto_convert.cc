@@ -183,6 +183,17 @@ absl::StatusOr<CurvatureEstimator> EstimatorFromProto(int estimator) {
   }
 }
 
+absl::StatusOr<BiharmonicForm> BiharmonicFormFromProto(int form) {
+  switch (form) {
+    case v1::BIHARMONIC_FORM_EXACT:
+      return BiharmonicForm::kExact;
+    case v1::BIHARMONIC_FORM_MIXED:
+      return BiharmonicForm::kMixed;
+    default:
+      return absl::InvalidArgumentError(absl::StrCat("unknown biharmonic form ", form));
+  }
+}
+
 EnergyWeights WeightsFromProto(const v1::Weights& w, const EnergyWeights& defaults) {
   return {.mu_s = w.has_mu_s() ? w.mu_s() : defaults.mu_s,
           .mu_b = w.has_mu_b() ? w.mu_b() : defaults.mu_b,

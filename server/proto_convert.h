@@ -40,6 +40,9 @@ void BasisInfoFromRecord(const BasisRecord& r, v1::BasisInfo* p);
 // The build a BuildBasisRequest asks for (validated further by Registry::StartBuild).
 absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& p);
 
+// InvalidArgument for a value the enum does not name.
+absl::StatusOr<BiharmonicForm> BiharmonicFormFromProto(int form);
+
 // The weights of a request; a weight the message leaves out is taken from `defaults` (the
 // operation's defaults, or a Design session's current weights).
 EnergyWeights WeightsFromProto(const v1::Weights& w, const EnergyWeights& defaults);

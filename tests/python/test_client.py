@@ -348,6 +348,26 @@ class SolveAndDesignTest(unittest.TestCase):
         with self.assertRaises(fs.InvalidArgument):  # mu_a: only with a data term
             CLIENT.solve(VECTOR, [77], value, weights=fs.Weights(1, 0, 1, 1))
 
+    def test_mixed_biharmonic_in_solve_and_design(self):
+        # The mixed form is another energy than the exact one (a different minimizer); a session
+        # opened with it reaches the one-shot solve's minimizer through its own solver.
+        faces, values = [12, 600], [[0, 1, 0], [0, 0, 1]]
+        weights = fs.Weights(0.1, 1.0, 1.0)
+        mixed = CLIENT.solve(VECTOR, faces, values, weights=weights, hard=[False, True],
+                             biharmonic="mixed")
+        exact = CLIENT.solve(VECTOR, faces, values, weights=weights, hard=[False, True])
+        scale = np.linalg.norm(mixed.coefficients)
+        self.assertGreater(np.linalg.norm(mixed.coefficients - exact.coefficients), 1e-3 * scale)
+        with CLIENT.design(VECTOR, weights, biharmonic="mixed") as s:
+            s.add(12, [0, 1, 0])
+            s.add(600, [0, 0, 1], hard=True)
+            x = s.coefficients
+        self.assertLess(np.linalg.norm(x - mixed.coefficients), 1e-8 * scale)
+        for call in (lambda: CLIENT.solve(VECTOR, [5], [[1.0, 0, 0]], biharmonic="lumped"),
+                     lambda: CLIENT.design(VECTOR, biharmonic=1)):
+            with self.assertRaises(fs.InvalidArgument):
+                call()
+
     def test_design_with_a_curvature_data_term(self):
         V, F = obj_arrays(torus_obj(48, 16)[0])
         torus = CLIENT.upload(V, F, name="torus")

@@ -125,6 +125,19 @@ def main():
         check(len(rows) == torus_faces, "solved field rows")
         check(abs(rows[5][0] - 0.5) < 1e-4 and abs(rows[5][1] + 0.25) < 1e-4,
               "hard constraint holds: %s" % rows[5])
+        # The mixed biharmonic: another minimizer through the same flags, hard constraint kept.
+        mixed_txt = os.path.join(work, "mixed.txt")
+        mixed = cli.json("solve", vector["id"], "--constraints", constraints, "--mu-s", "1",
+                         "--mu-b", "0.001", "--mu-c", "1", "--out", mixed_txt, "--encoding", "dof",
+                         "--biharmonic", "mixed")
+        mixed_rows = read_field_text(mixed_txt)
+        check(abs(mixed_rows[5][0] - 0.5) < 1e-4 and abs(mixed_rows[5][1] + 0.25) < 1e-4,
+              "mixed: hard constraint holds: %s" % mixed_rows[5])
+        check(max(abs(a - b) for a, b in zip(mixed["coefficients"], solved["coefficients"])) >
+              1e-6, "mixed and exact forms give different minimizers")
+        rc, _, err = cli("solve", vector["id"], "--constraints", constraints, "--biharmonic",
+                         "lumped", expect=2)
+        check("--biharmonic" in err, "biharmonic usage error: %s" % err)
         solved_ply = os.path.join(work, "solved.ply")
         cli("solve", vector["id"], "--constraints", constraints, "--out", solved_ply)
         with open(solved_ply, "rb") as f:

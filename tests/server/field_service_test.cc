@@ -1298,6 +1298,49 @@ TEST_F(ServiceTest, DesignSessionMatchesSolveAndNeverRefactorizesOnEdits) {
   }
 }
 
+TEST_F(ServiceTest, MixedBiharmonicSolveAndDesignAgreeAndDifferFromTheExactForm) {
+  const v1::Constraint soft = MakeConstraint(20, {1, 0, 0}, v1::FIELD_ENCODING_AMBIENT, false, 3);
+  const v1::Constraint hard = MakeConstraint(700, {0.2, 0.4}, v1::FIELD_ENCODING_DOF, true);
+  const auto solve = [&](v1::BiharmonicForm form) {
+    v1::SolveRequest r;
+    r.set_basis_id(*vector_id_);
+    r.mutable_weights()->set_mu_s(0.1);
+    r.mutable_weights()->set_mu_b(1.0);
+    r.mutable_weights()->set_mu_c(1.0);
+    r.set_biharmonic(form);
+    *r.add_constraints() = soft;
+    *r.add_constraints() = hard;
+    v1::SolveResponse resp;
+    grpc::ClientContext c;
+    const grpc::Status st = stub()->Solve(&c, r, &resp);
+    EXPECT_TRUE(st.ok()) << st.error_message();
+    return resp;
+  };
+  const v1::SolveResponse mixed = solve(v1::BIHARMONIC_FORM_MIXED);
+  const v1::SolveResponse exact = solve(v1::BIHARMONIC_FORM_EXACT);
+  const double scale = 1 + MaxAbs(mixed.coefficients());
+  EXPECT_GT(MaxAbsDiff(mixed.coefficients(), exact.coefficients()), 1e-3 * scale);
+  // A session opened with the mixed form reaches the same solution through its own solver
+  // (soft constraints in the Schur complement instead of the matrix).
+  v1::DesignRequest open = Open(*vector_id_, 0.1, 1.0, 1.0, {700});
+  open.mutable_open()->set_biharmonic(v1::BIHARMONIC_FORM_MIXED);
+  Session s = RunSession(stub(), {open, Add(1, soft), Add(2, hard)});
+  ASSERT_TRUE(s.status.ok()) << s.status.error_message();
+  ASSERT_EQ(s.updates.size(), 3u);
+  EXPECT_LT(MaxAbsDiff(s.updates[2].coefficients(), mixed.coefficients()), 1e-7 * scale);
+  EXPECT_NEAR(s.updates[2].watched().values(0), 0.2, 1e-4);
+  // A form the enum does not name.
+  v1::SolveRequest bad;
+  bad.set_basis_id(*vector_id_);
+  bad.set_biharmonic(static_cast<v1::BiharmonicForm>(7));
+  *bad.add_constraints() = soft;
+  v1::SolveResponse resp;
+  grpc::ClientContext c;
+  EXPECT_EQ(stub()->Solve(&c, bad, &resp).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  open.mutable_open()->set_biharmonic(static_cast<v1::BiharmonicForm>(7));
+  EXPECT_EQ(RunSession(stub(), {open}).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+}
+
 TEST_F(ServiceTest, DesignErrorsEndTheSessionWithExactCodes) {
   const v1::Constraint c = MakeConstraint(20, {1, 0, 0}, v1::FIELD_ENCODING_AMBIENT, false);
   auto final_code = [&](std::vector<v1::DesignRequest> requests) {

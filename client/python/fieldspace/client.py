@@ -45,6 +45,13 @@ def routing_key(request):
     return ""
 
 
+def _biharmonic_proto(form, what):
+    forms = {"exact": pb.BIHARMONIC_FORM_EXACT, "mixed": pb.BIHARMONIC_FORM_MIXED}
+    if form not in forms:
+        raise InvalidArgument(what, "biharmonic must be 'exact' or 'mixed', not %r" % (form,))
+    return forms[form]
+
+
 def _id(target):
     """An id from an id string or a MeshInfo / BasisInfo."""
     return target if isinstance(target, str) else target.id
@@ -446,7 +453,7 @@ class Client:
 
     def solve(self, basis, faces=(), values=None, *, weights=None, constraint_weights=None,
               hard=False, encoding=None, return_field=False, field_encoding=fld.AMBIENT,
-              singularities=False, raw_weights=False, timeout=_DEFAULT):
+              singularities=False, raw_weights=False, biharmonic="exact", timeout=_DEFAULT):
         """The reduced model problem with constraints given as arrays.
 
         Args:
@@ -461,6 +468,10 @@ class Client:
             raw_weights: the paper's raw weights instead of the scale-free ones (by default a
                 soft constraint alone pulls its face >= mu_c w / (1 + mu_c w) of the way, and
                 mu_b is relative to the total area; docs/conventions.md).
+            biharmonic: ``"exact"`` (default: the lifted field's energy, as the paper) or
+                ``"mixed"`` (the subspace's own biharmonic energy: designs with mu_b > 0 follow
+                the full space far more closely, for ~10-70x the solve time;
+                docs/conventions.md, "Biharmonic form").
         Returns:
             Solution(coefficients, field, timings, singularities=...).
         """
@@ -470,6 +481,7 @@ class Client:
                                   weights=Weights.of(weights, _SOLVE_WEIGHTS).proto(),
                                   return_field=return_field, singularities=singularities,
                                   raw_weights=raw_weights,
+                                  biharmonic=_biharmonic_proto(biharmonic, what),
                                   field_encoding=fld.encoding_proto(field_encoding, what))
         request.constraints.extend(self._constraints(what, field_type, faces, values,
                                                      constraint_weights, hard, encoding))
@@ -648,12 +660,12 @@ class Client:
     # -- design sessions -----------------------------------------------------------------------
 
     def design(self, basis, weights=None, watch=None, watch_encoding=fld.AMBIENT, timeout=None,
-               *, raw_weights=False, align_curvature=False, estimator="jet", data=None,
-               data_face_weights=None):
+               *, raw_weights=False, biharmonic="exact", align_curvature=False, estimator="jet",
+               data=None, data_face_weights=None):
         """Opens an interactive design session (a Design stream) and returns it; use it as a
         context manager. ``weights`` default (1, 0, 1); ``watch``: faces whose lifted values
         every update carries. ``timeout``: deadline of the whole session (default none).
-        ``raw_weights``: as in solve.
+        ``raw_weights``, ``biharmonic``: as in solve, for the whole session.
 
         A data term mu_a (X - X0)^T W M (X - X0) in the session's energy (paper Fig. 16: aligned
         to curvature, then constraints on top): ``align_curvature=True`` (an n-field basis with
@@ -682,5 +694,5 @@ class Client:
         default = _DATA_TERM_WEIGHTS if data_term is not None else _SOLVE_WEIGHTS
         return DesignSession(self, basis, Weights.of(weights, default), watch,
                              watch_encoding, timeout, raw_weights=raw_weights,
-                             data_term=data_term)
+                             biharmonic=_biharmonic_proto(biharmonic, what), data_term=data_term)
 

@@ -59,7 +59,7 @@ class DesignSession:
     """
 
     def __init__(self, client, basis, weights, watch, watch_encoding, timeout, *,
-                 raw_weights=False, data_term=None):
+                 raw_weights=False, biharmonic=0, data_term=None):
         self._client = client
         self.basis_id = basis if isinstance(basis, str) else basis.id
         self.field_type, self.mesh_id = client._basis(self.basis_id)
@@ -71,7 +71,7 @@ class DesignSession:
         open_message = pb.OpenDesign(basis_id=self.basis_id,
                                      weights=weights.proto(self._data_term),
                                      watch_encoding=fld.encoding_proto(watch_encoding, "Design"),
-                                     raw_weights=raw_weights)
+                                     raw_weights=raw_weights, biharmonic=biharmonic)
         if data_term is not None:
             open_message.data.CopyFrom(data_term)
         open_message.watch_faces.extend(self._watch.tolist())
