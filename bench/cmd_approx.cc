@@ -1,12 +1,13 @@
 // `fieldspace-bench approx MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S]
 //  --tests K --seed N [--basis local|eigen] [--min-constraints A] [--max-constraints B]
-//  [--coarse-dim C] [--quality paper|low-modes|smooth] [--design-mu-c X]`:
+//  [--coarse-dim C] [--quality paper|low-modes|smooth] [--design-mu-c X]
+//  [--biharmonic exact|mixed]`:
 // the approximation experiment of paper section 6 (Table 3) and, with --basis eigen, its
 // comparison with the global eigenbasis of section 7 (Table 5). The mesh is scaled to unit total
 // area first. Prints
 //   {"projection_error":{"mean","max"},"minimization_error":{"mean","max"},
 //    "biharmonic_model_error":{"mean","max"},
-//    "biharmonic_design_error":{"mean","max","mu_s","mu_b","mu_c"},"dim","nnz_u","basis",
+//    "biharmonic_design_error":{"mean","max","mu_s","mu_b","mu_c","form"},"dim","nnz_u","basis",
 //    "seconds":{...}}
 // projection_error: eq. 13 on K random test fields (biharmonic interpolants of A..B random unit
 // constraints, default 10..50); minimization_error: the smoothing instance of eq. 8 for
@@ -15,7 +16,8 @@
 // mu_B = 1 and the test fields' hard constraints solved in the subspace against its full-space
 // solution, the test field (BiharmonicModelErrors); biharmonic_design_error: the same constraints
 // as soft ones at kBiharmonicDesignWeights (mu_S = 0, mu_B = 1, mu_C = 1e4 or --design-mu-c,
-// raw), subspace against full-space solution (BiharmonicDesignErrors).
+// raw), subspace (biharmonic term in the --biharmonic form, default exact: BiharmonicForm)
+// against full-space solution (BiharmonicDesignErrors).
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -56,6 +58,14 @@ absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path) {
   }
   if (area > 0 && std::isfinite(area)) arrays.vertices *= 1.0 / std::sqrt(area);
   return TriangleMesh::Create(std::move(arrays));
+}
+
+absl::StatusOr<BiharmonicForm> BiharmonicFormFromArgs(const Args& args) {
+  const auto form = args.Get("biharmonic");
+  if (!form.has_value() || *form == "exact") return BiharmonicForm::kExact;
+  if (*form == "mixed") return BiharmonicForm::kMixed;
+  return absl::InvalidArgumentError(
+      absl::StrCat("--biharmonic must be exact or mixed, got '", *form, "'"));
 }
 
 absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args) {
@@ -127,7 +137,7 @@ int RunApprox(int argc, char** argv) {
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "tests", "seed", "basis",
                                   "min-constraints", "max-constraints", "coarse-dim", "quality",
-                                  "design-mu-c", "no-kernel-columns"});
+                                  "design-mu-c", "biharmonic", "no-kernel-columns"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -136,8 +146,7 @@ int RunApprox(int argc, char** argv) {
         "usage: fieldspace-bench approx MESH --field vector|nfield|tensor [--n N] --dim D "
         "[--sigma S] --tests K --seed N [--basis local|eigen] [--min-constraints A] "
         "[--max-constraints B] [--coarse-dim C] [--quality paper|low-modes|smooth] "
-        "[--design-mu-c X] "
-        "[--no-kernel-columns]"));
+        "[--design-mu-c X] [--biharmonic exact|mixed] [--no-kernel-columns]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());
@@ -153,6 +162,8 @@ int RunApprox(int argc, char** argv) {
   if (!(*design_mu_c > 0) || !std::isfinite(*design_mu_c)) {
     return ReportError(absl::InvalidArgumentError("--design-mu-c must be finite and > 0"));
   }
+  auto form = BiharmonicFormFromArgs(*args);
+  if (!form.ok()) return ReportError(form.status());
   if (*tests < 1 || *tests > 100000) {
     return ReportError(absl::InvalidArgumentError("--tests must be in [1, 100000]"));
   }
@@ -224,7 +235,7 @@ int RunApprox(int argc, char** argv) {
   Stopwatch design_watch;
   EnergyWeights design_weights = kBiharmonicDesignWeights;
   design_weights.mu_c = *design_mu_c;
-  auto design = BiharmonicDesignErrors(*op, **system, *fields, design_weights);
+  auto design = BiharmonicDesignErrors(*op, **system, *fields, design_weights, *form);
   if (!design.ok()) return ReportError(design.status());
   const ErrorSummary design_error = Summarize(*design);
   const double design_seconds = design_watch.Seconds();
@@ -249,6 +260,7 @@ int RunApprox(int argc, char** argv) {
       .Double("mu_s", design_weights.mu_s)
       .Double("mu_b", design_weights.mu_b)
       .Double("mu_c", design_weights.mu_c)
+      .String("form", *form == BiharmonicForm::kMixed ? "mixed" : "exact")
       .EndObject()
       .Int("dim", basis->dimension())
       .Int("nnz_u", basis->U.nonZeros())

@@ -1,5 +1,5 @@
 // `fieldspace-bench design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S
-//  [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic]`:
+//  [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic] [--biharmonic exact|mixed]`:
 // simulates an interactive design session (paper section 8, "Vector fields design") on the
 // mesh scaled to unit area: random add / move / remove of soft and hard constraints (at most C
 // live, default 40) and a few weight changes, timing each edit (the solve included), plus lifts
@@ -9,6 +9,8 @@
 //   {"factorize_ms","edit_ms":{"p50","p99","max"},"lift_ms":{"p50"},"full_factorize_ms",
 //    "full_solve_ms","weight_change_ms":{"p50"},...}
 // factorize_ms: median numeric factorization of U^T (mu_S S + mu_B B) U (shared analysis).
+// --biharmonic mixed: the session's BiharmonicForm (every edit with mu_B > 0 then runs conjugate
+// gradients; mean_refinement_steps counts their iterations).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -62,7 +64,8 @@ int RunDesign(int argc, char** argv) {
   auto args = Args::Parse(argc, argv, {"no-full", "full-biharmonic", "no-kernel-columns"});
   if (!args.ok()) return ReportError(args.status());
   if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "seed", "edits", "max-constraints",
-                                  "no-full", "full-biharmonic", "no-kernel-columns"});
+                                  "no-full", "full-biharmonic", "no-kernel-columns", "quality",
+                                  "coarse-dim", "biharmonic"});
       !st.ok()) {
     return ReportError(st);
   }
@@ -70,7 +73,7 @@ int RunDesign(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench design MESH --field vector|nfield|tensor [--n N] --dim D "
         "--edits N --seed S [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic] "
-        "[--no-kernel-columns]"));
+        "[--no-kernel-columns] [--quality paper|low-modes|smooth] [--biharmonic exact|mixed]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());
@@ -84,6 +87,8 @@ int RunDesign(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError("--edits and --max-constraints must be >= 1"));
   }
 
+  auto form = BiharmonicFormFromArgs(*args);
+  if (!form.ok()) return ReportError(form.status());
   auto sub = LoadBenchSubspace(*args, *type);
   if (!sub.ok()) return ReportError(sub.status());
   const ReducedSystem& sys = *sub->system;
@@ -108,7 +113,9 @@ int RunDesign(int argc, char** argv) {
     }
   }
   Stopwatch create_watch;
-  auto session = DesignSession::Create(sub->system, initial);
+  DesignSessionOptions session_options;
+  session_options.biharmonic = *form;
+  auto session = DesignSession::Create(sub->system, initial, session_options);
   if (!session.ok()) return ReportError(session.status());
   const double create_ms = create_watch.Seconds() * 1e3;
   DesignSession& s = **session;
@@ -229,6 +236,7 @@ int RunDesign(int argc, char** argv) {
       .Double("session_create_ms", create_ms)
       .Int("edits", static_cast<int64_t>(edit_ms.size()))
       .Int("rejected_edits", rejected)
+      .String("biharmonic", *form == BiharmonicForm::kMixed ? "mixed" : "exact")
       .Int("final_constraints", s.num_constraints())
       .Double("mean_refinement_steps",
               edit_ms.empty() ? 0.0 : static_cast<double>(refinement_steps) / edit_ms.size())

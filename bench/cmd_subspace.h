@@ -11,6 +11,7 @@
 #include "core/basis/basis.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_operator.h"
+#include "core/operators/reference_solvers.h"
 #include "core/subspace/reduced_system.h"
 
 namespace fieldspace::bench {
@@ -24,6 +25,8 @@ absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path);
 // see BasisQuality) and kernel columns unless --no-kernel-columns.
 // --quality: paper (default), low-modes or smooth (BasisQuality).
 absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args);
+// --biharmonic exact|mixed (default exact): the reduced solvers' BiharmonicForm.
+absl::StatusOr<BiharmonicForm> BiharmonicFormFromArgs(const Args& args);
 
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
                                                              const FieldOperator& op,
