@@ -71,7 +71,7 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
                                       face >= mu_c w / (1 + mu_c w) of the way, unless
                                       --raw-weights); --singularities: also the singular vertices;
                                       --biharmonic mixed: the mu_b term as the subspace's own
-                                      (closer to the full space, ~10-70x the solve time)
+                                      (closer to the full space; 50-270 ms per solve)
   lift BASIS_ID COEFFS_FILE (--out FIELD_FILE | --faces F1,F2,...) [--encoding ambient|dof]
         [--mode K]                    --mode K: eigenfield K of `eigen --coefficients` output
   eigen BASIS_ID --count K [--coefficients]

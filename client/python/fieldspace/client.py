@@ -470,7 +470,7 @@ class Client:
                 mu_b is relative to the total area; docs/conventions.md).
             biharmonic: ``"exact"`` (default: the lifted field's energy, as the paper) or
                 ``"mixed"`` (the subspace's own biharmonic energy: designs with mu_b > 0 follow
-                the full space far more closely, for ~10-70x the solve time;
+                the full space far more closely, for 50-270 ms per solve at d = 2000;
                 docs/conventions.md, "Biharmonic form").
         Returns:
             Solution(coefficients, field, timings, singularities=...).
