@@ -7,6 +7,7 @@
 
 #include "Eigen/Eigenvalues"
 #include "absl/strings/str_cat.h"
+#include "core/common/cancel.h"
 #include "core/subspace/subspace_util.h"
 
 namespace fieldspace {
@@ -388,7 +389,8 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
     int32_t iterations = 0;
     // Restarts from the recomputed residual when the recursive one has drifted; stops when a
     // cycle no longer halves the backward error (rounding level).
-    while (eta > options_.tolerance && iterations < options_.max_iterations) {
+    while (eta > options_.tolerance && iterations < options_.max_iterations &&
+           !IsCancelled(options_.cancel)) {
       // The corrections keep R_h x fixed, so its rounding error (large when F is nearly singular,
       // e.g. regularized in a kernel direction) is removed by a refinement step first.
       const Eigen::VectorXd hard_residual = hard_rows.cwiseProduct(t - apply_R(x));
@@ -403,7 +405,7 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
       precondition(&z);
       Eigen::VectorXd p = z;
       double rz = res.dot(z);
-      while (iterations < options_.max_iterations) {
+      while (iterations < options_.max_iterations && !IsCancelled(options_.cancel)) {
         const Eigen::VectorXd Ap = apply_A(p);
         const Eigen::VectorXd q = Ap + apply_soft(p);
         const double pq = p.dot(q);

@@ -179,6 +179,7 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   RETURN_IF_ERROR(kkt.FactorizeSchur());
   if (IsCancelled(options.cancel)) return cancelled_error;
   ReducedSolution solution = kkt.Solve(&b);
+  if (IsCancelled(options.cancel)) return cancelled_error;  // the mixed form's iterations stop
   solution.regularization = tau;
   return solution;
 }

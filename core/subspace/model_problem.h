@@ -49,7 +49,8 @@ struct ReducedSolveOptions {
   int32_t max_refinement_steps = 4;
   // With the mixed biharmonic (BiharmonicForm::kMixed, mu_b > 0) the solve is a conjugate
   // gradient iteration to the same `tolerance` instead of the refinement: at most this many
-  // iterations (measured: ~15 with the smooth basis, ~70 with low-modes at d = 2000).
+  // iterations (measured at d = 2000: ~15 with the smooth basis, 45-55 with low-modes, 125-150
+  // with the paper's). It stops early, unconverged, once *cancel is true.
   int32_t max_iterations = 400;
   // Hard constraints are linearly dependent when, after scaling to unit diagonal, the Schur
   // complement G A^-1 G^T has a pivot below this (the sine squared of the angle between a
