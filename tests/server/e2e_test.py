@@ -184,6 +184,15 @@ def main():
         check(updates[4]["num_hard_constraints"] == 1 and updates[5]["num_constraints"] == 1,
               "constraint counts")
         check(all(len(u["coefficients"]) == vector["columns"] for u in updates), "coefficients")
+        # The same script with the mixed biharmonic: the same answers until mu_b > 0, then another.
+        _, out, _ = cli("design", vector["id"], "--script", script, "--biharmonic", "mixed")
+        mixed_updates = [json.loads(line) for line in out.splitlines()]
+        check([u["edit"] for u in mixed_updates] == [u["edit"] for u in updates],
+              "mixed design edits")
+        gap = lambda a, b: max(abs(p - q) for p, q in zip(a["coefficients"], b["coefficients"]))
+        check(gap(mixed_updates[5], updates[5]) < 1e-12, "mu_b = 0: the forms are one solve")
+        # mu_b = 0.001 (scale-free) is light on this mesh: the forms differ by ~3e-7, not rounding.
+        check(gap(mixed_updates[6], updates[6]) > 1e-9, "mu_b > 0: the forms differ")
 
         # CLI errors: clear message, non-zero exit, no crash.
         rc, _, err = cli("mesh", "m-0000000000000000", expect=1)
