@@ -148,6 +148,16 @@ TEST(MultigridTest, RejectsBadInput) {
               StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
+// A positive diagonal but an indefinite matrix: the coarsest level's dense Cholesky fails, which
+// is FailedPrecondition (the kernel step then falls back to CHOLMOD), not a crash or garbage.
+TEST(MultigridTest, IndefiniteCoarsestMatrixIsFailedPrecondition) {
+  SpMat A = GridLaplacian(10, 0.0);  // 100 rows: the coarsest level alone; eigenvalues 0..8
+  for (int i = 0; i < A.rows(); ++i) A.coeffRef(i, i) -= 0.5 * A.coeff(i, i);
+  const MultigridRowMatrix B = Random(A.rows(), 2, 4);
+  EXPECT_THAT(SolveMultigridCg(A, B).status(),
+              StatusIs(absl::StatusCode::kFailedPrecondition, HasSubstr("not positive definite")));
+}
+
 TEST(MultigridTest, ReportsNonConvergenceAndCancellation) {
   const SpMat A = PinnedGridLaplacian(50);
   const MultigridRowMatrix B = Random(A.rows(), 2, 9);
