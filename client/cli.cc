@@ -996,6 +996,8 @@ int Cli::Solve(const CommandLine& a) {
   j.BeginObject();
   j.Key("basis_id").String(request.basis_id());
   j.Key("num_constraints").Int(request.constraints_size());
+  j.Key("backward_error").Number(response->backward_error());
+  j.Key("iterations").Int(response->iterations());
   j.Key("timings").BeginObject();
   j.Key("solve_ms").Number(response->timings().solve_ms());
   j.Key("total_ms").Number(response->timings().total_ms());
@@ -1343,6 +1345,8 @@ int Cli::Design(const CommandLine& a) {
     j.Key("num_constraints").Int(update->num_constraints());
     j.Key("num_hard_constraints").Int(update->num_hard_constraints());
     j.Key("refactorized").Bool(update->timings().refactorized());
+    j.Key("backward_error").Number(update->backward_error());  // null when unchecked (NaN)
+    j.Key("iterations").Int(update->iterations());
     if (resumable->resumed) j.Key("resumed").Bool(true);
     j.Key("timings").BeginObject();
     j.Key("edit_ms").Number(update->timings().edit_ms());

@@ -86,6 +86,8 @@ absl::Status DesignEditor::Answer(v1::DesignUpdate* update) {
   update->set_num_constraints(session_->num_constraints());
   update->set_num_hard_constraints(session_->num_hard_constraints());
   update->set_basis_id(basis_->record.id);
+  update->set_backward_error(session_->last_backward_error());
+  update->set_iterations(session_->last_refinement_steps());
   if (singularities_) RETURN_IF_ERROR(SingularityChanges(x, update->mutable_singularities()));
   return absl::OkStatus();
 }

@@ -280,6 +280,8 @@ grpc::ServerUnaryReactor* FieldService::Solve(grpc::CallbackServerContext* /*con
         RETURN_IF_ERROR(CheckSolutionFinite(result.coefficients));
         response->mutable_coefficients()->Add(
             result.coefficients.data(), result.coefficients.data() + result.coefficients.size());
+        response->set_backward_error(result.backward_error);
+        response->set_iterations(result.refinement_steps);
         double lift_ms = 0;
         Eigen::VectorXd dofs;  // the lifted field, once, for return_field and singularities
         if (request->return_field()) {

@@ -358,11 +358,15 @@ class SolveAndDesignTest(unittest.TestCase):
         exact = CLIENT.solve(VECTOR, faces, values, weights=weights, hard=[False, True])
         scale = np.linalg.norm(mixed.coefficients)
         self.assertGreater(np.linalg.norm(mixed.coefficients - exact.coefficients), 1e-3 * scale)
+        self.assertLessEqual(mixed.backward_error, 1e-12)
+        self.assertGreater(mixed.iterations, exact.iterations)
         with CLIENT.design(VECTOR, weights, biharmonic="mixed") as s:
             s.add(12, [0, 1, 0])
-            s.add(600, [0, 0, 1], hard=True)
+            u = s.add(600, [0, 0, 1], hard=True)
             x = s.coefficients
         self.assertLess(np.linalg.norm(x - mixed.coefficients), 1e-8 * scale)
+        self.assertGreater(u.iterations, 0)
+        self.assertLessEqual(u.backward_error, 1e-12)
         for call in (lambda: CLIENT.solve(VECTOR, [5], [[1.0, 0, 0]], biharmonic="lumped"),
                      lambda: CLIENT.design(VECTOR, biharmonic=1)):
             with self.assertRaises(fs.InvalidArgument):

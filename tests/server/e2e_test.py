@@ -135,6 +135,10 @@ def main():
               "mixed: hard constraint holds: %s" % mixed_rows[5])
         check(max(abs(a - b) for a, b in zip(mixed["coefficients"], solved["coefficients"])) >
               1e-6, "mixed and exact forms give different minimizers")
+        check(mixed["backward_error"] <= 1e-12 and solved["backward_error"] <= 1e-12 and
+              mixed["iterations"] > solved["iterations"], "solve reports its convergence: %s %s"
+              % ((mixed["backward_error"], mixed["iterations"]),
+                 (solved["backward_error"], solved["iterations"])))
         rc, _, err = cli("solve", vector["id"], "--constraints", constraints, "--biharmonic",
                          "lumped", expect=2)
         check("--biharmonic" in err, "biharmonic usage error: %s" % err)

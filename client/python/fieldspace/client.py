@@ -490,9 +490,10 @@ class Client:
         if return_field:
             field = self._decode(fld.flat_floats([r.field.values], len(r.field.values)),
                                  field_type, mesh_id, field_encoding)
-        return Solution(np.array(r.coefficients), field, _timings(r.timings),
+        return Solution(np.array(r.coefficients), field, _timings(r.timings), r.backward_error,
                         singularities=(Singularities.from_proto(r.singularities)
-                                       if r.HasField("singularities") else None))
+                                       if r.HasField("singularities") else None),
+                        iterations=r.iterations)
 
     @staticmethod
     def _constraints(what, field_type, faces, values, constraint_weights, hard, encoding):

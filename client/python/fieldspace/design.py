@@ -258,7 +258,8 @@ class DesignSession:
             num_constraints=message.num_constraints,
             num_hard_constraints=message.num_hard_constraints,
             refactorized=message.timings.refactorized, timings=timings,
-            constraint_id=None if constraint_id is None else int(constraint_id), resumed=resumed)
+            constraint_id=None if constraint_id is None else int(constraint_id), resumed=resumed,
+            backward_error=message.backward_error, iterations=message.iterations)
         return self.last
 
     def _end(self):

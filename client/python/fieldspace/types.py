@@ -150,14 +150,16 @@ class Projection:
 @dataclass(frozen=True)
 class Solution:
     """The answer of solve, smooth and align: d coefficients, the lifted field when asked for
-    (``return_field=True``), the server's timings in ms, (smooth, align) the backward error, and
-    the result's singularities when asked for (``singularities=True``)."""
+    (``return_field=True``), the server's timings in ms, the backward error against the true
+    reduced system, the result's singularities when asked for (``singularities=True``) and (solve)
+    the refinement steps or, with ``biharmonic="mixed"``, conjugate gradient iterations."""
 
     coefficients: np.ndarray
     field: Optional[np.ndarray] = None
     timings: dict = _field(default_factory=dict)
     backward_error: Optional[float] = None
     singularities: Optional["Singularities"] = None  # with ``singularities=True``
+    iterations: Optional[int] = None
 
 
 @dataclass(frozen=True)
@@ -241,3 +243,7 @@ class DesignUpdate:
     # died or drained) and its constraints, weights and watch were replayed; the coefficients
     # are then those of the lost session plus that edit.
     resumed: bool = False
+    # Of the session's last solve: backward error (NaN when the server did not check it) and
+    # refinement steps or, with ``biharmonic="mixed"``, conjugate gradient iterations.
+    backward_error: float = float("nan")
+    iterations: int = 0
