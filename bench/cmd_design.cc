@@ -1,5 +1,6 @@
 // `fieldspace-bench design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S
-//  [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic] [--biharmonic exact|mixed]`:
+//  [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic] [--no-kernel-columns]
+//  [--coarse-dim C] [--quality paper|low-modes|smooth] [--biharmonic exact|mixed]`:
 // simulates an interactive design session (paper section 8, "Vector fields design") on the
 // mesh scaled to unit area: random add / move / remove of soft and hard constraints (at most C
 // live, default 40) and a few weight changes, timing each edit (the solve included), plus lifts
@@ -73,7 +74,8 @@ int RunDesign(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "usage: fieldspace-bench design MESH --field vector|nfield|tensor [--n N] --dim D "
         "--edits N --seed S [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic] "
-        "[--no-kernel-columns] [--quality paper|low-modes|smooth] [--biharmonic exact|mixed]"));
+        "[--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes|smooth] "
+        "[--biharmonic exact|mixed]"));
   }
   auto type = FieldTypeFromArgs(*args);
   if (!type.ok()) return ReportError(type.status());

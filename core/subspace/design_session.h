@@ -96,7 +96,8 @@ struct DesignSessionOptions {
   bool scale_free = false;
   // The biharmonic term's form (ModelProblem::biharmonic). kMixed keeps the exact form's
   // factorization as the preconditioner of a conjugate gradient solve per edit (see
-  // KktSolver::Solve): an edit then costs that many solves with the factorization.
+  // KktSolver::Solve): with mu_B > 0 an edit then costs 15-150 solves with the factorization
+  // instead of one (bench/RESULTS.md, "Session 14").
   BiharmonicForm biharmonic = BiharmonicForm::kExact;
   // A data (alignment) term mu_A (X - X0)^T W M (X - X0) in the energy (paper section 8, Fig. 16:
   // a field aligned to curvature, then interpolation constraints on top), with X0, W and their
