@@ -77,3 +77,16 @@ def obj_text(V, F):
     lines = ["v %r %r %r" % tuple(map(float, p)) for p in V]
     lines += ["f %d %d %d" % tuple(int(i) + 1 for i in f) for f in F]
     return "\n".join(lines) + "\n"
+
+
+def ellipsoid(semi_axes, subdivisions=4, up="z"):
+    """An icosphere scaled to ``semi_axes`` (along x, y, z of a z-up scan). ``up="y"`` stores
+    the same shape as a y-up scan would (x stays, the z-up scan's z becomes y and its y
+    becomes -z: the rotation between the two conventions)."""
+    V, F = icosphere(subdivisions)
+    V = V * np.asarray(semi_axes, dtype=np.float64)
+    if up == "y":
+        V = np.stack([V[:, 0], V[:, 2], -V[:, 1]], axis=1)
+    elif up != "z":
+        raise ValueError("up is 'y' or 'z'")
+    return V, F

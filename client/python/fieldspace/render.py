@@ -12,6 +12,7 @@ private Xvfb when there is no DISPLAY (fieldspace.display).
 """
 
 import argparse
+import dataclasses
 import importlib
 import json
 import math
@@ -33,7 +34,7 @@ _VIRIDIS = np.array([
     [0.993248, 0.906157, 0.143936]])
 _GRAY = np.array([[0.15, 0.15, 0.15], [0.95, 0.95, 0.95]])
 
-STYLES = ("glyphs", "streamlines", "lic", "surface")
+STYLES = ("glyphs", "streamlines", "hatching", "lic", "surface")
 
 
 def colormap(name_or_table="viridis", samples=256):
@@ -133,20 +134,26 @@ def _polylines_polydata(lines, offset_normals=None):
     return poly
 
 
-def _glyph_segments(V, F, a, kind, faces, arm, normalize, tensor_glyph="cross"):
+def _glyph_segments(V, F, a, kind, faces, arm, by_magnitude, tensor_glyph="cross"):
     """Segments (starts, ends, colours) of the glyphs at ``faces``, face-major (the segments
-    of each glyph together, in the order of ``faces``); ``arm`` the longest arm."""
+    of each glyph together, in the order of ``faces``); ``arm`` the longest arm. Every glyph
+    gets the full length unless ``by_magnitude`` (then its length is its magnitude over the
+    largest one); a tensor's smaller arm is its principal values' ratio of the larger one."""
     normals = fl.face_normals(V, F)[faces]
     centers = V[F[faces]].mean(axis=1)
     black = np.array([0.05, 0.05, 0.05])
     starts, ends, colors = [], [], []
+
+    def scales(length, full):
+        # Factor per glyph turning a direction of ``length`` into one of length ``full``
+        # (times its share of the largest length when drawn by magnitude).
+        top = length.max() if len(length) and length.max() > 0 else 1.0
+        share = length / top if by_magnitude else 1.0
+        return np.where(length > 0, share * full / np.where(length > 0, length, 1.0), 0.0)
+
     if kind == fl.VECTOR:
         v = a[faces]
-        length = np.linalg.norm(v, axis=1)
-        top = length.max() if len(length) and length.max() > 0 else 1.0
-        scale = np.where(length > 0, (length / top if normalize else 1.0) * arm
-                         / np.where(length > 0, length, 1.0), 0.0)
-        d = v * scale[:, None]
+        d = v * scales(np.linalg.norm(v, axis=1), arm)[:, None]
         tail = centers - 0.5 * d
         tip = centers + 0.5 * d
         side = np.cross(normals, d)
@@ -155,20 +162,17 @@ def _glyph_segments(V, F, a, kind, faces, arm, normalize, tensor_glyph="cross"):
         colors += [black] * 3
     elif kind == fl.NFIELD:
         dirs = a[faces]
-        length = np.linalg.norm(dirs[:, 0], axis=1)
-        top = length.max() if len(length) and length.max() > 0 else 1.0
-        scale = np.where(length > 0, (length / top if normalize else 1.0) * 0.5 * arm
-                         / np.where(length > 0, length, 1.0), 0.0)
+        scale = scales(np.linalg.norm(dirs[:, 0], axis=1), 0.5 * arm)
         for k in range(dirs.shape[1]):
             starts.append(centers)
             ends.append(centers + dirs[:, k] * scale[:, None])
             colors.append(black)
     else:
         values, directions = fl.principal(V, F[faces], a[faces])
-        top = np.abs(values).max() if values.size and np.abs(values).max() > 0 else 1.0
         palette = (np.array([0.8, 0.1, 0.1]), np.array([0.1, 0.2, 0.85]))
-        halves = [(np.abs(values[:, j]) / top if normalize else 1.0) * 0.5 * arm
-                  for j in range(2)]
+        largest = np.abs(values).max(axis=1)
+        full = scales(largest, 0.5 * arm)
+        halves = [np.abs(values[:, j]) * full for j in range(2)]
         if tensor_glyph == "ellipse":
             # Semi-axes |k1| d1 and |k2| d2 (scaled), 24 segments, coloured by the sign of k1.
             t = np.linspace(0.0, 2.0 * math.pi, 25)
@@ -197,33 +201,133 @@ def _glyph_segments(V, F, a, kind, faces, arm, normalize, tensor_glyph="cross"):
     return face_major(starts), face_major(ends), face_major(colors)
 
 
-def _fit_view(cam, points, aspect, fill=0.9):
-    """Narrows the view angle until ``points`` fill ``fill`` of the view (the automatic camera
-    starts from VTK's bounding-sphere framing, which leaves wide margins)."""
+# The automatic view looks at the shape from the side of its thinnest principal axis, turned by
+# these angles (degrees) about the up axis and above the horizon: a three-quarter view from a
+# little above, never from above or below.
+_VIEW_AZIMUTH = 30.0
+_VIEW_ELEVATION = 15.0
+
+
+def principal_axes(V, F):
+    """Principal axes of the surface: ``(center, axes, extents)``, ``axes`` ``(3, 3)`` with one
+    unit axis per row from the longest to the shortest, ``extents`` the standard deviations
+    along them. Vertices are weighted by a third of the area of their faces, so the answer is
+    the surface's, not its sampling's."""
+    V, F = fl.as_mesh(V, F)
+    weights = np.zeros(len(V))
+    np.add.at(weights, F.reshape(-1), np.repeat(fl.face_areas(V, F) / 3.0, 3))
+    total = weights.sum()
+    if total <= 0:
+        weights, total = np.ones(len(V)), float(len(V))
+    center = weights @ V / total
+    rel = V - center
+    values, vectors = np.linalg.eigh((rel * weights[:, None]).T @ rel / total)
+    order = np.argsort(values)[::-1]
+    return center, vectors[:, order].T, np.sqrt(np.maximum(values[order], 0.0))
+
+
+def base_area(V, F, up):
+    """The share of the surface's area that is a flat base below it along ``up``: faces whose
+    normal is within 10 degrees of ``-up`` and whose corners all lie in the lowest 0.2% of the
+    height (a vase's foot, a bust's cut). A smooth convex bottom scores at most about 0.4%
+    (twice the height share), a cut base much more."""
+    V, F = fl.as_mesh(V, F)
+    up = np.asarray(up, dtype=np.float64)
+    areas = fl.face_areas(V, F)
+    height = V @ up
+    low = height[F].max(axis=1) <= height.min() + 0.002 * (height.max() - height.min())
+    down = fl.face_normals(V, F) @ up < -math.cos(math.radians(10.0))
+    total = areas.sum()
+    return float(areas[low & down].sum() / total) if total > 0 else 0.0
+
+
+def automatic_view(V, F):
+    """The automatic camera's ``(direction, view_up)``: the side the camera looks from and the
+    picture's up, both unit 3-vectors.
+
+    Scans are stored with y or z up. The up axis is the one of the two that a flat base faces
+    away from (:func:`base_area`: at least 0.6% of the area, 3 times a flat top's, so that a
+    plate's sides are no base, and 3 times the other axis's); without
+    one, the one closer to the plane of the shape's two longest principal axes (more
+    perpendicular to the thinnest one, by more than 0.25 in cosine), else y. The camera looks
+    along the thinnest principal axis made horizontal (the largest silhouette; the longer
+    remaining one when the thinnest is the up axis) from the front, the side of ``x cross up``
+    (+z for y up, -y for z up), turned by 30 degrees about the up axis and raised by 15 degrees:
+    never from above or below.
+    """
+    _, axes, _ = principal_axes(V, F)
+    thinnest = axes[2]
+    candidates = (np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]))
+    # A base counts when the shape has no such flat face on top (a plate has both).
+    bases = [base_area(V, F, c) if base_area(V, F, c) >= 3.0 * base_area(V, F, -c) else 0.0
+             for c in candidates]
+    across = [abs(float(c @ thinnest)) for c in candidates]
+    if max(bases) >= 0.006 and max(bases) >= 3.0 * min(bases):
+        up = candidates[int(np.argmax(bases))]
+    elif abs(across[0] - across[1]) > 0.25:
+        up = candidates[int(np.argmin(across))]
+    else:
+        up = candidates[0]
+    # The thinnest principal axis that is not (nearly) the up axis, made horizontal.
+    for axis in (axes[2], axes[1]):
+        side = axis - (axis @ up) * up
+        if np.linalg.norm(side) > 0.5:
+            break
+    side /= np.linalg.norm(side)
+    front = np.cross([1.0, 0.0, 0.0], up)
+    if side @ front < -1e-9 or (abs(side @ front) <= 1e-9 and side[0] < 0):
+        side = -side
+    az, el = math.radians(_VIEW_AZIMUTH), math.radians(_VIEW_ELEVATION)
+    turned = math.cos(az) * side + math.sin(az) * np.cross(up, side)
+    direction = math.cos(el) * turned + math.sin(el) * up
+    return direction / np.linalg.norm(direction), up
+
+
+def _camera_frame(cam):
     position = np.array(cam.GetPosition())
     forward = np.array(cam.GetFocalPoint()) - position
     forward /= np.linalg.norm(forward)
     up = np.array(cam.GetViewUp())
     up -= np.dot(up, forward) * forward
     up /= np.linalg.norm(up)
-    right = np.cross(forward, up)
+    return position, forward, up, np.cross(forward, up)
+
+
+def _fit_view(cam, points, aspect, fill):
+    """Centres ``points`` in the view and narrows the view angle until they fill ``fill`` of
+    its height or width, whichever limits (the automatic camera starts from VTK's
+    bounding-sphere framing, which leaves wide margins and need not centre the silhouette)."""
+    for _ in range(3):
+        position, forward, up, right = _camera_frame(cam)
+        rel = points - position
+        depth = rel @ forward
+        if np.any(depth <= 0):
+            return
+        x, y = (rel @ right) / depth, (rel @ up) / depth
+        # Turn the camera (same position) towards the middle of the silhouette's tangents.
+        mx, my = 0.5 * (x.max() + x.min()), 0.5 * (y.max() + y.min())
+        distance = np.linalg.norm(np.array(cam.GetFocalPoint()) - position)
+        target = forward + mx * right + my * up
+        cam.SetFocalPoint(*(position + distance * target / np.linalg.norm(target)))
+        cam.OrthogonalizeViewUp()
+    position, forward, up, right = _camera_frame(cam)
     rel = points - position
     depth = rel @ forward
-    if np.any(depth <= 0):
-        return
-    need = max(np.max(np.abs(rel @ up) / depth), np.max(np.abs(rel @ right) / depth) / aspect)
+    x, y = (rel @ right) / depth, (rel @ up) / depth
+    need = max(0.5 * (y.max() - y.min()), 0.5 * (x.max() - x.min()) / aspect)
     angle = 2.0 * math.degrees(math.atan(need / fill))
     cam.SetViewAngle(min(max(angle, 1.0), 120.0))
 
 
-def _apply_camera(renderer, camera, bounds, fit_points=None, aspect=1.0):
-    """Sets the renderer's camera from ``camera`` (None: automatic) and returns its state."""
+def _apply_camera(renderer, camera, bounds, fit_points, aspect, fill, automatic):
+    """Sets the renderer's camera from ``camera`` (None: ``automatic``, a (direction, view_up)
+    pair) and returns its state."""
     cam = renderer.GetActiveCamera()
     camera = dict(camera or {})
-    unknown = set(camera) - {"position", "focal_point", "view_up", "view_angle",
-                             "parallel_scale", "direction", "azimuth", "elevation", "zoom"}
+    unknown = set(camera) - set(CAMERA_KEYS)
     if unknown:
-        raise ValueError("unknown camera keys: %s" % ", ".join(sorted(unknown)))
+        raise ValueError("unknown camera keys: %s (known: %s)"
+                         % (", ".join(sorted(unknown)), ", ".join(CAMERA_KEYS)))
     lo, hi = np.array(bounds[0::2]), np.array(bounds[1::2])
     center = 0.5 * (lo + hi)
     if "view_angle" in camera:
@@ -231,18 +335,20 @@ def _apply_camera(renderer, camera, bounds, fit_points=None, aspect=1.0):
     if "position" in camera:
         cam.SetFocalPoint(*map(float, camera.get("focal_point", center)))
         cam.SetPosition(*map(float, camera["position"]))
-        cam.SetViewUp(*map(float, camera.get("view_up", (0.0, 0.0, 1.0))))
+        cam.SetViewUp(*map(float, camera.get("view_up", automatic[1])))
         if "parallel_scale" in camera:
             cam.ParallelProjectionOn()
             cam.SetParallelScale(float(camera["parallel_scale"]))
         else:
             renderer.ResetCameraClippingRange()
     else:
-        direction = np.asarray(camera.get("direction", (1.0, -1.6, 0.9)), dtype=np.float64)
+        direction = np.asarray(camera.get("direction", automatic[0]), dtype=np.float64)
+        if not np.linalg.norm(direction) > 0:
+            raise ValueError("camera direction must be a nonzero 3-vector")
         direction = direction / np.linalg.norm(direction)
-        up = np.asarray(camera.get("view_up", (0.0, 0.0, 1.0)), dtype=np.float64)
+        up = np.asarray(camera.get("view_up", automatic[1]), dtype=np.float64)
         if abs(np.dot(up, direction)) > 0.99 * np.linalg.norm(up):
-            up = np.array([0.0, 1.0, 0.0])
+            up = np.array([0.0, 1.0, 0.0]) if abs(direction[1]) < 0.9 else np.array([0, 0, 1.0])
         focal = np.asarray(camera.get("focal_point", center), dtype=np.float64)
         cam.SetFocalPoint(*focal)
         cam.SetPosition(*(focal + direction))
@@ -252,8 +358,8 @@ def _apply_camera(renderer, camera, bounds, fit_points=None, aspect=1.0):
         renderer.ResetCamera(bounds)
         if "parallel_scale" in camera:
             cam.SetParallelScale(float(camera["parallel_scale"]))
-        elif fit_points is not None and len(fit_points):
-            _fit_view(cam, fit_points, aspect)
+        elif "view_angle" not in camera and fit_points is not None and len(fit_points):
+            _fit_view(cam, fit_points, aspect, fill)
     if "azimuth" in camera:
         cam.Azimuth(float(camera["azimuth"]))
     if "elevation" in camera:
@@ -267,6 +373,32 @@ def _apply_camera(renderer, camera, bounds, fit_points=None, aspect=1.0):
     if cam.GetParallelProjection():
         state["parallel_scale"] = cam.GetParallelScale()
     return state
+
+
+def project(points, camera, size):
+    """Pixel coordinates ``(k, 2)`` (column, row; row 0 at the top, pixel centres at .5) of
+    ``points`` ``(k, 3)`` in a picture of ``size`` (width, height) taken with ``camera`` (the
+    camera state :func:`render` returns)."""
+    from vtkmodules.vtkRenderingCore import vtkCamera
+    width, height = size
+    cam = vtkCamera()
+    cam.SetPosition(*camera["position"])
+    cam.SetFocalPoint(*camera["focal_point"])
+    cam.SetViewUp(*camera["view_up"])
+    cam.SetViewAngle(camera["view_angle"])
+    if "parallel_scale" in camera:
+        cam.ParallelProjectionOn()
+        cam.SetParallelScale(camera["parallel_scale"])
+    return _project(cam, points, width, height)
+
+
+def _project(cam, points, width, height):
+    matrix = cam.GetCompositeProjectionTransformMatrix(width / height, -1.0, 1.0)
+    P = np.array([[matrix.GetElement(i, j) for j in range(4)] for i in range(4)])
+    h = np.hstack([np.asarray(points, dtype=np.float64).reshape(-1, 3),
+                   np.ones((len(points), 1))]) @ P.T
+    ndc = h[:, :2] / h[:, 3:4]
+    return np.stack([(ndc[:, 0] + 1.0) * width / 2.0, (1.0 - ndc[:, 1]) * height / 2.0], axis=1)
 
 
 def _grab(window, vtkWindowToImageFilter, vtk_to_numpy):
@@ -283,15 +415,38 @@ def _grab(window, vtkWindowToImageFilter, vtk_to_numpy):
     return np.ascontiguousarray(pixels[:, :, :3])
 
 
-def _write_png(path, pixels, numpy_to_vtk):
+IMAGE_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
+
+
+def image_format(path):
+    """The picture format of ``path`` by its extension (``"PNG"`` or ``"JPEG"``); any other
+    extension is refused (ValueError) before anything is drawn."""
+    import os
+    ext = os.path.splitext(str(path))[1].lower()
+    if ext not in IMAGE_FORMATS:
+        raise ValueError("cannot write a picture to %s: the extension must be one of %s"
+                         % (path, ", ".join(IMAGE_FORMATS)))
+    return IMAGE_FORMATS[ext]
+
+
+def write_image(path, pixels):
+    """Writes ``pixels`` (``(h, w, 3)`` uint8, top row first) as PNG or JPEG (quality 95), by
+    the extension of ``path`` (:func:`image_format`)."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk
     from vtkmodules.vtkCommonDataModel import vtkImageData
-    from vtkmodules.vtkIOImage import vtkPNGWriter
+    from vtkmodules.vtkIOImage import vtkJPEGWriter, vtkPNGWriter
+    kind = image_format(path)
     h, w, _ = pixels.shape
     image = vtkImageData()
     image.SetDimensions(w, h, 1)
     data = numpy_to_vtk(np.ascontiguousarray(pixels[::-1].reshape(-1, 3)), deep=True)
     image.GetPointData().SetScalars(data)
-    writer = vtkPNGWriter()
+    if kind == "JPEG":
+        writer = vtkJPEGWriter()
+        writer.SetQuality(95)
+        writer.ProgressiveOff()
+    else:
+        writer = vtkPNGWriter()
     writer.SetFileName(str(path))
     writer.SetInputData(image)
     writer.Write()
@@ -365,28 +520,23 @@ def _screen_directions(renderer, V, F, dirs, width, height):
     """Per face and family, the unit screen direction (x right, y up) of the 3D direction at
     the face's centre, by the camera's projection."""
     cam = renderer.GetActiveCamera()
-    matrix = cam.GetCompositeProjectionTransformMatrix(width / height, -1.0, 1.0)
-    P = np.array([[matrix.GetElement(i, j) for j in range(4)] for i in range(4)])
     centers = V[F].mean(axis=1)
     eps = 1e-3 * float(np.linalg.norm(np.ptp(V, axis=0)))
-
-    def project(points):
-        h = np.hstack([points, np.ones((len(points), 1))]) @ P.T
-        return h[:, :2] / h[:, 3:4] * np.array([width / 2.0, height / 2.0])
-
-    base = project(centers)
+    base = _project(cam, centers, width, height)
     out = np.zeros(dirs.shape[:2] + (2,))
     for j in range(dirs.shape[1]):
-        s = project(centers + eps * dirs[:, j]) - base
+        s = _project(cam, centers + eps * dirs[:, j], width, height) - base
+        s[:, 1] = -s[:, 1]  # rows go down, screen y up
         norm = np.linalg.norm(s, axis=1)
         out[:, j] = s / np.where(norm > 0, norm, 1.0)[:, None]
     return out
 
 
-def _lic_pass(window, renderer, legend, actor, mapper, V, F, a, kind, pixels, width, height,
-              length, rng, numpy_to_vtk, vtkWindowToImageFilter, vtk_to_numpy):
+def _lic_pass(window, renderer, legend, actor, mapper, occluder, V, F, a, kind, pixels, width,
+              height, length, rng, numpy_to_vtk, vtkWindowToImageFilter, vtk_to_numpy):
     """Renders each line family's screen directions into the picture's pixels (doubled angle
-    in red and green, blue marks the surface) and modulates ``pixels`` by their LIC."""
+    in red and green, blue marks the surface; ``occluder``, the singularity spheres or None,
+    black in front of it) and modulates ``pixels`` by their LIC."""
     dirs = family_directions(V, F, a, kind)
     screen = _screen_directions(renderer, V, F, dirs, width, height)
     # The mapper draws a copy of the surface (with vertex normals) when lighting is on.
@@ -395,10 +545,14 @@ def _lic_pass(window, renderer, legend, actor, mapper, V, F, a, kind, pixels, wi
     saved = (mapper.GetScalarVisibility(), mapper.GetColorMode(), actor.GetVisibility())
     prop = actor.GetProperty()
     lighting = (prop.GetAmbient(), prop.GetDiffuse(), prop.GetSpecular())
-    others = [x for x in _actors(renderer) if x is not actor]
+    others = [x for x in _actors(renderer) if x is not actor and x is not occluder]
     visible = [x.GetVisibility() for x in others]
     for x in others:
         x.VisibilityOff()
+    if occluder is not None:
+        occluder.GetMapper().ScalarVisibilityOff()
+        occluder.GetProperty().SetColor(0.0, 0.0, 0.0)
+        occluder.GetProperty().LightingOff()
     if legend is not None:
         legend_background = legend.GetBackground()
         legend.SetBackground(0.0, 0.0, 0.0)
@@ -436,6 +590,9 @@ def _lic_pass(window, renderer, legend, actor, mapper, V, F, a, kind, pixels, wi
         prop.SetSpecular(lighting[2])
         for x, v in zip(others, visible):
             x.SetVisibility(v)
+        if occluder is not None:
+            occluder.GetMapper().ScalarVisibilityOn()
+            occluder.GetProperty().LightingOn()
         if legend is not None:
             legend.SetBackground(*legend_background)
             for bar in bars:
@@ -446,12 +603,21 @@ def _lic_pass(window, renderer, legend, actor, mapper, V, F, a, kind, pixels, wi
     half = 0.5 * doubled
     directions = np.stack([np.cos(half), np.sin(half)], axis=-1)
     texture = lic(directions, mask, length=length, rng=rng)
-    values = texture[mask]
-    if values.size:
-        spread = values.std() if values.std() > 0 else 1.0
-        texture = np.clip(0.5 + 0.18 * (texture - values.mean()) / spread, 0.0, 1.0)
-    shade = np.where(mask, 0.35 + 0.65 * texture, 1.0)
+    shade = np.where(mask, 0.25 + 0.75 * stretch_contrast(texture, mask), 1.0)
     return np.clip(pixels * shade[:, :, None], 0, 255).astype(np.uint8)
+
+
+def stretch_contrast(texture, mask, low=2.0, high=98.0):
+    """``texture`` mapped linearly so that its ``low`` and ``high`` percentiles over ``mask``
+    become 0 and 1 (clipped). Averaging noise over 2L + 1 pixels shrinks its spread by about
+    sqrt(2L + 1), so LIC needs the stretch to be seen."""
+    values = texture[mask]
+    if not values.size:
+        return texture
+    lo, hi = np.percentile(values, [low, high])
+    if hi <= lo:
+        return np.full_like(texture, 0.5)
+    return np.clip((texture - lo) / (hi - lo), 0.0, 1.0)
 
 
 def _actors(renderer):
@@ -463,40 +629,229 @@ def _actors(renderer):
     return out
 
 
-def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800, 600),
-           camera=None, colormap_name="viridis", scalars=None, scalar_range=None,
-           scalar_bar=False, title=None, max_glyphs=3000, glyph_scale=1.0, normalize=True,
-           streamline_count=None, streamline_length=None, streamline_separation=None,
-           lic_length=None, lighting=True,
-           background=(1.0, 1.0, 1.0), surface_color=(0.85, 0.85, 0.85), line_width=1.5,
-           line_color=(0.08, 0.08, 0.08), colorize=True, tensor_glyph="cross", rng=0,
-           use_display=True):
-    """Renders the mesh ``(V, F)`` with ``field`` and writes a PNG to ``out_png`` (if given).
+CAMERA_KEYS = ("position", "focal_point", "view_up", "view_angle", "parallel_scale",
+               "direction", "azimuth", "elevation", "zoom")
+COLORS = ("none", "magnitude")
+GLYPH_LENGTHS = ("even", "magnitude")
+TENSOR_GLYPHS = ("cross", "ellipse")
+
+
+def _option(default, flag=None, help=None, **argparse_keywords):
+    """A RenderOptions field; ``flag``: its option of ``python3 -m fieldspace.render`` (and so
+    of ``fieldspace render``), with ``argparse_keywords`` for argparse."""
+    metadata = {"flag": flag, "help": help, "argparse": argparse_keywords} if flag else {}
+    return dataclasses.field(default=default, metadata=metadata)
+
+
+def _size(text):
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError("size is WIDTHxHEIGHT, e.g. 800x600") from None
+    return w, h
+
+
+@dataclasses.dataclass(frozen=True)
+class RenderOptions:
+    """How :func:`render` draws: every option with its default, in one place. The command line
+    (``python3 -m fieldspace.render``, ``fieldspace render``) has a flag for those that name one;
+    ``render(..., name=value)`` overrides any of them for one call.
+
+    - ``style``: ``"glyphs"``, ``"streamlines"``, ``"hatching"`` (many short strokes on a plain
+      surface, the paper's Fig. 17), ``"lic"`` (line integral convolution) or ``"surface"``.
+    - ``color``: ``"none"`` (a plain ``surface_color`` surface) or ``"magnitude"`` (the field's
+      magnitude through ``colormap``); ``scalars`` given to :func:`render` always colour.
+    - ``glyph_length``: ``"even"`` (every glyph as long as ``glyph_scale`` allows; a tensor's
+      smaller arm in proportion) or ``"magnitude"`` (in proportion to the largest).
+    - ``fill``: the share of the picture's limiting dimension the automatic camera gives the mesh.
+    """
+
+    style: str = _option("glyphs", "--style", "what to draw", choices=None)
+    size: tuple = _option((800, 600), "--size", "WIDTHxHEIGHT", type=_size)
+    camera: dict = _option(None, "--camera", "JSON, e.g. '{\"direction\": [0, -1, 0.3]}' or "
+                           "position, focal_point, view_up, view_angle, parallel_scale, zoom "
+                           "(default: the automatic view)", type=json.loads)
+    fill: float = _option(0.8, "--fill", "share of the picture the mesh fills (automatic "
+                          "camera)", type=float)
+    color: str = _option("none", "--color", "colour the surface by the field's magnitude, or "
+                         "not", choices=COLORS)
+    colormap: object = _option("viridis", "--colormap", "colormap of --color magnitude",
+                               choices=("viridis", "gray"))
+    scalar_range: tuple = None
+    scalar_bar: bool = _option(False, "--scalar-bar", "add a colour legend",
+                               action="store_true")
+    title: str = None
+    max_glyphs: int = _option(None, "--glyphs", "glyphs at most (about; default one per 600 "
+                              "pixels)", type=int)
+    glyph_scale: float = _option(1.0, "--glyph-scale", "glyph length factor", type=float)
+    glyph_length: str = _option("even", "--glyph-length", "even lengths, or in proportion to "
+                                "the magnitude", choices=GLYPH_LENGTHS)
+    tensor_glyph: str = _option("cross", "--tensor-glyph", "tensors as principal crosses or "
+                                "ellipses", choices=TENSOR_GLYPHS)
+    streamline_count: int = _option(None, "--lines", "streamline / hatching seeds", type=int)
+    streamline_length: float = _option(None, "--line-length", "half length of a streamline "
+                                       "or hatching stroke (default 12% / 1.2% of the "
+                                       "diagonal)", type=float)
+    streamline_separation: float = _option(None, "--separation", "streamlines: keep lines of "
+                                           "a family this far apart", type=float)
+    lic_length: int = _option(None, "--lic-length", "LIC: pixels each way (default a "
+                              "thirtieth of the picture)", type=int)
+    singularity_radius: float = _option(0.012, "--singularity-radius", "radius of the "
+                                        "singularity spheres, share of the diagonal",
+                                        type=float)
+    lighting: bool = True
+    background: tuple = (1.0, 1.0, 1.0)
+    surface_color: tuple = None
+    line_width: float = None
+    line_color: tuple = (0.08, 0.08, 0.08)
+    rng: int = _option(0, "--seed", "random seed (glyph places, seeds, LIC noise)", type=int)
+    use_display: bool = True
+
+    def __post_init__(self):
+        if self.style not in STYLES:
+            raise ValueError("style must be one of %s, got %r" % (", ".join(STYLES), self.style))
+        for name, allowed in (("color", COLORS), ("glyph_length", GLYPH_LENGTHS),
+                              ("tensor_glyph", TENSOR_GLYPHS)):
+            if getattr(self, name) not in allowed:
+                raise ValueError("%s must be one of %s, got %r"
+                                 % (name, ", ".join(allowed), getattr(self, name)))
+        try:
+            width, height = (int(x) for x in self.size)
+        except (TypeError, ValueError):
+            raise ValueError("size must be (width, height)") from None
+        if not (1 <= width <= 8192 and 1 <= height <= 8192):
+            raise ValueError("size must be (width, height) within 1..8192")
+        if not 0.05 <= self.fill <= 1.0:
+            raise ValueError("fill must be within 0.05..1, got %r" % (self.fill,))
+        for name in ("max_glyphs", "streamline_count", "lic_length"):
+            value = getattr(self, name)
+            if value is not None and value < 1:
+                raise ValueError("%s must be at least 1, got %r" % (name, value))
+        if not self.singularity_radius > 0:
+            raise ValueError("singularity_radius must be positive")
+
+    @property
+    def plain_color(self):
+        """The surface's colour when it is not coloured by values: warm paper for hatching,
+        light grey otherwise."""
+        if self.surface_color is not None:
+            return tuple(self.surface_color)
+        return (0.97, 0.95, 0.9) if self.style == "hatching" else (0.85, 0.85, 0.85)
+
+    @classmethod
+    def add_arguments(cls, parser):
+        """Adds the options that have a flag to an argparse ``parser`` (defaults: None, so
+        :meth:`from_arguments` keeps the dataclass's)."""
+        for f in dataclasses.fields(cls):
+            if not f.metadata:
+                continue
+            keywords = dict(f.metadata["argparse"])
+            if f.name == "style":
+                keywords["choices"] = STYLES
+            default = f.default
+            shown = "x".join(map(str, default)) if f.name == "size" else default
+            text = f.metadata["help"]
+            if keywords.get("action") != "store_true":
+                text += " (default: %s)" % ("automatic" if default is None else shown)
+                keywords["default"] = None
+            parser.add_argument(f.metadata["flag"], dest=f.name, help=text.replace("%", "%%"),
+                                **keywords)
+
+    @classmethod
+    def from_arguments(cls, args):
+        """The options of parsed arguments (:meth:`add_arguments`), the rest at defaults."""
+        given = {}
+        for f in dataclasses.fields(cls):
+            value = getattr(args, f.name, None) if f.metadata else None
+            if value is not None and value is not False:
+                given[f.name] = value
+        return cls(**given)
+
+
+def _singularity_pairs(singularities):
+    """``(vertices, index)`` int arrays from a Singularities answer, ``(vertex, index)`` pairs or
+    a dict vertex -> index (fieldspace.export.singularity_pairs); only the signs and relative
+    sizes of the indices matter here."""
+    if hasattr(singularities, "vertices") and hasattr(singularities, "index"):
+        return (np.asarray(singularities.vertices, dtype=np.int64).reshape(-1),
+                np.asarray(singularities.index, dtype=np.int64).reshape(-1))
+    from .export import singularity_pairs
+    pairs = singularity_pairs(singularities)
+    return pairs[:, 0], pairs[:, 1]
+
+
+# Singularity colours by the sign of the index.
+POSITIVE_COLOR = (0.9, 0.1, 0.1)
+NEGATIVE_COLOR = (0.1, 0.3, 0.95)
+
+
+def _spheres_polydata(centers, radii, colors):
+    """One triangulated sphere per centre, coloured per cell."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkFiltersSources import vtkSphereSource
+    source = vtkSphereSource()
+    source.SetThetaResolution(16)
+    source.SetPhiResolution(12)
+    source.SetRadius(1.0)
+    source.Update()
+    unit = source.GetOutput()
+    P = vtk_to_numpy(unit.GetPoints().GetData()).astype(np.float64)
+    T = vtk_to_numpy(unit.GetPolys().GetConnectivityArray()).reshape(-1, 3)
+    k = len(centers)
+    pts = (P[None] * np.asarray(radii)[:, None, None] + centers[:, None, :]).reshape(-1, 3)
+    tris = (T[None] + (np.arange(k) * len(P))[:, None, None]).reshape(-1)
+    points = vtkPoints()
+    points.SetData(numpy_to_vtk(np.ascontiguousarray(pts), deep=True))
+    cells = vtkCellArray()
+    cells.SetData(numpy_to_vtkIdTypeArray(np.arange(0, len(tris) + 1, 3, dtype=np.int64), deep=True),
+                  numpy_to_vtkIdTypeArray(tris.astype(np.int64), deep=True))
+    poly = vtkPolyData()
+    poly.SetPoints(points)
+    poly.SetPolys(cells)
+    rgb = np.repeat((np.clip(colors, 0, 1) * 255).astype(np.uint8), len(T), axis=0)
+    data = numpy_to_vtk(np.ascontiguousarray(rgb), deep=True)
+    data.SetName("colors")
+    poly.GetCellData().SetScalars(data)
+    return poly
+
+
+def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
+           singularities=None, **overrides):
+    """Renders the mesh ``(V, F)`` with ``field`` and writes ``out`` (if given: ``.png``, or
+    ``.jpg`` / ``.jpeg`` for JPEG; any other extension is refused before drawing).
 
     - ``field``/``kind``: as in fieldspace.fields (vectors ``(F, 3)``, n-fields ``(F, n, 3)``,
       tensors ``(F, 3, 3)``), or None for the bare surface.
-    - ``style``: ``"glyphs"`` (about ``max_glyphs`` glyphs spread evenly; arms scaled by
-      magnitude unless ``normalize=False``; ``glyph_scale`` scales them; tensors as principal
-      crosses or, with ``tensor_glyph="ellipse"``, ellipses with semi-axes ``|k1| d1``,
-      ``|k2| d2``, red where ``k1 >= 0``, blue elsewhere), ``"streamlines"``
-      (``streamline_count`` seeds, half length ``streamline_length``; n-fields and tensors draw
-      every line family; default about one seed per 2500 pixels, drawn in ``line_color``;
-      ``streamline_separation``: evenly spaced lines, see streamlines.space_lines), ``"lic"``
-      (line integral convolution in image space, :func:`lic`, ``lic_length`` pixels each way)
-      or ``"surface"`` (colour only).
-    - the surface is coloured by ``scalars`` (``(F,)``, default the field's magnitude:
-      fieldspace.fields.magnitude) through the colormap over ``scalar_range`` (default the
-      values' min and max); ``scalar_bar`` adds a legend titled ``title``. ``colorize=False``
-      (and no ``scalars``): a plain ``surface_color`` surface, e.g. for hatching.
-    - ``camera``: None (look from ``(1, -1.6, 0.9)`` with z up, framing the mesh) or a dict with
+    - ``options``: a :class:`RenderOptions` (default: its defaults); ``overrides``: any of its
+      fields by name, e.g. ``render(V, F, field, style="lic", size=(400, 300))``.
+    - ``scalars``: ``(F,)`` values that colour the surface (through ``colormap`` over
+      ``scalar_range``, default their min and max; a constant gets the colormap's middle);
+      with ``color="magnitude"`` the field's magnitude (fieldspace.fields.magnitude).
+    - ``singularities``: spheres at singular vertices, red for a positive index, blue for a
+      negative one, radius ``singularity_radius`` times the bounding box diagonal (times the
+      square root of the index over the smallest one): a Singularities answer
+      (``client.singularities``) or ``(vertex, index)`` pairs.
+    - Styles: ``"glyphs"``: about ``max_glyphs`` glyphs spread evenly (arrows, n-crosses, tensor
+      crosses with the maximum direction red and the minimum blue, or ellipses with semi-axes
+      ``|k1| d1``, ``|k2| d2``, red where ``k1 >= 0``). ``"streamlines"``: ``streamline_count``
+      seeds (default one per 2500 pixels), half length ``streamline_length`` (12% of the
+      diagonal), every line family. ``"hatching"``: the same with one short stroke (1.2% of the
+      diagonal) per 90 pixels on a plain surface. ``"lic"``: line integral convolution in image
+      space (:func:`lic`, ``lic_length`` pixels each way), contrast stretched. ``"surface"``.
+    - ``camera``: None: the automatic view (:func:`automatic_view`: up and side from the
+      principal axes), centred, the mesh filling ``fill`` of the picture; or a dict with
       ``position``, ``focal_point``, ``view_up``, ``view_angle`` (degrees) and
       ``parallel_scale`` (parallel projection: half the view's height), or ``direction``
-      (automatic framing from that side), plus ``azimuth``, ``elevation``, ``zoom``.
+      (automatic framing from that side; ``view_up`` defaults to the automatic one), plus
+      ``azimuth``, ``elevation``, ``zoom``.
     - ``lighting=False`` shows the colormap's colours unshaded (flat ambient light).
     - ``use_display``: use ``DISPLAY`` when it is set; else (or when False) a private Xvfb.
 
     Returns a dict: ``image`` (``(h, w, 3)`` uint8, top row first), ``camera`` (the camera
-    used, in the dict form above), ``scalar_range``, ``glyphs`` (count), ``lines`` (count).
+    used, in the dict form above), ``scalar_range``, ``glyphs`` (count), ``lines`` (count),
+    ``singularities`` (spheres drawn).
     """
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
     from vtkmodules.vtkCommonCore import vtkLookupTable, vtkPoints
@@ -507,19 +862,24 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
     importlib.import_module("vtkmodules.vtkRenderingOpenGL2")
     importlib.import_module("vtkmodules.vtkRenderingFreeType")
 
-    if tensor_glyph not in ("cross", "ellipse"):
-        raise ValueError("tensor_glyph must be 'cross' or 'ellipse', got %r" % (tensor_glyph,))
-    if style not in STYLES:
-        raise ValueError("style must be one of %s, got %r" % (", ".join(STYLES), style))
-    width, height = (int(size[0]), int(size[1]))
-    if not (1 <= width <= 8192 and 1 <= height <= 8192):
-        raise ValueError("size must be (width, height) within 1..8192")
+    o = options if options is not None else RenderOptions()
+    if not isinstance(o, RenderOptions):
+        raise TypeError("options must be a RenderOptions")
+    if overrides:
+        unknown = set(overrides) - {f.name for f in dataclasses.fields(RenderOptions)}
+        if unknown:
+            raise TypeError("render() got unknown options: %s" % ", ".join(sorted(unknown)))
+        o = dataclasses.replace(o, **overrides)
+    if out is not None:
+        image_format(out)
+    width, height = (int(o.size[0]), int(o.size[1]))
     V, F = fl.as_mesh(V, F)
     a = None
     if field is not None:
         a, kind, n = fl.check_field(V, F, field, kind)
-    if scalars is None and a is not None and colorize:
+    if scalars is None and a is not None and o.color == "magnitude":
         scalars = fl.magnitude(a, kind)
+    scalar_range = o.scalar_range
     if scalars is not None:
         scalars = np.asarray(scalars, dtype=np.float64).reshape(-1)
         if len(scalars) != len(F):
@@ -534,6 +894,13 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
             half = max(0.5 * abs(middle), 0.5)
             lo, hi = middle - half, middle + half
         scalar_range = (lo, hi)
+    sing_vertices = sing_index = None
+    if singularities is not None:
+        sing_vertices, sing_index = _singularity_pairs(singularities)
+        keep = sing_index != 0
+        sing_vertices, sing_index = sing_vertices[keep], sing_index[keep]
+        if len(sing_vertices) and (sing_vertices.min() < 0 or sing_vertices.max() >= len(V)):
+            raise ValueError("singularities: vertex out of range 0..%d" % (len(V) - 1))
 
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if len(V) else 1.0
     total_area = float(fl.face_areas(V, F).sum())
@@ -559,7 +926,7 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
         values.SetName("magnitude")
         surface.GetCellData().SetScalars(values)
         lut = vtkLookupTable()
-        table = colormap(colormap_name)
+        table = colormap(o.colormap)
         lut.SetNumberOfTableValues(len(table))
         for i, c in enumerate(table):
             lut.SetTableValue(i, float(c[0]), float(c[1]), float(c[2]), 1.0)
@@ -571,8 +938,8 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
         mapper.ScalarVisibilityOn()
     else:
         mapper.ScalarVisibilityOff()
-        actor.GetProperty().SetColor(*surface_color)
-    if lighting:
+        actor.GetProperty().SetColor(*o.plain_color)
+    if o.lighting:
         # Smooth shading from vertex normals; the colours stay per face.
         from vtkmodules.vtkFiltersCore import vtkPolyDataNormals
         normals = vtkPolyDataNormals()
@@ -586,29 +953,30 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
     else:
         mapper.SetInputData(surface)
     prop = actor.GetProperty()
-    if lighting:
+    if o.lighting:
         prop.SetAmbient(0.25)
         prop.SetDiffuse(0.75)
         prop.SetSpecular(0.1)
+        prop.SetInterpolationToGouraud()
     else:
         prop.SetAmbient(1.0)
         prop.SetDiffuse(0.0)
         prop.SetSpecular(0.0)
-    if lighting:
-        prop.SetInterpolationToGouraud()
-    else:
         prop.SetInterpolationToFlat()
 
     overlays = []
     n_glyphs, n_lines = 0, 0
-    if a is not None and style == "glyphs":
+    line_width = o.line_width if o.line_width is not None else \
+        (1.0 if o.style == "hatching" else 1.5)
+    if a is not None and o.style == "glyphs":
         mag = fl.magnitude(a, kind)
         allowed = mag > 1e-12 * (mag.max() if len(mag) else 0.0)
-        faces = glyph_faces(V, F, max_glyphs, rng=rng, allowed=allowed)
-        arm = 0.8 * glyph_scale * math.sqrt(total_area / max(len(faces), 1))
+        count = o.max_glyphs or max(50, width * height // 600)
+        faces = glyph_faces(V, F, count, rng=o.rng, allowed=allowed)
+        arm = 0.8 * o.glyph_scale * math.sqrt(total_area / max(len(faces), 1))
         if len(faces):
-            starts, ends, colors = _glyph_segments(V, F, a, kind, faces, arm, normalize,
-                                                   tensor_glyph)
+            starts, ends, colors = _glyph_segments(V, F, a, kind, faces, arm,
+                                                   o.glyph_length == "magnitude", o.tensor_glyph)
             # Lift glyphs off the surface (along their face's normal) so that the depth test
             # keeps them where the surface curves away under their flat arms.
             lift = max(0.002 * diag, 0.1 * arm)
@@ -616,26 +984,37 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
             offset = lift * np.repeat(fl.face_normals(V, F)[faces], per_glyph, axis=0)
             overlays.append(_segments_polydata(starts + offset, ends + offset, colors))
             n_glyphs = len(faces)
-    elif a is not None and style == "streamlines":
+    elif a is not None and o.style in ("streamlines", "hatching"):
         m = 1 if kind == fl.VECTOR else (4 if kind == fl.TENSOR else a.shape[1])
         families = len(sl.line_families(kind, m))
-        count = streamline_count or max(20, width * height // (2500 * families))
-        length = streamline_length or 0.12 * diag
-        lines = sl.trace_streamlines(V, F, a, kind=kind, count=count, rng=rng,
+        if o.style == "hatching":
+            count = o.streamline_count or max(20, width * height // (90 * families))
+            length = o.streamline_length or 0.012 * diag
+        else:
+            count = o.streamline_count or max(20, width * height // (2500 * families))
+            length = o.streamline_length or 0.12 * diag
+        lines = sl.trace_streamlines(V, F, a, kind=kind, count=count, rng=o.rng,
                                      max_length=length, max_faces=20000,
-                                     separation=streamline_separation)
+                                     separation=o.streamline_separation)
         if len(lines):
             poly = _polylines_polydata(list(lines))
-            rgb = np.tile((np.clip(line_color, 0, 1) * 255).astype(np.uint8), (len(lines), 1))
+            rgb = np.tile((np.clip(o.line_color, 0, 1) * 255).astype(np.uint8),
+                          (len(lines), 1))
             colors = numpy_to_vtk(rgb, deep=True)
             colors.SetName("colors")
             poly.GetCellData().SetScalars(colors)
             overlays.append(poly)
             n_lines = len(lines)
+    spheres = None
+    if sing_vertices is not None and len(sing_vertices):
+        size = np.abs(sing_index).astype(np.float64)
+        radii = o.singularity_radius * diag * np.sqrt(size / size.min())
+        colors = np.where((sing_index > 0)[:, None], POSITIVE_COLOR, NEGATIVE_COLOR)
+        spheres = _spheres_polydata(V[sing_vertices], radii, colors)
 
-    with x_display(width, height, use_existing=use_display):
+    with x_display(width, height, use_existing=o.use_display):
         renderer = vtkRenderer()
-        renderer.SetBackground(*background)
+        renderer.SetBackground(*o.background)
         renderer.AddActor(actor)
         for poly in overlays:
             m = vtkPolyDataMapper()
@@ -648,18 +1027,29 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
             line_actor.GetProperty().SetLineWidth(line_width)
             line_actor.GetProperty().LightingOff()
             renderer.AddActor(line_actor)
+        sphere_actor = None
+        if spheres is not None:
+            m = vtkPolyDataMapper()
+            m.SetInputData(spheres)
+            m.SetScalarModeToUseCellData()
+            m.SetColorModeToDirectScalars()
+            sphere_actor = vtkActor()
+            sphere_actor.SetMapper(m)
+            sphere_actor.GetProperty().SetAmbient(0.45)
+            sphere_actor.GetProperty().SetDiffuse(0.6)
+            renderer.AddActor(sphere_actor)
         aspect = width / height
-        if scalar_bar and lut is not None:
+        if o.scalar_bar and lut is not None:
             from vtkmodules.vtkRenderingAnnotation import vtkScalarBarActor
             split = 0.86
             renderer.SetViewport(0.0, 0.0, split, 1.0)
             aspect *= split
             legend = vtkRenderer()
             legend.SetViewport(split, 0.0, 1.0, 1.0)
-            legend.SetBackground(*background)
+            legend.SetBackground(*o.background)
             bar = vtkScalarBarActor()
             bar.SetLookupTable(lut)
-            bar.SetTitle(title or "magnitude")
+            bar.SetTitle(o.title or "magnitude")
             bar.SetNumberOfLabels(5)
             bar.SetPosition(0.3, 0.12)
             bar.SetWidth(0.4)
@@ -674,7 +1064,8 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
         else:
             legend = None
         bounds = surface.GetBounds()
-        state = _apply_camera(renderer, camera, bounds, V, aspect)
+        automatic = automatic_view(V, F) if len(F) else ((1.0, -1.6, 0.9), (0.0, 0.0, 1.0))
+        state = _apply_camera(renderer, o.camera, bounds, V, aspect, o.fill, automatic)
         window = vtkRenderWindow()
         window.SetOffScreenRendering(1)
         window.SetMultiSamples(0)
@@ -684,58 +1075,73 @@ def render(V, F, field=None, kind=None, out_png=None, style="glyphs", size=(800,
             window.AddRenderer(legend)
         try:
             pixels = _grab(window, vtkWindowToImageFilter, vtk_to_numpy)
-            if style == "lic" and a is not None:
-                length = lic_length or max(8, min(width, height) // 30)
-                pixels = _lic_pass(window, renderer, legend, actor, mapper, V, F, a, kind,
-                                   pixels, width, height, length, rng, numpy_to_vtk,
+            if o.style == "lic" and a is not None:
+                length = o.lic_length or max(8, min(width, height) // 30)
+                pixels = _lic_pass(window, renderer, legend, actor, mapper, sphere_actor, V, F,
+                                   a, kind, pixels, width, height, length, o.rng, numpy_to_vtk,
                                    vtkWindowToImageFilter, vtk_to_numpy)
-            if out_png is not None:
-                _write_png(out_png, pixels, numpy_to_vtk)
+            if out is not None:
+                write_image(out, pixels)
         finally:
             window.Finalize()
     return {"image": pixels, "camera": state, "scalar_range": scalar_range,
-            "glyphs": n_glyphs, "lines": n_lines}
+            "glyphs": n_glyphs, "lines": n_lines,
+            "singularities": 0 if sing_vertices is None else len(sing_vertices)}
 
 
-def _size(text):
+def _read_singularities(path):
+    """Singular vertices and indices from a file: the JSON that ``fieldspace singularities``
+    prints (or that of ``solve``/``smooth``/``align``/``design`` with ``--singularities``: its
+    ``singularities`` object), or Directional's ``.sing`` (``N count``, then ``vertex index``)."""
+    from .export import singularities_from_cli
+    with open(path, encoding="utf-8") as f:
+        text = f.read()
+    if text.lstrip().startswith("{"):
+        data = json.loads(text.strip().splitlines()[-1] if "\n" in text.strip() else text)
+        if isinstance(data.get("singularities"), dict):
+            data = data["singularities"]
+        if "n" not in data or "singularities" not in data:
+            raise ValueError("%s: no singularities in this JSON (the output of `fieldspace "
+                             "singularities` has n and singularities)" % path)
+        return singularities_from_cli(data)[1]
+    numbers = text.split()
     try:
-        w, h = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError("size is WIDTHxHEIGHT, e.g. 800x600") from None
-    return w, h
+        count = int(numbers[1])
+        pairs = np.array([int(x) for x in numbers[2:]], dtype=np.int64).reshape(-1, 2)
+    except (IndexError, ValueError):
+        raise ValueError("%s: neither the JSON of `fieldspace singularities` nor a .sing file "
+                         "(N count, then vertex index lines)" % path) from None
+    if len(pairs) != count:
+        raise ValueError("%s: header says %d singularities, file has %d" % (path, count,
+                                                                            len(pairs)))
+    return pairs
 
 
 def main(argv=None):
-    """python3 -m fieldspace.render MESH [FIELD_FILE] --out PNG: draws the mesh and a field file
-    of the fieldspace CLI (glyphs, streamlines or colour only) into a PNG, without a display."""
+    """python3 -m fieldspace.render MESH [FIELD_FILE] --out FILE.png|.jpg: draws the mesh and a
+    field file of the fieldspace CLI (glyphs, streamlines, hatching, LIC or the bare surface)
+    into a picture, without a display."""
     from . import mesh_io
     from .errors import FieldspaceError
 
     parser = argparse.ArgumentParser(prog="python3 -m fieldspace.render",
                                      description=main.__doc__)
     mesh_io.add_field_arguments(parser)
-    parser.add_argument("--out", required=True, help="the PNG to write")
-    parser.add_argument("--style", choices=STYLES, default="glyphs")
-    parser.add_argument("--separation", type=float, default=None,
-                        help="streamlines: keep lines of a family this far apart")
-    parser.add_argument("--size", type=_size, default=(800, 600), help="WIDTHxHEIGHT")
-    parser.add_argument("--camera", type=json.loads, default=None,
-                        help='JSON, e.g. \'{"direction": [0, -1, 0.3]}\' or position, '
-                        'focal_point, view_up, view_angle, parallel_scale, zoom')
-    parser.add_argument("--scalar-bar", action="store_true", help="add a colour legend")
-    parser.add_argument("--glyphs", type=int, default=3000, help="glyphs at most (about)")
-    parser.add_argument("--lines", type=int, default=None, help="streamline seeds")
-    parser.add_argument("--line-length", type=float, default=None,
-                        help="half length of a streamline (default 12%% of the diagonal)")
+    parser.add_argument("--out", required=True, help="the picture to write (.png, .jpg, .jpeg)")
+    parser.add_argument("--singularities", default=None, metavar="FILE",
+                        help="spheres at singular vertices (red +, blue -): the JSON "
+                        "`fieldspace singularities` prints, or a .sing file")
+    RenderOptions.add_arguments(parser)
     args = parser.parse_args(argv)
     try:
+        options = RenderOptions.from_arguments(args)
+        image_format(args.out)
+        singularities = _read_singularities(args.singularities) if args.singularities else None
         V, F, field, kind = mesh_io.load_mesh_and_field(
             args.mesh, args.field, args.kind, args.n, server=args.server,
             token=mesh_io.read_token(args.token), tls=mesh_io.tls_arguments(args))
-        result = render(V, F, field, kind, out_png=args.out, style=args.style, size=args.size,
-                        camera=args.camera, scalar_bar=args.scalar_bar, max_glyphs=args.glyphs,
-                        streamline_count=args.lines, streamline_length=args.line_length,
-                        streamline_separation=args.separation)
+        result = render(V, F, field, kind, out=args.out, options=options,
+                        singularities=singularities)
     except (OSError, ValueError, RuntimeError) as e:
         print("fieldspace: render failed: %s" % e, file=sys.stderr)
         return 1
@@ -743,7 +1149,8 @@ def main(argv=None):
         print("fieldspace: %s" % e, file=sys.stderr)
         return 1
     print(json.dumps({"out": args.out, "glyphs": result["glyphs"], "lines": result["lines"],
-                      "camera": result["camera"], "scalar_range": result["scalar_range"]}))
+                      "singularities": result["singularities"], "camera": result["camera"],
+                      "scalar_range": result["scalar_range"]}))
     return 0
 
 
