@@ -7,7 +7,8 @@ principal curvature direction (`Align`), lifts it, and writes into --out-dir:
     field.vtu        the mesh with both directions of the line field per face (ParaView, meshio)
     field.rawfield   the same in Directional's format, field.sing its singularities
     hatching.vtk     the hatching strokes traced on the field, as VTK polylines
-    hatching.png     the picture (VTK, off screen: no GPU or display needed)
+    hatching.png     the picture (VTK, off screen: no GPU or display needed): render's hatching
+                     style with its defaults, singular vertices as spheres
 
 The mesh is --mesh (an .obj/.off/.ply file; default the shared fertility_28k.obj next to the
 checkout when it exists) or else a torus made here. The README's picture is this example's
@@ -41,9 +42,6 @@ def main():
     parser.add_argument("--dim", type=int, default=400, help="basis dimension")
     parser.add_argument("--out-dir", default="fieldspace-hatching")
     parser.add_argument("--size", default="900x600", help="picture size WxH")
-    parser.add_argument("--view", default=None,
-                        help="camera: 'dx,dy,dz' (looking from that side) and optionally "
-                             "';ux,uy,uz' (the up direction); default: render's automatic camera")
     args = parser.parse_args()
     width, height = (int(x) for x in args.size.split("x"))
     os.makedirs(args.out_dir, exist_ok=True)
@@ -70,19 +68,15 @@ def main():
     strokes = streamlines.hatching(V, F, lines_field, kind="nfield", count=4000,
                                    stroke_length=0.03 * diag)
     export.write_polylines_vtk(out("hatching.vtk"), strokes.lines)
-    camera = None
-    if args.view:
-        parts = [[float(x) for x in p.split(",")] for p in args.view.split(";")]
-        camera = {"direction": parts[0]}
-        if len(parts) > 1:
-            camera["view_up"] = parts[1]
-    picture = render.render(V, F, lines_field, "nfield", out_png=out("hatching.png"),
-                            camera=camera, style="streamlines", size=(width, height), streamline_count=6000,
-                            streamline_length=0.012 * diag, line_width=1.0, colorize=False,
-                            surface_color=(0.97, 0.95, 0.9), line_color=(0.1, 0.1, 0.15))
+    # The picture with render's defaults for hatching (automatic view, plain paper, strokes),
+    # and the singular vertices as spheres (red: positive index, blue: negative).
+    picture = render.render(V, F, lines_field, "nfield", out=out("hatching.png"),
+                            style="hatching", size=(width, height), singularities=sing)
     covered = float(np.mean(np.any(picture["image"] < 250, axis=2)))
     print(json.dumps({"faces": len(F), "strokes": len(strokes.lines),
-                      "picture_lines": picture["lines"], "covered_fraction": round(covered, 3),
+                      "picture_lines": picture["lines"],
+                      "picture_singularities": picture["singularities"],
+                      "covered_fraction": round(covered, 3),
                       "files": sorted(os.listdir(args.out_dir))}))
     print("wrote field.vtu, field.rawfield, field.sing, hatching.vtk and hatching.png to %s"
           % args.out_dir)

@@ -1,10 +1,13 @@
 """Pictures of a mesh and its field with VTK, on machines with no GPU and no display.
 
-:func:`render` draws the surface coloured by the field's magnitude (viridis, optional scalar
-bar) with glyphs (vectors as arrows, n-fields as n-crosses, tensors as principal crosses: the
-maximum direction red, the minimum blue, arm lengths proportional to the principal values; or
-ellipses), streamlines / hatching strokes (fieldspace.streamlines) or a line integral
-convolution texture, from an automatic camera that frames the mesh or a given one.
+:func:`render` draws the surface (plain, or coloured by the field's magnitude or given values)
+with glyphs of one length (vectors as arrows, n-fields as n-crosses, tensors as principal
+crosses: the maximum direction red, the minimum blue; or ellipses), streamlines, hatching
+strokes (fieldspace.streamlines) or a line integral convolution texture, and singular vertices
+as spheres coloured by the sign of their index, from an automatic view (:func:`automatic_view`:
+up axis and side from the shape's principal axes) or a given camera. :class:`RenderOptions`
+holds every option and its default; the command line (``python3 -m fieldspace.render``, which
+``fieldspace render`` runs) maps its flags onto it.
 
 VTK is the field's standard library (ParaView, 3D Slicer, PyVista build on it) and Debian ships
 it (python3-vtk9); it renders with Mesa's software OpenGL into an off-screen buffer, through a
@@ -805,7 +808,8 @@ def _spheres_polydata(centers, radii, colors):
     points = vtkPoints()
     points.SetData(numpy_to_vtk(np.ascontiguousarray(pts), deep=True))
     cells = vtkCellArray()
-    cells.SetData(numpy_to_vtkIdTypeArray(np.arange(0, len(tris) + 1, 3, dtype=np.int64), deep=True),
+    offsets = np.arange(0, len(tris) + 1, 3, dtype=np.int64)
+    cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True),
                   numpy_to_vtkIdTypeArray(tris.astype(np.int64), deep=True))
     poly = vtkPolyData()
     poly.SetPoints(points)
@@ -837,9 +841,10 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
       crosses with the maximum direction red and the minimum blue, or ellipses with semi-axes
       ``|k1| d1``, ``|k2| d2``, red where ``k1 >= 0``). ``"streamlines"``: ``streamline_count``
       seeds (default one per 2500 pixels), half length ``streamline_length`` (12% of the
-      diagonal), every line family. ``"hatching"``: the same with one short stroke (1.2% of the
-      diagonal) per 90 pixels on a plain surface. ``"lic"``: line integral convolution in image
-      space (:func:`lic`, ``lic_length`` pixels each way), contrast stretched. ``"surface"``.
+      diagonal), every line family. ``"hatching"``: the same with one short stroke (half length
+      1.2% of the diagonal) per 90 pixels on a plain surface. ``"lic"``: line integral
+      convolution in image space (:func:`lic`, ``lic_length`` pixels each way), contrast
+      stretched (:func:`stretch_contrast`). ``"surface"``.
     - ``camera``: None: the automatic view (:func:`automatic_view`: up and side from the
       principal axes), centred, the mesh filling ``fill`` of the picture; or a dict with
       ``position``, ``focal_point``, ``view_up``, ``view_angle`` (degrees) and
