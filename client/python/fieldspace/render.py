@@ -691,12 +691,14 @@ class RenderOptions:
                                 "the magnitude", choices=GLYPH_LENGTHS)
     tensor_glyph: str = _option("cross", "--tensor-glyph", "tensors as principal crosses or "
                                 "ellipses", choices=TENSOR_GLYPHS)
-    streamline_count: int = _option(None, "--lines", "streamline / hatching seeds", type=int)
+    streamline_count: int = _option(None, "--lines", "streamline / hatching seeds (default one "
+                                    "per 2500 / 90 pixels)", type=int)
     streamline_length: float = _option(None, "--line-length", "half length of a streamline "
                                        "or hatching stroke (default 12% / 1.2% of the "
                                        "diagonal)", type=float)
     streamline_separation: float = _option(None, "--separation", "streamlines: keep lines of "
-                                           "a family this far apart", type=float)
+                                           "a family this far apart (default: not spaced)",
+                                           type=float)
     lic_length: int = _option(None, "--lic-length", "LIC: pixels each way (default a "
                               "thirtieth of the picture)", type=int)
     singularity_radius: float = _option(0.012, "--singularity-radius", "radius of the "
@@ -755,8 +757,11 @@ class RenderOptions:
             shown = "x".join(map(str, default)) if f.name == "size" else default
             text = f.metadata["help"]
             if keywords.get("action") != "store_true":
-                text += " (default: %s)" % ("automatic" if default is None else shown)
+                if "default" not in text:
+                    text += " (default: %s)" % ("automatic" if default is None else shown)
                 keywords["default"] = None
+                if "choices" not in keywords:
+                    keywords["metavar"] = f.metadata["flag"][2:].upper().replace("-", "_")
             parser.add_argument(f.metadata["flag"], dest=f.name, help=text.replace("%", "%%"),
                                 **keywords)
 
