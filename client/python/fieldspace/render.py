@@ -669,7 +669,7 @@ class RenderOptions:
     - ``fill``: the share of the picture's limiting dimension the automatic camera gives the mesh.
     """
 
-    style: str = _option("glyphs", "--style", "what to draw", choices=None)
+    style: str = _option("glyphs", "--style", "what to draw", choices=STYLES)
     size: tuple = _option((800, 600), "--size", "WIDTHxHEIGHT", type=_size)
     camera: dict = _option(None, "--camera", "JSON, e.g. '{\"direction\": [0, -1, 0.3]}' or "
                            "position, focal_point, view_up, view_angle, parallel_scale, zoom "
@@ -751,8 +751,6 @@ class RenderOptions:
             if not f.metadata:
                 continue
             keywords = dict(f.metadata["argparse"])
-            if f.name == "style":
-                keywords["choices"] = STYLES
             default = f.default
             shown = "x".join(map(str, default)) if f.name == "size" else default
             text = f.metadata["help"]
@@ -1003,7 +1001,14 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
         else:
             count = o.streamline_count or max(20, width * height // (2500 * families))
             length = o.streamline_length or 0.12 * diag
-        lines = sl.trace_streamlines(V, F, a, kind=kind, count=count, rng=o.rng,
+        seeds = None
+        if o.style == "hatching":
+            # Strokes spread evenly (one seed face per grid cell, as glyphs): random seeds clump.
+            mag = fl.magnitude(a, kind)
+            faces = glyph_faces(V, F, count, rng=o.rng,
+                                allowed=mag > 1e-6 * (mag.max() if len(mag) else 0.0))
+            seeds = (faces, np.full((len(faces), 3), 1.0 / 3.0))
+        lines = sl.trace_streamlines(V, F, a, kind=kind, count=count, seeds=seeds, rng=o.rng,
                                      max_length=length, max_faces=20000,
                                      separation=o.streamline_separation)
         if len(lines):
