@@ -377,6 +377,24 @@ class RenderTest(unittest.TestCase):
         self.assertGreater(dark["even"] / glyphs, 5.0)
         self.assertGreater(dark["even"], 4 * dark["magnitude"])
 
+    def test_no_glyph_fringes_the_outline(self):
+        # Looking at the unit sphere with a parallel camera: its outline is the unit circle.
+        # Glyphs on faces seen edge-on would stick out of it by their half arm; they are left
+        # out, and the ones drawn cover the disc.
+        size, scale = 300, 1.25
+        camera = {"position": (0, 0, 10), "focal_point": (0, 0, 0), "view_up": (0, 1, 0),
+                  "parallel_scale": scale}
+        field = unit_tangent_field(self.V, self.F, np.ones(len(self.F)))
+        cross = fl.nfield_from_representative(self.V, self.F, field, 4)
+        result = rd.render(self.V, self.F, cross, "nfield", size=(size, size), camera=camera,
+                           max_glyphs=600)
+        dark = np.all(result["image"] < 60, axis=2)
+        rows, cols = np.nonzero(dark)
+        radius = np.hypot(cols + 0.5 - size / 2, size / 2 - rows - 0.5) / (size / 2) * scale
+        self.assertGreater(len(radius), 1000)
+        self.assertLess(float(radius.max()), 1.0)
+        self.assertGreater(float(np.mean(radius > 0.7)), 0.2)
+
     def test_singularity_markers_sit_on_their_vertices(self):
         V, F = shapes.ellipsoid((1.2, 0.6, 3.0), 4, up="y")
         size = (400, 300)

@@ -774,6 +774,19 @@ class RenderOptions:
         return cls(**given)
 
 
+def _facing(V, F, camera):
+    """Per face, |cos| of the angle between its normal and the line of sight to its centre
+    (the camera state of :func:`_apply_camera`; parallel projections look along one axis)."""
+    centers = V[F].mean(axis=1)
+    if "parallel_scale" in camera:
+        sight = np.array(camera["position"]) - np.array(camera["focal_point"])
+        sight = np.broadcast_to(sight / np.linalg.norm(sight), centers.shape)
+    else:
+        sight = np.array(camera["position"]) - centers
+        sight = sight / np.maximum(np.linalg.norm(sight, axis=1), 1e-300)[:, None]
+    return np.abs(np.einsum("ij,ij->i", fl.face_normals(V, F), sight))
+
+
 def _singularity_pairs(singularities):
     """``(vertices, index)`` int arrays from a Singularities answer, ``(vertex, index)`` pairs or
     a dict vertex -> index (fieldspace.export.singularity_pairs); only the signs and relative
@@ -911,7 +924,6 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
             raise ValueError("singularities: vertex out of range 0..%d" % (len(V) - 1))
 
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if len(V) else 1.0
-    total_area = float(fl.face_areas(V, F).sum())
 
     # The surface.
     points = vtkPoints()
@@ -972,6 +984,13 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
         prop.SetSpecular(0.0)
         prop.SetInterpolationToFlat()
 
+    # The camera first: glyphs are placed where it sees the surface.
+    renderer = vtkRenderer()
+    legend_split = 0.86 if o.scalar_bar and lut is not None else None
+    aspect = width / height * (legend_split or 1.0)
+    automatic = automatic_view(V, F) if len(F) else ((1.0, -1.6, 0.9), (0.0, 0.0, 1.0))
+    state = _apply_camera(renderer, o.camera, surface.GetBounds(), V, aspect, o.fill, automatic)
+
     overlays = []
     n_glyphs, n_lines = 0, 0
     line_width = o.line_width if o.line_width is not None else \
@@ -980,8 +999,15 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
         mag = fl.magnitude(a, kind)
         allowed = mag > 1e-12 * (mag.max() if len(mag) else 0.0)
         count = o.max_glyphs or max(50, width * height // 600)
-        faces = glyph_faces(V, F, count, rng=o.rng, allowed=allowed)
-        arm = 0.8 * o.glyph_scale * math.sqrt(total_area / max(len(faces), 1))
+        # Glyphs on faces seen at a grazing angle (within 24 degrees) fringe the outline:
+        # they are left out, at the density the whole surface would have.
+        areas = fl.face_areas(V, F)
+        seen = _facing(V, F, state) > 0.4
+        share = float(areas[allowed & seen].sum() / max(areas[allowed].sum(), 1e-300))
+        faces = glyph_faces(V, F, max(1, round(count * share)), rng=o.rng,
+                            allowed=allowed & seen)
+        arm = 0.8 * o.glyph_scale * math.sqrt(float(areas[allowed & seen].sum())
+                                              / max(len(faces), 1))
         if len(faces):
             starts, ends, colors = _glyph_segments(V, F, a, kind, faces, arm,
                                                    o.glyph_length == "magnitude", o.tensor_glyph)
@@ -1028,7 +1054,6 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
         spheres = _spheres_polydata(V[sing_vertices], radii, colors)
 
     with x_display(width, height, use_existing=o.use_display):
-        renderer = vtkRenderer()
         renderer.SetBackground(*o.background)
         renderer.AddActor(actor)
         for poly in overlays:
@@ -1053,12 +1078,10 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
             sphere_actor.GetProperty().SetAmbient(0.45)
             sphere_actor.GetProperty().SetDiffuse(0.6)
             renderer.AddActor(sphere_actor)
-        aspect = width / height
-        if o.scalar_bar and lut is not None:
+        if legend_split is not None:
             from vtkmodules.vtkRenderingAnnotation import vtkScalarBarActor
-            split = 0.86
+            split = legend_split
             renderer.SetViewport(0.0, 0.0, split, 1.0)
-            aspect *= split
             legend = vtkRenderer()
             legend.SetViewport(split, 0.0, 1.0, 1.0)
             legend.SetBackground(*o.background)
@@ -1078,9 +1101,6 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
             legend.AddActor2D(bar)
         else:
             legend = None
-        bounds = surface.GetBounds()
-        automatic = automatic_view(V, F) if len(F) else ((1.0, -1.6, 0.9), (0.0, 0.0, 1.0))
-        state = _apply_camera(renderer, o.camera, bounds, V, aspect, o.fill, automatic)
         window = vtkRenderWindow()
         window.SetOffScreenRendering(1)
         window.SetMultiSamples(0)
