@@ -568,7 +568,12 @@ class RenderTest(unittest.TestCase):
         sing = self.path("field.sing")
         with open(sing, "w") as f:
             f.write("4 3\n3 1\n40 -1\n41 2\n")
-        for given, count in ((printed, 2), (sing, 3)):
+        nested = self.path("solved.json")  # solve / smooth / align --singularities
+        with open(nested, "w") as f:
+            json.dump({"coefficients": [1.0], "singularities": {
+                "n": 4, "singularities": [{"vertex": 7, "index": -0.5}], "index_sum": -0.5}},
+                f, indent=2)
+        for given, count in ((printed, 2), (sing, 3), (nested, 1)):
             stdout = io.StringIO()
             with contextlib.redirect_stdout(stdout):
                 code = rd.main([mesh, field, "--out", self.path("hatch.jpg"), "--style",

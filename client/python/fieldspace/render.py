@@ -1126,13 +1126,14 @@ def render(V, F, field=None, kind=None, out=None, options=None, scalars=None,
 
 def _read_singularities(path):
     """Singular vertices and indices from a file: the JSON that ``fieldspace singularities``
-    prints (or that of ``solve``/``smooth``/``align``/``design`` with ``--singularities``: its
-    ``singularities`` object), or Directional's ``.sing`` (``N count``, then ``vertex index``)."""
+    prints (or that of ``solve``/``smooth``/``align`` with ``--singularities``: its
+    ``singularities`` object), or Directional's ``.sing`` (``N count``, then ``vertex index``
+    lines)."""
     from .export import singularities_from_cli
     with open(path, encoding="utf-8") as f:
         text = f.read()
     if text.lstrip().startswith("{"):
-        data = json.loads(text.strip().splitlines()[-1] if "\n" in text.strip() else text)
+        data = json.loads(text)
         if isinstance(data.get("singularities"), dict):
             data = data["singularities"]
         if "n" not in data or "singularities" not in data:
