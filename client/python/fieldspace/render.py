@@ -217,8 +217,19 @@ def principal_axes(V, F):
     along them. Vertices are weighted by a third of the area of their faces, so the answer is
     the surface's, not its sampling's."""
     V, F = fl.as_mesh(V, F)
-    weights = np.zeros(len(V))
-    np.add.at(weights, F.reshape(-1), np.repeat(fl.face_areas(V, F) / 3.0, 3))
+    return _principal_axes(V, F, _areas_and_normals(V, F)[0])
+
+
+def _areas_and_normals(V, F):
+    """Face areas ``(F,)`` and unit normals ``(F, 3)`` from one cross product (those of
+    fieldspace.fields, which take one each: this is for large meshes)."""
+    c = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    length = np.linalg.norm(c, axis=1)
+    return 0.5 * length, c / np.where(length > 0, length, 1.0)[:, None]
+
+
+def _principal_axes(V, F, areas):
+    weights = np.bincount(F.reshape(-1), weights=np.repeat(areas / 3.0, 3), minlength=len(V))
     total = weights.sum()
     if total <= 0:
         weights, total = np.ones(len(V)), float(len(V))
@@ -235,11 +246,14 @@ def base_area(V, F, up):
     height (a vase's foot, a bust's cut). A smooth convex bottom scores at most about 0.4%
     (twice the height share), a cut base much more."""
     V, F = fl.as_mesh(V, F)
+    return _base_area(V, F, *_areas_and_normals(V, F), up)
+
+
+def _base_area(V, F, areas, normals, up):
     up = np.asarray(up, dtype=np.float64)
-    areas = fl.face_areas(V, F)
     height = V @ up
     low = height[F].max(axis=1) <= height.min() + 0.002 * (height.max() - height.min())
-    down = fl.face_normals(V, F) @ up < -math.cos(math.radians(10.0))
+    down = normals @ up < -math.cos(math.radians(10.0))
     total = areas.sum()
     return float(areas[low & down].sum() / total) if total > 0 else 0.0
 
@@ -258,12 +272,16 @@ def automatic_view(V, F):
     (+z for y up, -y for z up), turned by 30 degrees about the up axis and raised by 15 degrees:
     never from above or below.
     """
-    _, axes, _ = principal_axes(V, F)
+    V, F = fl.as_mesh(V, F)
+    areas, normals = _areas_and_normals(V, F)
+    _, axes, _ = _principal_axes(V, F, areas)
     thinnest = axes[2]
     candidates = (np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]))
-    # A base counts when the shape has no such flat face on top (a plate has both).
-    bases = [base_area(V, F, c) if base_area(V, F, c) >= 3.0 * base_area(V, F, -c) else 0.0
-             for c in candidates]
+    bases = []
+    for c in candidates:
+        # A base counts when the shape has no such flat face on top (a plate has both).
+        below, above = (_base_area(V, F, areas, normals, s * c) for s in (1.0, -1.0))
+        bases.append(below if below >= 3.0 * above else 0.0)
     across = [abs(float(c @ thinnest)) for c in candidates]
     if max(bases) >= 0.006 and max(bases) >= 3.0 * min(bases):
         up = candidates[int(np.argmax(bases))]
