@@ -18,7 +18,7 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "server"))
-from fs_testlib import Cli, Daemon, check, log, run, torus_obj  # noqa: E402
+from fs_testlib import Cli, Daemon, check, icosphere_obj, log, run, torus_obj  # noqa: E402
 
 
 def interrupted_build(client, address, mesh_id, seed, extra=()):
@@ -177,8 +177,12 @@ def main():
             cli("upload", unnamed, "--format", "stl", expect=2)
 
             # load: a file below the daemon's --data-root, the same mesh as its upload.
-            loaded = cli.json("load", "torus.obj", "--name", "loaded")
-            check(loaded["id"] == mesh["id"] and loaded["name"] == "loaded", "load: %s" % loaded)
+            check(cli.json("load", "torus.obj")["id"] == mesh["id"], "load of the uploaded file")
+            os.makedirs(os.path.join(work, "sub"))
+            with open(os.path.join(work, "sub", "ico.obj"), "w") as f:
+                f.write(icosphere_obj(1)[0])
+            loaded = cli.json("load", "sub/ico.obj", "--name", "ico")
+            check(loaded["num_faces"] == 80 and loaded["name"] == "ico", "load: %s" % loaded)
             rc, _, err = cli("load", "../outside.obj", expect=1)
             check(err.startswith("fieldspace: LoadMesh failed: "), "load outside the root: %r" % err)
             rc, _, err = cli("load", "nothing.obj", expect=1)
