@@ -11,8 +11,8 @@
 
 namespace fieldspace::bench {
 
-// Command-line arguments of one subcommand: the parser shared with fieldspaced and fieldspace
-// (`Args::Parse(argc, argv, switches)`, then `CheckKnown`).
+// Command-line arguments of one subcommand, parsed by the parser shared with fieldspaced and
+// fieldspace against the command table of main.cc.
 using Args = ::fieldspace::CommandLine;
 
 // Minimal JSON writer for flat objects with nested objects and number arrays.

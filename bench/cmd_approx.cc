@@ -132,48 +132,33 @@ absl::StatusOr<BenchSubspace> LoadBenchSubspace(const Args& args, const FieldTyp
                        *std::move(system), basis_seconds,  reduced_watch.Seconds()};
 }
 
-int RunApprox(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"no-kernel-columns"});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "tests", "seed", "basis",
-                                  "min-constraints", "max-constraints", "coarse-dim", "quality",
-                                  "design-mu-c", "biharmonic", "no-kernel-columns"});
-      !st.ok()) {
-    return ReportError(st);
-  }
-  if (args->positional().size() != 1 || !args->Has("dim") || !args->Has("tests")) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench approx MESH --field vector|nfield|tensor [--n N] --dim D "
-        "[--sigma S] --tests K --seed N [--basis local|eigen] [--min-constraints A] "
-        "[--max-constraints B] [--coarse-dim C] [--quality paper|low-modes|smooth] "
-        "[--design-mu-c X] [--biharmonic exact|mixed] [--no-kernel-columns]"));
-  }
-  auto type = FieldTypeFromArgs(*args);
+int RunApprox(const Args& args) {
+  auto type = FieldTypeFromArgs(args);
   if (!type.ok()) return ReportError(type.status());
-  auto tests = args->GetInt("tests", 0);
-  auto seed = args->GetInt("seed", 0);
-  auto min_constraints = args->GetInt("min-constraints", 10);
-  auto max_constraints = args->GetInt("max-constraints", 50);
+  auto tests = args.GetInt("tests", 0);
+  auto seed = args.GetInt("seed", 0);
+  auto min_constraints = args.GetInt("min-constraints", 10);
+  auto max_constraints = args.GetInt("max-constraints", 50);
   for (const auto* v : {&tests, &seed, &min_constraints, &max_constraints}) {
     if (!v->ok()) return ReportError(v->status());
   }
-  auto design_mu_c = args->GetDouble("design-mu-c", kBiharmonicDesignWeights.mu_c);
+  auto design_mu_c = args.GetDouble("design-mu-c", kBiharmonicDesignWeights.mu_c);
   if (!design_mu_c.ok()) return ReportError(design_mu_c.status());
   if (!(*design_mu_c > 0) || !std::isfinite(*design_mu_c)) {
     return ReportError(absl::InvalidArgumentError("--design-mu-c must be finite and > 0"));
   }
-  auto form = BiharmonicFormFromArgs(*args);
+  auto form = BiharmonicFormFromArgs(args);
   if (!form.ok()) return ReportError(form.status());
   if (*tests < 1 || *tests > 100000) {
     return ReportError(absl::InvalidArgumentError("--tests must be in [1, 100000]"));
   }
-  const std::string basis_kind = args->Get("basis").value_or("local");
+  const std::string basis_kind = args.Get("basis").value_or("local");
   if (basis_kind != "local" && basis_kind != "eigen") {
     return ReportError(absl::InvalidArgumentError("--basis must be local or eigen"));
   }
 
   Stopwatch setup_watch;
-  auto mesh = LoadUnitAreaMesh(args->positional()[0]);
+  auto mesh = LoadUnitAreaMesh(args.positional()[0]);
   if (!mesh.ok()) return ReportError(mesh.status());
   auto op = BuildFieldOperator(*mesh, *type);
   if (!op.ok()) return ReportError(op.status());
@@ -182,11 +167,11 @@ int RunApprox(int argc, char** argv) {
   Stopwatch basis_watch;
   std::shared_ptr<const Basis> basis;
   if (basis_kind == "local") {
-    auto local = BuildBenchBasis(*mesh, *op, *args);
+    auto local = BuildBenchBasis(*mesh, *op, args);
     if (!local.ok()) return ReportError(local.status());
     basis = *std::move(local);
   } else {
-    auto dim = args->GetInt("dim", 0);
+    auto dim = args.GetInt("dim", 0);
     if (!dim.ok()) return ReportError(dim.status());
     if (*dim < 1 || *dim > 100000) {
       return ReportError(absl::InvalidArgumentError("--dim must be in [1, 100000]"));

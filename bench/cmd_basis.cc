@@ -44,11 +44,6 @@
 namespace fieldspace::bench {
 namespace {
 
-constexpr char kUsage[] =
-    "usage: fieldspace-bench basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] "
-    "[--threads T] [--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--stats] "
-    "[--tolerance T] [--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes|smooth]";
-
 absl::StatusOr<std::string> ReadWholeFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) return absl::NotFoundError(absl::StrCat("cannot open '", path, "'"));
@@ -113,31 +108,20 @@ absl::Status ExportMtx(const std::string& dir, const Basis& basis, const FieldOp
 
 }  // namespace
 
-int RunBasis(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"stats", "no-kernel-columns"});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "threads", "weights", "save",
-                                  "export-mtx", "seed", "stats", "tolerance", "no-kernel-columns",
-                                  "coarse-dim", "quality"});
-      !st.ok()) {
-    return ReportError(st);
-  }
-  if (args->positional().size() != 1 || !args->Has("dim")) {
-    return ReportError(absl::InvalidArgumentError(kUsage));
-  }
-  auto type = FieldTypeFromArgs(*args);
+int RunBasis(const Args& args) {
+  auto type = FieldTypeFromArgs(args);
   if (!type.ok()) return ReportError(type.status());
-  auto dim = args->GetInt("dim", 0);
+  auto dim = args.GetInt("dim", 0);
   if (!dim.ok()) return ReportError(dim.status());
-  auto sigma = args->GetDouble("sigma", 40.0);
+  auto sigma = args.GetDouble("sigma", 40.0);
   if (!sigma.ok()) return ReportError(sigma.status());
-  auto threads = args->GetInt("threads", 0);
+  auto threads = args.GetInt("threads", 0);
   if (!threads.ok()) return ReportError(threads.status());
-  auto seed = args->GetInt("seed", 0);
+  auto seed = args.GetInt("seed", 0);
   if (!seed.ok()) return ReportError(seed.status());
-  auto tolerance = args->GetDouble("tolerance", BasisOptions().eigen_tolerance);
+  auto tolerance = args.GetDouble("tolerance", BasisOptions().eigen_tolerance);
   if (!tolerance.ok()) return ReportError(tolerance.status());
-  auto coarse_dim = args->GetInt("coarse-dim", 0);
+  auto coarse_dim = args.GetInt("coarse-dim", 0);
   if (!coarse_dim.ok()) return ReportError(coarse_dim.status());
   if (*dim < 1 || *dim > (int64_t{1} << 31) - 1) {
     return ReportError(absl::InvalidArgumentError(absl::StrCat("--dim ", *dim, " out of range")));
@@ -145,7 +129,7 @@ int RunBasis(int argc, char** argv) {
   if (*coarse_dim < 0 || *coarse_dim >= *dim) {
     return ReportError(absl::InvalidArgumentError("--coarse-dim must be in [0, dim)"));
   }
-  auto quality = QualityFromArgs(*args);
+  auto quality = QualityFromArgs(args);
   if (!quality.ok()) return ReportError(quality.status());
   if (*quality != BasisQuality::kPaper && *coarse_dim > 0) {
     return ReportError(
@@ -156,7 +140,7 @@ int RunBasis(int argc, char** argv) {
         absl::InvalidArgumentError(absl::StrCat("--threads ", *threads, " out of range")));
   }
 
-  const std::string mesh_path = args->positional()[0];
+  const std::string mesh_path = args.positional()[0];
   auto mesh = LoadBenchMesh(mesh_path);
   if (!mesh.ok()) return ReportError(mesh.status());
   auto op = BuildFieldOperator(*mesh, *type);
@@ -168,8 +152,8 @@ int RunBasis(int argc, char** argv) {
   options.params.seed = static_cast<uint64_t>(*seed);
   options.threads = static_cast<int32_t>(*threads);
   options.eigen_tolerance = *tolerance;
-  options.kernel_columns = !args->Has("no-kernel-columns");
-  if (const auto weights = args->Get("weights"); weights.has_value()) {
+  options.kernel_columns = !args.Has("no-kernel-columns");
+  if (const auto weights = args.Get("weights"); weights.has_value()) {
     auto w = ReadWeights(*weights, mesh->num_faces());
     if (!w.ok()) return ReportError(w.status());
     options.params.face_weights = std::move(*w);
@@ -184,14 +168,14 @@ int RunBasis(int argc, char** argv) {
   }
   if (!basis.ok()) return ReportError(basis.status());
 
-  if (const auto save = args->Get("save"); save.has_value()) {
+  if (const auto save = args.Get("save"); save.has_value()) {
     auto bytes = ReadWholeFile(mesh_path);
     if (!bytes.ok()) return ReportError(bytes.status());
     const std::string mesh_id =
         absl::StrFormat("crc32c:%08x", Crc32c(bytes->data(), bytes->size()));
     if (auto st = SaveBasisFile(*save, *basis, mesh_id); !st.ok()) return ReportError(st);
   }
-  if (const auto dir = args->Get("export-mtx"); dir.has_value()) {
+  if (const auto dir = args.Get("export-mtx"); dir.has_value()) {
     if (auto st = ExportMtx(*dir, *basis, *op); !st.ok()) return ReportError(st);
   }
 
@@ -218,7 +202,7 @@ int RunBasis(int argc, char** argv) {
                                        *coarse_dim > 0 || *quality != BasisQuality::kPaper,
                                        *quality == BasisQuality::kSmooth, options.threads)) /
                                        (1 << 20));
-  if (args->Has("stats")) {
+  if (args.Has("stats")) {
     const BasisStats& st = basis->stats;
     json.BeginObject("stats")
         .Bool("hodge_factor_used", st.hodge_factor_used)

@@ -21,16 +21,9 @@ double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC;
 
 }  // namespace
 
-int RunCurvature(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"estimator"}); !st.ok()) return ReportError(st);
-  if (args->positional().size() != 1) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench curvature MESH [--estimator jet|normal-differences]"));
-  }
+int RunCurvature(const Args& args) {
   ShapeOperatorOptions options;
-  const std::string estimator = args->Get("estimator").value_or("jet");
+  const std::string estimator = args.Get("estimator").value_or("jet");
   if (estimator == "jet") {
     options.estimator = CurvatureEstimator::kJetFit;
   } else if (estimator == "normal-differences") {
@@ -40,7 +33,7 @@ int RunCurvature(int argc, char** argv) {
         absl::StrCat("--estimator must be jet or normal-differences, got '", estimator, "'")));
   }
   Stopwatch load_clock;
-  auto mesh = LoadBenchMesh(args->positional()[0]);
+  auto mesh = LoadBenchMesh(args.positional()[0]);
   if (!mesh.ok()) return ReportError(mesh.status());
   const double load_s = load_clock.Seconds();
 
@@ -71,7 +64,7 @@ int RunCurvature(int argc, char** argv) {
   };
   JsonWriter json;
   json.BeginObject()
-      .String("mesh", args->positional()[0])
+      .String("mesh", args.positional()[0])
       .Int("faces", mesh->num_faces())
       .Int("vertices", mesh->num_vertices())
       .String("estimator", estimator)

@@ -61,27 +61,12 @@ Eigen::VectorXd RandomUnit(std::mt19937_64& rng, int32_t p) {
 
 }  // namespace
 
-int RunDesign(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"no-full", "full-biharmonic", "no-kernel-columns"});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "dim", "sigma", "seed", "edits", "max-constraints",
-                                  "no-full", "full-biharmonic", "no-kernel-columns", "quality",
-                                  "coarse-dim", "biharmonic"});
-      !st.ok()) {
-    return ReportError(st);
-  }
-  if (args->positional().size() != 1 || !args->Has("dim") || !args->Has("edits")) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench design MESH --field vector|nfield|tensor [--n N] --dim D "
-        "--edits N --seed S [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic] "
-        "[--no-kernel-columns] [--coarse-dim C] [--quality paper|low-modes|smooth] "
-        "[--biharmonic exact|mixed]"));
-  }
-  auto type = FieldTypeFromArgs(*args);
+int RunDesign(const Args& args) {
+  auto type = FieldTypeFromArgs(args);
   if (!type.ok()) return ReportError(type.status());
-  auto edits = args->GetInt("edits", 0);
-  auto seed = args->GetInt("seed", 0);
-  auto max_constraints = args->GetInt("max-constraints", 40);
+  auto edits = args.GetInt("edits", 0);
+  auto seed = args.GetInt("seed", 0);
+  auto max_constraints = args.GetInt("max-constraints", 40);
   for (const auto* v : {&edits, &seed, &max_constraints}) {
     if (!v->ok()) return ReportError(v->status());
   }
@@ -89,9 +74,9 @@ int RunDesign(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError("--edits and --max-constraints must be >= 1"));
   }
 
-  auto form = BiharmonicFormFromArgs(*args);
+  auto form = BiharmonicFormFromArgs(args);
   if (!form.ok()) return ReportError(form.status());
-  auto sub = LoadBenchSubspace(*args, *type);
+  auto sub = LoadBenchSubspace(args, *type);
   if (!sub.ok()) return ReportError(sub.status());
   const ReducedSystem& sys = *sub->system;
 
@@ -190,8 +175,8 @@ int RunDesign(int argc, char** argv) {
   }
 
   double full_factorize_ms = 0, full_solve_ms = 0;
-  const bool full_biharmonic = args->Has("full-biharmonic");
-  if (!args->Has("no-full")) {
+  const bool full_biharmonic = args.Has("full-biharmonic");
+  if (!args.Has("no-full")) {
     ModelProblem problem = s.problem();
     for (FieldConstraint& c : problem.constraints) {
       if (c.hard()) c = {c.face, c.value, 1.0, ConstraintKind::kSoft};

@@ -33,24 +33,10 @@
 
 namespace fieldspace::bench {
 
-int RunEigen(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"full", "no-kernel-columns"});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "count", "dim", "sigma", "seed", "method", "full",
-                                  "coarse-dim", "quality", "no-kernel-columns"});
-      !st.ok()) {
-    return ReportError(st);
-  }
-  if (args->positional().size() != 1 || !args->Has("count") || !args->Has("dim")) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench eigen MESH --field vector|nfield|tensor [--n N] --count K "
-        "--dim D [--sigma S] [--seed N] [--method auto|dense|sparse] [--full] [--coarse-dim C] "
-        "[--quality paper|low-modes|smooth] "
-        "[--no-kernel-columns]"));
-  }
-  auto type = FieldTypeFromArgs(*args);
+int RunEigen(const Args& args) {
+  auto type = FieldTypeFromArgs(args);
   if (!type.ok()) return ReportError(type.status());
-  auto count = args->GetInt("count", 0);
+  auto count = args.GetInt("count", 0);
   if (!count.ok()) return ReportError(count.status());
   if (*count < 1 || *count > 100000) {
     return ReportError(absl::InvalidArgumentError("--count must be in [1, 100000]"));
@@ -58,7 +44,7 @@ int RunEigen(int argc, char** argv) {
   ReducedEigenOptions options;
   options.count = static_cast<int32_t>(*count);
   options.compute_vectors = true;  // the eigenfields are part of the timed work
-  const std::string method = args->Get("method").value_or("auto");
+  const std::string method = args.Get("method").value_or("auto");
   if (method == "dense") {
     options.method = ReducedEigenMethod::kDense;
   } else if (method == "sparse") {
@@ -67,7 +53,7 @@ int RunEigen(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError("--method must be auto, dense or sparse"));
   }
 
-  auto sub = LoadBenchSubspace(*args, *type);
+  auto sub = LoadBenchSubspace(args, *type);
   if (!sub.ok()) return ReportError(sub.status());
 
   Stopwatch solve_watch;
@@ -79,7 +65,7 @@ int RunEigen(int argc, char** argv) {
   int64_t kernel_dimension = 0;
   double kernel_ratio = std::numeric_limits<double>::quiet_NaN();
   double full_seconds = 0;
-  if (args->Has("full")) {
+  if (args.Has("full")) {
     Stopwatch full_watch;
     EigenOptions full_options;
     full_options.count = options.count;

@@ -22,25 +22,17 @@
 
 namespace fieldspace::bench {
 
-int RunKernel(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "poisson"}); !st.ok()) return ReportError(st);
-  if (args->positional().size() != 1) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench kernel MESH --field vector|nfield|tensor [--n N] "
-        "[--poisson multigrid|cholesky]"));
-  }
-  const std::string poisson = args->Get("poisson").value_or("multigrid");
+int RunKernel(const Args& args) {
+  const std::string poisson = args.Get("poisson").value_or("multigrid");
   KernelFieldOptions options;
   if (poisson == "cholesky") {
     options.poisson_solver = PoissonSolver::kCholesky;
   } else if (poisson != "multigrid") {
     return ReportError(absl::InvalidArgumentError("--poisson must be multigrid or cholesky"));
   }
-  auto type = FieldTypeFromArgs(*args);
+  auto type = FieldTypeFromArgs(args);
   if (!type.ok()) return ReportError(type.status());
-  auto mesh = LoadBenchMesh(args->positional()[0]);
+  auto mesh = LoadBenchMesh(args.positional()[0]);
   if (!mesh.ok()) return ReportError(mesh.status());
   Stopwatch op_watch;
   auto op = BuildFieldOperator(*mesh, *type);

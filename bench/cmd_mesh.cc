@@ -32,14 +32,8 @@ int ReportError(const absl::Status& status) {
   }
 }
 
-int RunMesh(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({}); !st.ok()) return ReportError(st);
-  if (args->positional().size() != 1) {
-    return ReportError(absl::InvalidArgumentError("usage: fieldspace-bench mesh FILE"));
-  }
-  auto read = ReadMeshFile(args->positional()[0]);
+int RunMesh(const Args& args) {
+  auto read = ReadMeshFile(args.positional()[0]);
   if (!read.ok()) return ReportError(read.status());
   auto mesh = TriangleMesh::Create(std::move(read->arrays));
   if (!mesh.ok()) return ReportError(mesh.status());

@@ -22,13 +22,6 @@
 #include "core/operators/field_type.h"
 
 namespace fieldspace::bench {
-namespace {
-
-constexpr char kUsage[] =
-    "usage: fieldspace-bench operator MESH --field vector|nfield|tensor [--n N] [--out DIR] "
-    "[--timing]";
-
-}  // namespace
 
 // --field and --n as a FieldType; --n is only read for n-fields.
 absl::StatusOr<FieldType> FieldTypeFromArgs(const Args& args) {
@@ -52,18 +45,12 @@ absl::StatusOr<TriangleMesh> LoadBenchMesh(const std::string& path) {
   return TriangleMesh::Create(std::move(read->arrays));
 }
 
-int RunOperator(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"timing"});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "out", "timing"}); !st.ok()) {
-    return ReportError(st);
-  }
-  if (args->positional().size() != 1) return ReportError(absl::InvalidArgumentError(kUsage));
-  auto type = FieldTypeFromArgs(*args);
+int RunOperator(const Args& args) {
+  auto type = FieldTypeFromArgs(args);
   if (!type.ok()) return ReportError(type.status());
 
   Stopwatch load_watch;
-  auto mesh = LoadBenchMesh(args->positional()[0]);
+  auto mesh = LoadBenchMesh(args.positional()[0]);
   if (!mesh.ok()) return ReportError(mesh.status());
   const double load_seconds = load_watch.Seconds();
 
@@ -73,7 +60,7 @@ int RunOperator(int argc, char** argv) {
   const double assemble_seconds = assemble_watch.Seconds();
 
   std::optional<double> write_seconds;
-  if (const std::optional<std::string> out = args->Get("out"); out.has_value()) {
+  if (const std::optional<std::string> out = args.Get("out"); out.has_value()) {
     Stopwatch write_watch;
     std::error_code ec;
     std::filesystem::create_directories(*out, ec);
@@ -93,7 +80,7 @@ int RunOperator(int argc, char** argv) {
 
   JsonWriter json;
   json.BeginObject().Int("dofs", op->dofs()).Int("nnz_s", op->stiffness.nonZeros());
-  if (args->Has("timing")) {
+  if (args.Has("timing")) {
     json.BeginObject("seconds").Double("load", load_seconds).Double("assemble", assemble_seconds);
     if (write_seconds.has_value()) json.Double("write", *write_seconds);
     json.EndObject();

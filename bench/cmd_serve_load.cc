@@ -152,31 +152,18 @@ SessionResult RunSession(const client::FieldClient& field_client, const std::str
 
 }  // namespace
 
-int RunServeLoad(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"dim", "field", "n", "sessions", "edits", "watch", "threads",
-                                  "server", "rate", "lifts"});
-      !st.ok()) {
-    return ReportError(st);
-  }
-  if (args->positional().size() != 1) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] "
-        "[--sessions S] [--edits E] [--watch W] [--threads T] [--rate HZ] [--lifts L] "
-        "[--server HOST:PORT]"));
-  }
-  auto dim = args->GetInt("dim", 0);
-  auto sessions = args->GetInt("sessions", 4);
-  auto edits = args->GetInt("edits", 200);
-  auto watch = args->GetInt("watch", 16);
-  auto threads = args->GetInt("threads", 0);
-  auto n = args->GetInt("n", 4);
-  auto lifts = args->GetInt("lifts", 5);
+int RunServeLoad(const Args& args) {
+  auto dim = args.GetInt("dim", 0);
+  auto sessions = args.GetInt("sessions", 4);
+  auto edits = args.GetInt("edits", 200);
+  auto watch = args.GetInt("watch", 16);
+  auto threads = args.GetInt("threads", 0);
+  auto n = args.GetInt("n", 4);
+  auto lifts = args.GetInt("lifts", 5);
   for (const auto* v : {&dim, &sessions, &edits, &watch, &threads, &n, &lifts}) {
     if (!v->ok()) return ReportError(v->status());
   }
-  auto rate = args->GetDouble("rate", 0.0);
+  auto rate = args.GetDouble("rate", 0.0);
   if (!rate.ok()) return ReportError(rate.status());
   if (!(*rate >= 0.0 && *rate <= 1e4)) {
     return ReportError(absl::InvalidArgumentError("--rate must be in [0, 10000] edits/s"));
@@ -185,7 +172,7 @@ int RunServeLoad(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError(
         "need --dim >= 1, --sessions >= 1, --edits >= 1, --watch >= 0, --lifts >= 0"));
   }
-  const std::string field = args->Get("field").value_or("vector");
+  const std::string field = args.Get("field").value_or("vector");
   v1::FieldType type;
   int32_t values_per_face = 3;
   if (field == "vector") {
@@ -200,12 +187,12 @@ int RunServeLoad(int argc, char** argv) {
     return ReportError(absl::InvalidArgumentError("--field must be vector, nfield or tensor"));
   }
 
-  auto mesh = ReadMeshFile(args->positional()[0]);
+  auto mesh = ReadMeshFile(args.positional()[0]);
   if (!mesh.ok()) return ReportError(mesh.status());
 
   std::unique_ptr<server::FieldServer> local;
   std::filesystem::path store;
-  std::string address = args->Get("server").value_or("");
+  std::string address = args.Get("server").value_or("");
   if (address.empty()) {
     store =
         std::filesystem::temp_directory_path() / absl::StrCat("fieldspace_serve_load_", ::getpid());
@@ -236,7 +223,7 @@ int RunServeLoad(int argc, char** argv) {
   absl::StatusOr<v1::MeshInfo> info =
       (*field_client)
           ->UploadMeshArrays(mesh->arrays,
-                             std::filesystem::path(args->positional()[0]).filename().string());
+                             std::filesystem::path(args.positional()[0]).filename().string());
   if (!info.ok()) {
     cleanup();
     return ReportError(Prefixed(info.status(), "UploadMesh"));
@@ -327,7 +314,7 @@ int RunServeLoad(int argc, char** argv) {
   JsonWriter j;
   j.BeginObject();
   j.String("command", "serve-load");
-  j.String("mesh", args->positional()[0]);
+  j.String("mesh", args.positional()[0]);
   j.Int("faces", info->num_faces());
   j.String("field", field);
   j.Int("dimension", basis->columns());

@@ -13,19 +13,11 @@
 
 namespace fieldspace::bench {
 
-int RunShape(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"out", "level"}); !st.ok()) return ReportError(st);
-  const auto out = args->Get("out");
-  if (args->positional().size() != 1 || !out) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench shape torus-knot|icosphere|torus|genus2 --out FILE.ply "
-        "[--level N]"));
-  }
-  auto level = args->GetInt("level", 4);
+int RunShape(const Args& args) {
+  const auto out = args.Get("out");
+  auto level = args.GetInt("level", 4);
   if (!level.ok()) return ReportError(level.status());
-  const std::string& name = args->positional()[0];
+  const std::string& name = args.positional()[0];
   absl::StatusOr<MeshArrays> arrays;
   if (name == "torus-knot") {
     TorusKnotOptions knot;  // the demo mesh: 2 * 1024 * 24 = 49,152 faces, genus 1

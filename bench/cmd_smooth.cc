@@ -55,30 +55,16 @@ absl::StatusOr<Eigen::VectorXd> SmoothingInput(const TriangleMesh& mesh, const F
 
 }  // namespace
 
-int RunSmooth(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"scale-free", "no-kernel-columns"});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st =
-          args->CheckKnown({"field", "n", "dim", "sigma", "seed", "coarse-dim", "mu-s", "mu-b",
-                            "mu-c", "repeat", "scale-free", "no-kernel-columns", "quality"});
-      !st.ok()) {
-    return ReportError(st);
-  }
-  if (args->positional().size() != 1 || !args->Has("dim") || !args->Has("field")) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench smooth MESH --field tensor|vector|nfield [--n N] --dim D "
-        "[--sigma S] [--seed N] [--coarse-dim C] [--mu-s X] [--mu-b X] [--mu-c X] [--repeat R] "
-        "[--scale-free] [--no-kernel-columns]"));
-  }
-  auto type = FieldTypeFromArgs(*args);
+int RunSmooth(const Args& args) {
+  auto type = FieldTypeFromArgs(args);
   if (!type.ok()) return ReportError(type.status());
-  auto mu_s = args->GetDouble("mu-s", 1.0);
-  auto mu_b = args->GetDouble("mu-b", 0.0);
-  auto mu_c = args->GetDouble("mu-c", 1000.0);
+  auto mu_s = args.GetDouble("mu-s", 1.0);
+  auto mu_b = args.GetDouble("mu-b", 0.0);
+  auto mu_c = args.GetDouble("mu-c", 1000.0);
   for (const auto* v : {&mu_s, &mu_b, &mu_c}) {
     if (!v->ok()) return ReportError(v->status());
   }
-  auto repeat = args->GetInt32("repeat", 10);
+  auto repeat = args.GetInt32("repeat", 10);
   if (!repeat.ok()) return ReportError(repeat.status());
   if (*repeat < 1 || *repeat > 100000) {
     return ReportError(absl::InvalidArgumentError("--repeat must be in [1, 100000]"));
@@ -86,7 +72,7 @@ int RunSmooth(int argc, char** argv) {
   const EnergyWeights weights{*mu_s, *mu_b, *mu_c};
   if (auto st = ValidateWeights(weights); !st.ok()) return ReportError(st);
 
-  auto sub = LoadBenchSubspace(*args, *type);
+  auto sub = LoadBenchSubspace(args, *type);
   if (!sub.ok()) return ReportError(sub.status());
   const ReducedSystem& sys = *sub->system;
 
@@ -96,7 +82,7 @@ int RunSmooth(int argc, char** argv) {
   const double input_seconds = input_watch.Seconds();
 
   SmoothingOptions options;
-  options.scale_free = args->Has("scale-free");
+  options.scale_free = args.Has("scale-free");
   auto smoother = ReducedSmoother::Create(sub->system, *field, {}, options);
   if (!smoother.ok()) return ReportError(smoother.status());
   // The weighted variant's extra pass (U^T W M U), timed once with W = 1.
@@ -131,7 +117,7 @@ int RunSmooth(int argc, char** argv) {
 
   JsonWriter json;
   json.BeginObject()
-      .String("mesh", args->positional()[0])
+      .String("mesh", args.positional()[0])
       .String("field", type->ToString())
       .Int("faces", sys.num_faces())
       .Int("dim", sys.dimension())

@@ -16,27 +16,17 @@
 
 namespace fieldspace::bench {
 
-int RunSpectrum(int argc, char** argv) {
-  auto args = Args::Parse(argc, argv, {"timing"});
-  if (!args.ok()) return ReportError(args.status());
-  if (auto st = args->CheckKnown({"field", "n", "count", "timing"}); !st.ok()) {
-    return ReportError(st);
-  }
-  if (args->positional().size() != 1 || !args->Has("count")) {
-    return ReportError(absl::InvalidArgumentError(
-        "usage: fieldspace-bench spectrum MESH --field vector|nfield|tensor [--n N] --count K "
-        "[--timing]"));
-  }
-  auto type = FieldTypeFromArgs(*args);
+int RunSpectrum(const Args& args) {
+  auto type = FieldTypeFromArgs(args);
   if (!type.ok()) return ReportError(type.status());
-  auto count = args->GetInt("count", 0);
+  auto count = args.GetInt("count", 0);
   if (!count.ok()) return ReportError(count.status());
   if (*count < 1 || *count > (int64_t{1} << 20)) {
     return ReportError(absl::InvalidArgumentError("--count must be >= 1"));
   }
 
   Stopwatch load_watch;
-  auto mesh = LoadBenchMesh(args->positional()[0]);
+  auto mesh = LoadBenchMesh(args.positional()[0]);
   if (!mesh.ok()) return ReportError(mesh.status());
   const double load_seconds = load_watch.Seconds();
   Stopwatch assemble_watch;
@@ -56,7 +46,7 @@ int RunSpectrum(int argc, char** argv) {
   json.BeginObject().DoubleArray(
       "eigenvalues",
       std::vector<double>(result->values.data(), result->values.data() + result->values.size()));
-  if (args->Has("timing")) {
+  if (args.Has("timing")) {
     json.BeginObject("seconds")
         .Double("load", load_seconds)
         .Double("assemble", assemble_seconds)

@@ -2,22 +2,25 @@
 #define FIELDSPACE_BENCH_COMMANDS_H_
 
 #include "absl/status/status.h"
+#include "bench/bench_util.h"
 
 namespace fieldspace::bench {
 
-// Each subcommand gets the arguments after its name and returns the process exit status.
-int RunMesh(int argc, char** argv);
-int RunShape(int argc, char** argv);
-int RunOperator(int argc, char** argv);
-int RunSpectrum(int argc, char** argv);
-int RunBasis(int argc, char** argv);
-int RunServeLoad(int argc, char** argv);
-int RunApprox(int argc, char** argv);
-int RunEigen(int argc, char** argv);
-int RunDesign(int argc, char** argv);
-int RunCurvature(int argc, char** argv);
-int RunSmooth(int argc, char** argv);
-int RunKernel(int argc, char** argv);
+// Each subcommand gets its arguments parsed and checked against the command table of main.cc
+// (its flags, the required ones, the number of positional arguments) and returns the process
+// exit status.
+int RunMesh(const Args& args);
+int RunShape(const Args& args);
+int RunOperator(const Args& args);
+int RunSpectrum(const Args& args);
+int RunBasis(const Args& args);
+int RunServeLoad(const Args& args);
+int RunApprox(const Args& args);
+int RunEigen(const Args& args);
+int RunDesign(const Args& args);
+int RunCurvature(const Args& args);
+int RunSmooth(const Args& args);
+int RunKernel(const Args& args);
 
 // Prints `status` as one line on stderr and returns the exit code: 2 for caller errors
 // (InvalidArgument, NotFound, OutOfRange, FailedPrecondition, ResourceExhausted, DataLoss), else 1.

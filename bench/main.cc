@@ -3,68 +3,171 @@
 #include <cstdio>
 #include <cstring>
 #include <string>
+#include <vector>
 
+#include "absl/strings/ascii.h"
+#include "absl/strings/str_cat.h"
 #include "bench/commands.h"
+#include "core/common/command_line.h"
 
+namespace fieldspace::bench {
 namespace {
 
 struct Command {
-  const char* name;
-  int (*run)(int argc, char** argv);
-  const char* usage;
+  CommandDoc doc;  // flags and usage, written once
+  int (*run)(const Args& args);
 };
 
-constexpr Command kCommands[] = {
-    {"mesh", fieldspace::bench::RunMesh, "mesh FILE"},
-    {"shape", fieldspace::bench::RunShape,
-     "shape torus-knot|icosphere|torus|genus2 --out FILE.ply [--level N]"},
-    {"operator", fieldspace::bench::RunOperator,
-     "operator MESH --field vector|nfield|tensor [--n N] [--out DIR] [--timing]"},
-    {"spectrum", fieldspace::bench::RunSpectrum,
-     "spectrum MESH --field vector|nfield|tensor [--n N] --count K [--timing]"},
-    {"basis", fieldspace::bench::RunBasis,
-     "basis MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] [--threads T] "
-     "[--weights FILE] [--save FILE] [--export-mtx DIR] [--seed N] [--no-kernel-columns]"},
-    {"serve-load", fieldspace::bench::RunServeLoad,
-     "serve-load MESH --dim D [--field vector|nfield|tensor] [--n N] [--sessions S] [--edits E] "
-     "[--watch W] [--threads T] [--rate HZ] [--lifts L] [--server HOST:PORT]"},
-    {"approx", fieldspace::bench::RunApprox,
-     "approx MESH --field vector|nfield|tensor [--n N] --dim D [--sigma S] --tests K --seed N "
-     "[--basis local|eigen] [--min-constraints A] [--max-constraints B] [--coarse-dim C] "
-     "[--quality paper|low-modes|smooth] [--design-mu-c X] [--no-kernel-columns]"},
-    {"eigen", fieldspace::bench::RunEigen,
-     "eigen MESH --field vector|nfield|tensor [--n N] --count K --dim D [--sigma S] [--seed N] "
-     "[--method auto|dense|sparse] [--full] [--coarse-dim C] [--quality paper|low-modes|smooth] "
-     "[--no-kernel-columns]"},
-    {"design", fieldspace::bench::RunDesign,
-     "design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S [--sigma S] "
-     "[--max-constraints C] [--no-full] [--full-biharmonic] [--no-kernel-columns]"},
-    {"curvature", fieldspace::bench::RunCurvature,
-     "curvature MESH [--estimator jet|normal-differences]"},
-    {"kernel", fieldspace::bench::RunKernel, "kernel MESH --field vector|nfield|tensor [--n N]"},
-    {"smooth", fieldspace::bench::RunSmooth,
-     "smooth MESH --field tensor|vector|nfield [--n N] --dim D [--sigma S] [--seed N] "
-     "[--coarse-dim C] [--quality paper|low-modes|smooth] [--mu-s X] [--mu-b X] [--mu-c X] "
-     "[--repeat R] "
-     "[--scale-free] [--no-kernel-columns]"},
-};
+// Flags several commands share.
+FlagDoc Field(bool required = true) { return {"field", "vector|nfield|tensor", required}; }
+const FlagDoc kN = {"n", "N"};
+const FlagDoc kSigma = {"sigma", "S"};
+const FlagDoc kSeed = {"seed", "N"};
+const FlagDoc kCoarseDim = {"coarse-dim", "C"};
+const FlagDoc kQuality = {"quality", "paper|low-modes|smooth"};
+const FlagDoc kBiharmonic = {"biharmonic", "exact|mixed"};
+const FlagDoc kNoKernelColumns = {"no-kernel-columns", ""};
+FlagDoc Dim(bool required = true) { return {"dim", "D", required}; }
+
+const std::vector<Command>& Commands() {
+  static const std::vector<Command> commands = {
+      {{"mesh", "FILE", {}}, RunMesh},
+      {{"shape", "torus-knot|icosphere|torus|genus2", {{"out", "FILE.ply", true}, {"level", "N"}}},
+       RunShape},
+      {{"operator", "MESH", {Field(), kN, {"out", "DIR"}, {"timing", ""}}}, RunOperator},
+      {{"spectrum", "MESH", {Field(), kN, {"count", "K", true}, {"timing", ""}}}, RunSpectrum},
+      {{"basis",
+        "MESH",
+        {Field(),
+         kN,
+         Dim(),
+         kSigma,
+         {"threads", "T"},
+         {"weights", "FILE"},
+         {"save", "FILE"},
+         {"export-mtx", "DIR"},
+         kSeed,
+         {"stats", ""},
+         {"tolerance", "T"},
+         kNoKernelColumns,
+         kCoarseDim,
+         kQuality}},
+       RunBasis},
+      {{"serve-load",
+        "MESH",
+        {Dim(),
+         Field(false),
+         kN,
+         {"sessions", "S"},
+         {"edits", "E"},
+         {"watch", "W"},
+         {"threads", "T"},
+         {"rate", "HZ"},
+         {"lifts", "L"},
+         {"server", "HOST:PORT"}}},
+       RunServeLoad},
+      {{"approx",
+        "MESH",
+        {Field(),
+         kN,
+         Dim(),
+         kSigma,
+         {"tests", "K", true},
+         kSeed,
+         {"basis", "local|eigen"},
+         {"min-constraints", "A"},
+         {"max-constraints", "B"},
+         kCoarseDim,
+         kQuality,
+         {"design-mu-c", "X"},
+         kBiharmonic,
+         kNoKernelColumns}},
+       RunApprox},
+      {{"eigen",
+        "MESH",
+        {Field(),
+         kN,
+         {"count", "K", true},
+         Dim(),
+         kSigma,
+         kSeed,
+         {"method", "auto|dense|sparse"},
+         {"full", ""},
+         kCoarseDim,
+         kQuality,
+         kNoKernelColumns}},
+       RunEigen},
+      {{"design",
+        "MESH",
+        {Field(),
+         kN,
+         Dim(),
+         {"edits", "N", true},
+         kSeed,
+         kSigma,
+         {"max-constraints", "C"},
+         {"no-full", ""},
+         {"full-biharmonic", ""},
+         kNoKernelColumns,
+         kCoarseDim,
+         kQuality,
+         kBiharmonic}},
+       RunDesign},
+      {{"curvature", "MESH", {{"estimator", "jet|normal-differences"}}}, RunCurvature},
+      {{"kernel", "MESH", {Field(), kN, {"poisson", "multigrid|cholesky"}}}, RunKernel},
+      {{"smooth",
+        "MESH",
+        {Field(),
+         kN,
+         Dim(),
+         kSigma,
+         kSeed,
+         kCoarseDim,
+         kQuality,
+         {"mu-s", "X"},
+         {"mu-b", "X"},
+         {"mu-c", "X"},
+         {"repeat", "R"},
+         {"scale-free", ""},
+         kNoKernelColumns}},
+       RunSmooth},
+  };
+  return commands;
+}
+
+constexpr int kWidth = 100;
 
 void PrintUsage() {
   std::fprintf(stderr, "usage: fieldspace-bench COMMAND ...\ncommands:\n");
-  for (const Command& c : kCommands) std::fprintf(stderr, "  %s\n", c.usage);
+  for (const Command& c : Commands()) {
+    std::fprintf(stderr, "%s", FormatCommandUsage(c.doc, 2, 6, kWidth).c_str());
+  }
 }
 
-}  // namespace
-
-int main(int argc, char** argv) {
+int Run(int argc, char** argv) {
   if (argc < 2 || std::strcmp(argv[1], "--help") == 0 || std::strcmp(argv[1], "-h") == 0) {
     PrintUsage();
     return argc < 2 ? 2 : 0;
   }
-  for (const Command& c : kCommands) {
-    if (std::strcmp(argv[1], c.name) == 0) return c.run(argc - 2, argv + 2);
+  for (const Command& c : Commands()) {
+    if (c.doc.name != argv[1]) continue;
+    const std::vector<std::string> rest(argv + 2, argv + argc);
+    absl::StatusOr<CommandLine> args = ParseCommand(c.doc, rest);
+    if (!args.ok()) {
+      // The message, then the command's usage, on one line as every bench error.
+      return ReportError(absl::Status(
+          args.status().code(),
+          absl::StrCat(args.status().message(), "; usage: fieldspace-bench ",
+                       absl::StripAsciiWhitespace(FormatCommandUsage(c.doc, 0, 0, 1 << 20)))));
+    }
+    return c.run(*args);
   }
   std::fprintf(stderr, "fieldspace-bench: unknown command '%s'\n", argv[1]);
   PrintUsage();
   return 2;
 }
+
+}  // namespace
+}  // namespace fieldspace::bench
+
+int main(int argc, char** argv) { return fieldspace::bench::Run(argc, argv); }

@@ -423,21 +423,10 @@ absl::StatusOr<v1::DesignUpdate> ResumableDesign::Resume(const v1::DesignRequest
   for (int attempt = 0; attempt < kMaxReopens; ++attempt) {
     std::this_thread::sleep_for(std::chrono::milliseconds(kPauseMs[attempt]));
     stream_.reset();  // cancels the broken call
-    absl::StatusOr<v1::DesignUpdate> update;
-    if (!r.has_open()) {
-      v1::DesignRequest open;
-      open.set_seq(r.seq());
-      *open.mutable_open() = open_;
-      update = Exchange(open);
-      for (size_t i = 0; update.ok() && i < constraints_.size(); ++i) {
-        v1::DesignRequest add;
-        add.set_seq(r.seq());
-        add.mutable_add()->set_id(constraints_[i].first);
-        *add.mutable_add()->mutable_constraint() = constraints_[i].second;
-        update = Exchange(add);
-      }
-    }
-    if (update.ok()) update = Exchange(r);
+    // A lost open is simply sent again; any other edit needs the session reopened and its
+    // constraints replayed first.
+    absl::StatusOr<v1::DesignUpdate> update = r.has_open() ? Exchange(r) : Replay(r.seq());
+    if (update.ok() && !r.has_open()) update = Exchange(r);
     if (update.ok()) {
       ++resumes_;
       return update;
@@ -450,6 +439,21 @@ absl::StatusOr<v1::DesignUpdate> ResumableDesign::Resume(const v1::DesignRequest
       lost.code(),
       absl::StrCat(lost.message(), " (reopening the session failed ", kMaxReopens, " times, last: ",
                    error.message().empty() ? "no server answered" : error.ToString(), ")"));
+}
+
+absl::StatusOr<v1::DesignUpdate> ResumableDesign::Replay(uint64_t seq) {
+  v1::DesignRequest open;
+  open.set_seq(seq);
+  *open.mutable_open() = open_;
+  absl::StatusOr<v1::DesignUpdate> update = Exchange(open);
+  for (size_t i = 0; update.ok() && i < constraints_.size(); ++i) {
+    v1::DesignRequest add;
+    add.set_seq(seq);
+    add.mutable_add()->set_id(constraints_[i].first);
+    *add.mutable_add()->mutable_constraint() = constraints_[i].second;
+    update = Exchange(add);
+  }
+  return update;
 }
 
 void ResumableDesign::Remember(const v1::DesignRequest& r) {

@@ -224,7 +224,8 @@ bool ReplicaLost(const absl::Status& status);
 // server confirmed (the open with its current weights and watch, the constraints by id in the
 // order they were added); when an edit fails with ReplicaLost, it reopens the stream (through a
 // router: on another replica), replays that state, sends the edit again and returns its update
-// marked `resumed`, with the coefficients the lost session would have given. Other errors end the
+// marked `resumed`, with the coefficients the lost session would have given (a lost open, e.g. a
+// replica that died while loading the basis, is sent again the same way). Other errors end the
 // session as with DesignStream; when every reopen fails, the edit fails with the status that lost
 // the session (its message says why reopening failed). Belongs to one thread.
 class ResumableDesign {
@@ -251,6 +252,9 @@ class ResumableDesign {
   absl::StatusOr<fieldspace::v1::DesignUpdate> Exchange(const fieldspace::v1::DesignRequest& r);
   absl::StatusOr<fieldspace::v1::DesignUpdate> Resume(const fieldspace::v1::DesignRequest& r,
                                                       const absl::Status& lost);
+  // Opens a new stream with the session's open and adds its constraints (every message with
+  // `seq`); the last update.
+  absl::StatusOr<fieldspace::v1::DesignUpdate> Replay(uint64_t seq);
   void Remember(const fieldspace::v1::DesignRequest& request);
 
   const FieldClient* const client_;

@@ -1,5 +1,6 @@
 #include "client/field_files.h"
 
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <fstream>
@@ -95,7 +96,7 @@ absl::StatusOr<const Struct*> ObjectOf(const Value& v, absl::string_view where) 
 
 absl::StatusOr<std::string> ReadFile(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::NotFoundError(absl::StrCat("cannot open ", path));
+  if (!in) return absl::ErrnoToStatus(errno, absl::StrCat("cannot open ", path));
   std::stringstream ss;
   ss << in.rdbuf();
   if (in.bad()) return absl::DataLossError(absl::StrCat("error reading ", path));
@@ -159,7 +160,7 @@ absl::StatusOr<FieldFile> ReadFieldFile(const std::string& path) {
 absl::Status WriteFieldText(const std::string& path, const FieldFile& field,
                             const std::string& field_type) {
   std::ofstream out(path);
-  if (!out) return absl::PermissionDeniedError(absl::StrCat("cannot write ", path));
+  if (!out) return absl::ErrnoToStatus(errno, absl::StrCat("cannot write ", path));
   out << "# fieldspace field: type " << field_type << ", " << field.num_faces() << " faces\n";
   out << "# encoding: " << (field.encoding == v1::FIELD_ENCODING_DOF ? "dof" : "ambient") << "\n";
   std::string line;

@@ -64,7 +64,7 @@ absl::StatusOr<std::vector<fieldspace::v1::Constraint>> ParseConstraints(absl::s
 absl::StatusOr<fieldspace::v1::DesignRequest> ParseEdit(absl::string_view line,
                                                         absl::string_view where);
 
-// Reads a whole file. NotFound / PermissionDenied with the path.
+// Reads a whole file. The errno's status ("cannot open PATH: No such file or directory").
 absl::StatusOr<std::string> ReadFile(const std::string& path);
 
 }  // namespace fieldspace::client

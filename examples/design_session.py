@@ -52,11 +52,13 @@ def main():
 
     demo = [m for m in client.meshes() if m.name == "demo-torus-knot"]
     if demo:
-        mesh, dim = demo[0], 1000  # the demo's basis: built already, or joined while it builds
+        # The demo's basis, asked for with the settings of --demo (d = 1000, no kernel columns):
+        # built already, or joined while it builds; other settings would build a second basis.
+        mesh, dim, kernel_columns = demo[0], 1000, False
     else:
-        mesh, dim = client.upload(*torus(), name="torus"), args.dim
+        mesh, dim, kernel_columns = client.upload(*torus(), name="torus"), args.dim, True
     print("mesh %s: %d faces, genus %d" % (mesh.id, mesh.num_faces, mesh.genus))
-    basis = client.build(mesh.id, "vector", dim)
+    basis = client.build(mesh.id, "vector", dim, kernel_columns=kernel_columns)
     print("basis %s (vector, d = %d)" % (basis, dim))
 
     V, F = client.mesh_geometry(mesh.id)

@@ -1,9 +1,12 @@
 """The CLI's manners against a live daemon: per-command --help, errors in the README's form
-(`fieldspace: <what> failed: <CODE>: <message>`), flags that do not apply rejected, one overall
-build progress that only goes up, and Ctrl-C during `build` (the build goes on and the CLI says how
-to cancel it; --cancel-on-exit cancels it)."""
+(`fieldspace: <what> failed: <CODE>: <message>`; a local file: `fieldspace: cannot open FILE:
+<reason>`), flags that do not apply rejected, --out's format by its extension (or a refusal before
+any call), `load` below the daemon's --data-root, the default server, one overall build progress
+that only goes up, and Ctrl-C during `build` (the build goes on and the CLI says how to cancel it,
+with --server; --cancel-on-exit cancels it)."""
 
 import argparse
+import glob
 import json
 import os
 import re
@@ -15,7 +18,7 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "server"))
-from fs_testlib import Cli, Daemon, check, log, run, torus_obj  # noqa: E402
+from fs_testlib import Cli, Daemon, check, icosphere_obj, log, run, torus_obj  # noqa: E402
 
 
 def interrupted_build(client, address, mesh_id, seed, extra=()):
@@ -43,6 +46,74 @@ def interrupted_build(client, address, mesh_id, seed, extra=()):
     return proc.returncode, err + rest, basis_id
 
 
+def read_ply_header(path):
+    """The header lines of a PLY file (up to end_header)."""
+    lines = []
+    with open(path, "rb") as f:
+        for raw in f:
+            lines.append(raw.decode("ascii", "replace").strip())
+            if lines[-1] == "end_header":
+                return lines
+    raise AssertionError("%s: no end_header" % path)
+
+
+def check_field_file(path, faces, per_face, what):
+    """`path` is a field file as its extension says: text with `faces` lines of `per_face` numbers,
+    or binary PLY with `faces` faces and `per_face` float face properties (+ magnitude)."""
+    if path.endswith(".ply"):
+        header = read_ply_header(path)
+        check(header[0] == "ply" and header[1] == "format binary_little_endian 1.0",
+              "%s: not binary PLY: %s" % (what, header[:2]))
+        check("element face %d" % faces in header, "%s: faces: %s" % (what, header))
+        names = [h.split()[-1] for h in header if h.startswith("property float")
+                 and h.split()[-1] not in ("x", "y", "z")]
+        check(len(names) in (per_face, per_face + 1), "%s: face properties %s" % (what, names))
+    else:
+        with open(path) as f:
+            text = f.read()
+        check(text.startswith("# fieldspace field:"), "%s: not a text field file" % what)
+        rows = [line.split() for line in text.splitlines() if line and not line.startswith("#")]
+        check(len(rows) == faces and all(len(r) == per_face for r in rows),
+              "%s: %d rows" % (what, len(rows)))
+
+
+def check_field_outputs(cli, work, mesh, basis, coefficients):
+    """--out of solve, lift, smoothest, smooth, align and curvature: .txt gives text, .ply binary
+    PLY, and any other extension is refused (exit 2, naming the accepted ones) before any call."""
+    faces = mesh["num_faces"]
+    constraints = os.path.join(work, "one.jsonl")
+    with open(constraints, "w") as f:
+        f.write('{"face": 3, "vector": [1, 0, 0]}\n')
+    lines = cli.json("build", mesh["id"], "--field", "nfield", "--n", "2", "--dim", "20")
+    target = os.path.join(work, "target.txt")
+    cli("lift", basis["id"], coefficients, "--out", target)
+    runs = {
+        "solve": (["solve", basis["id"], "--constraints", constraints], 3),
+        "lift": (["lift", basis["id"], coefficients], 3),
+        "smoothest": (["smoothest", basis["id"]], 3),
+        "smooth": (["smooth", basis["id"], target], 3),
+        "align": (["align", lines["id"], "--curvature"], 3),
+        "curvature": (["curvature", mesh["id"]], 6),
+    }
+    for name, (command, per_face) in runs.items():
+        for ext in (".txt", ".ply"):
+            path = os.path.join(work, "%s_out%s" % (name, ext))
+            cli(*command, "--out", path)
+            check_field_file(path, faces, per_face, "%s --out %s" % (name, ext))
+        for ext in (".vtu", ".vtk", ".rawfield", ".obj", ".png", ".json", ""):
+            path = os.path.join(work, "%s_refused%s" % (name, ext))
+            rc, out, err = cli(*command, "--out", path, expect=2)
+            check(err.startswith("fieldspace: %s failed: INVALID_ARGUMENT: --out %s: a field "
+                                 "file is .txt" % (name, path)) and ".ply" in err,
+                  "%s --out %s: %r" % (name, ext, err))
+            check(out == "" and not glob.glob(path + "*"), "%s --out %s wrote something" %
+                  (name, ext))
+        # For the formats `export` writes, the refusal says how.
+        _, _, err = cli(*command, "--out", os.path.join(work, "x.vtu"), expect=2)
+        check("fieldspace export" in err, "%s --out x.vtu: no hint: %r" % (name, err))
+    log("--out: .txt and .ply for all 6 commands, 7 other extensions refused")
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--daemon", required=True)
@@ -56,9 +127,21 @@ def main():
           "build --help shows only build: %r" % out)
     rc, out, _ = run([args.client, "smooth", "-h"], timeout=30)
     check(rc == 0 and "smooth BASIS_ID FIELD_FILE" in out and "--mu-s" in out, "smooth -h: %r" % out)
+    # Every flag a command's usage shows is one it parses, and the other way round: the usage is
+    # made from the same table. `--help` lists every command; each one's flags parse.
+    rc, _, err = run([args.client, "--help"], timeout=30)
+    check(rc == 0 and "  load PATH" in err and "127.0.0.1:50051" in err, "--help: %r" % err)
+    rc, out, _ = run([args.client, "design", "--help"], timeout=30)
+    design_flags = re.findall(r"\[?--([a-z-]+)", out.split("\n\n")[1])
+    check({"script", "align-curvature", "data", "face-weights", "mu-a", "estimator"} <=
+          set(design_flags), "design --help: %r" % out)
+    for flag in design_flags:
+        rc, _, err = run([args.client, "--server", "127.0.0.1:1", "design", "b-0", "--" + flag,
+                          "x", "--script", "/nonexistent.jsonl"], timeout=30)
+        check("unknown flag" not in err, "design --help shows --%s, which it refuses" % flag)
 
     with tempfile.TemporaryDirectory() as work:
-        d = Daemon(args.daemon, os.path.join(work, "store")).start()
+        d = Daemon(args.daemon, os.path.join(work, "store"), data_root=work).start()
         try:
             cli = Cli(args.client, d.address)
             torus = os.path.join(work, "torus.obj")
@@ -72,11 +155,14 @@ def main():
             check(err.startswith("fieldspace: build failed: INVALID_ARGUMENT: --n applies only to "
                                  "--field nfield"), "--n on a vector build: %r" % err)
             check("build MESH_ID" in err and "upload MESH" not in err, "build usage after it")
-            # Local failures too: "<command> failed: <CODE>: <message>".
-            rc, _, err = cli("project", "b-0000000000000000", os.path.join(work, "missing.txt"),
-                             expect=1)
-            check(re.match(r"fieldspace: project failed: [A-Z_]+: .*missing\.txt", err),
+            # Local failures read as such: "fieldspace: cannot open FILE: <reason>", no code.
+            missing = os.path.join(work, "missing.txt")
+            rc, _, err = cli("project", "b-0000000000000000", missing, expect=1)
+            check(err == "fieldspace: cannot open %s: No such file or directory\n" % missing,
                   "local failure form: %r" % err)
+            rc, _, err = cli("upload", os.path.join(work, "missing.obj"), expect=1)
+            check(err == "fieldspace: cannot open %s: No such file or directory\n" %
+                  os.path.join(work, "missing.obj"), "upload of a missing file: %r" % err)
             rc, _, err = cli("mesh", "m-0000000000000000", expect=1)
             check(err.startswith("fieldspace: GetMesh failed: NOT_FOUND: "), "RPC failure: %r" % err)
 
@@ -89,6 +175,25 @@ def main():
             check(cli.json("upload", unnamed, "--format", "obj")["id"] == mesh["id"],
                   "upload --format obj gives the same mesh")
             cli("upload", unnamed, "--format", "stl", expect=2)
+
+            # load: a file below the daemon's --data-root, the same mesh as its upload.
+            check(cli.json("load", "torus.obj")["id"] == mesh["id"], "load of the uploaded file")
+            os.makedirs(os.path.join(work, "sub"))
+            with open(os.path.join(work, "sub", "ico.obj"), "w") as f:
+                f.write(icosphere_obj(1)[0])
+            loaded = cli.json("load", "sub/ico.obj", "--name", "ico")
+            check(loaded["num_faces"] == 80 and loaded["name"] == "ico", "load: %s" % loaded)
+            rc, _, err = cli("load", "../outside.obj", expect=1)
+            check(err.startswith("fieldspace: LoadMesh failed: "), "load outside the root: %r" % err)
+            rc, _, err = cli("load", "nothing.obj", expect=1)
+            check("LoadMesh failed: NOT_FOUND" in err, "load of a missing file: %r" % err)
+
+            # No --server and no $FIELDSPACE_SERVER: 127.0.0.1:50051, as the Python package.
+            env = {k: v for k, v in os.environ.items() if k != "FIELDSPACE_SERVER"}
+            p = subprocess.run([args.client, "--timeout", "5", "health"], env=env, text=True,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=60)
+            check(p.returncode == 0 or (p.returncode == 1 and "127.0.0.1:50051" in p.stderr),
+                  "no --server: rc %d %r" % (p.returncode, p.stderr))
 
             # build --face-weights FILE: an adaptive basis (its own id); a wrong count is refused.
             small = cli.json("build", mesh["id"], "--field", "vector", "--dim", "40")
@@ -123,6 +228,8 @@ def main():
                              expect=1)
             check("out of range" in err, "--mode out of range: %r" % err)
 
+            check_field_outputs(cli, work, mesh, small, mode2)
+
             # export / render: the Python package's tools, run by the CLI with the server's
             # geometry for a mesh id. The .vtu is read back by VTK's own reader.
             lifted = os.path.join(work, "lifted.txt")
@@ -152,6 +259,10 @@ def main():
                                    "160x120", expect=None)
                 check(rc == 0 and os.path.getsize(png) > 1000, "fieldspace render: %r" % err)
                 log("export and render through the CLI: ok")
+            # render writes PNG: another extension is refused before anything runs.
+            jpg = os.path.join(work, "field.jpg")
+            rc, _, err = cli("render", mesh["id"], lifted, "--out", jpg, expect=2)
+            check("render writes PNG" in err and not os.path.exists(jpg), "render .jpg: %r" % err)
             rc, _, err = cli("export", "m-0000000000000000", lifted, "--out", vtu, expect=None)
             check(rc == 1 and "NOT_FOUND" in err, "export of an unknown mesh: %r" % err)
 
@@ -166,8 +277,8 @@ def main():
             # Ctrl-C: the build goes on on the server, and the CLI prints how to cancel it.
             rc, err, basis_id = interrupted_build(args.client, d.address, mesh["id"], seed=11)
             check(rc == 130, "Ctrl-C exit code %d: %r" % (rc, err[-500:]))
-            check(("goes on on the server; cancel it with: fieldspace cancel %s" % basis_id) in err,
-                  "Ctrl-C message: %r" % err[-500:])
+            check(("goes on on the server; cancel it with: fieldspace --server %s cancel %s" %
+                   (d.address, basis_id)) in err, "Ctrl-C message: %r" % err[-500:])
             info = cli.json("basis", basis_id)
             check(info["state"] in ("building", "ready"), "the build went on: %s" % info["state"])
             rc, _, _ = cli("cancel", basis_id, expect=None)

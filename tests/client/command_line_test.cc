@@ -1,4 +1,5 @@
-// The command-line parser shared by fieldspaced, fieldspace and fieldspace-bench.
+// The command-line parser shared by fieldspaced, fieldspace and fieldspace-bench, and the command
+// table of fieldspace and fieldspace-bench.
 
 #include "core/common/command_line.h"
 
@@ -100,18 +101,74 @@ TEST(CommandLineTest, StopAtPositionalLeavesASubcommandsArguments) {
   EXPECT_EQ(Parse({"--dim", "3", "build"}, global).status().message(), "unknown flag --dim");
 }
 
-TEST(CommandLineTest, BenchFormTakesAnyFlagWithAValueAndChecksLater) {
-  const char* argv[] = {"mesh.obj", "--dim", "10", "--stats", "--seed=3"};
-  auto a = CommandLine::Parse(5, argv, {"stats"});
+// The command table: one CommandDoc gives the parser, the checks and the usage.
+CommandDoc BuildDoc() {
+  return {"build",
+          "MESH_ID [EXTRA]",
+          {{"field", "vector|nfield|tensor", true},
+           {"dim", "D", true},
+           {"sigma", "S"},
+           {"no-kernel-columns", ""}},
+          "build a basis of D columns"};
+}
+
+TEST(CommandTableTest, TheDocIsTheParser) {
+  const FlagSpec spec = FlagSpecOf(BuildDoc(), {"help"});
+  EXPECT_THAT(spec.value_flags, ElementsAre("field", "dim", "sigma"));
+  EXPECT_THAT(spec.switches, ElementsAre("help", "no-kernel-columns"));
+  auto a = ParseCommand(BuildDoc(), std::vector<std::string>{"m-1", "--field", "vector", "--dim",
+                                                             "40", "--no-kernel-columns"});
   ASSERT_TRUE(a.ok()) << a.status();
-  EXPECT_THAT(a->positional(), ElementsAre("mesh.obj"));
-  EXPECT_EQ(*a->GetInt("seed", 0), 3);
-  EXPECT_TRUE(a->CheckKnown({"dim", "stats", "seed"}).ok());
-  absl::Status unknown = a->CheckKnown({"dim", "stats"});
-  EXPECT_EQ(unknown.code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(unknown.message(), "unknown flag --seed");
-  const char* missing[] = {"--dim"};
-  EXPECT_EQ(CommandLine::Parse(1, missing, {}).status().message(), "--dim needs a value");
+  EXPECT_THAT(a->positional(), ElementsAre("m-1"));
+  EXPECT_EQ(*a->GetInt("dim", 0), 40);
+  EXPECT_TRUE(a->Has("no-kernel-columns"));
+  // A flag the doc does not list is refused, as is a value given to a switch.
+  EXPECT_EQ(ParseCommand(BuildDoc(), std::vector<std::string>{"m-1", "--field", "vector", "--dim",
+                                                              "4", "--seed", "3"})
+                .status()
+                .message(),
+            "unknown flag --seed");
+  EXPECT_EQ(ParseCommand(BuildDoc(), std::vector<std::string>{"m-1", "--field", "vector", "--dim",
+                                                              "4", "--no-kernel-columns=1"})
+                .status()
+                .message(),
+            "--no-kernel-columns takes no value");
+}
+
+TEST(CommandTableTest, RequiredFlagsAndArgumentCountsAreChecked) {
+  auto missing = ParseCommand(BuildDoc(), std::vector<std::string>{"m-1", "--dim", "4"});
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(missing.status().message(), "build needs --field vector|nfield|tensor");
+  EXPECT_TRUE(ParseCommand(BuildDoc(),
+                           std::vector<std::string>{"m-1", "x", "--field", "tensor", "--dim", "4"})
+                  .ok());
+  EXPECT_EQ(ParseCommand(BuildDoc(), std::vector<std::string>{"--field", "tensor", "--dim", "4"})
+                .status()
+                .message(),
+            "build takes 1 to 2 argument(s), got 0");
+  CommandDoc mesh = {"mesh", "FILE", {}, ""};
+  EXPECT_EQ(ParseCommand(mesh, std::vector<std::string>{"a", "b"}).status().message(),
+            "mesh takes 1 argument(s), got 2");
+  CommandDoc align = {"align", "", {{"curvature", "", true}}, ""};
+  EXPECT_EQ(ParseCommand(align, std::vector<std::string>{}).status().message(),
+            "align needs --curvature");
+}
+
+TEST(CommandTableTest, UsageShowsEveryFlagAsParsed) {
+  EXPECT_EQ(FormatCommandUsage(BuildDoc(), 2, 6, 100),
+            "  build MESH_ID [EXTRA] --field vector|nfield|tensor --dim D [--sigma S] "
+            "[--no-kernel-columns]\n"
+            "      build a basis of D columns\n");
+  // Wrapped: continued lines indented by 4 more, no flag split across lines.
+  EXPECT_EQ(FormatCommandUsage(BuildDoc(), 0, 2, 40),
+            "build MESH_ID [EXTRA]\n"
+            "    --field vector|nfield|tensor --dim D\n"
+            "    [--sigma S] [--no-kernel-columns]\n"
+            "  build a basis of D columns\n");
+  // A short synopsis: the help starts on its line, at its column.
+  EXPECT_EQ(FormatCommandUsage({"mesh", "FILE", {}, "one mesh of the store, as JSON"}, 2, 20, 40),
+            "  mesh FILE         one mesh of the\n"
+            "                    store, as JSON\n");
 }
 
 }  // namespace

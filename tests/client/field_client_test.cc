@@ -362,30 +362,62 @@ TEST_F(FieldClientBasisTest, DesignSessionDeadlineCoversTheWholeStream) {
   EXPECT_EQ(stream->Close().code(), absl::StatusCode::kDeadlineExceeded);
 }
 
+// A server on a shared store (what a replica behind a router has), a client of its address and
+// the icosphere's basis; Replace() stops the server and starts the next one on the same address
+// and store, as a router finds the next replica.
+class ResumableDesignTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = fs::temp_directory_path() /
+            absl::StrFormat("fs_client_%d_%s", ::getpid(),
+                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(root_);
+    options_.listen = "127.0.0.1:0";
+    options_.store_dir = (root_ / "store").string();
+    options_.threads = 2;
+    options_.store_lock = server::StoreLockMode::kShared;
+    auto first = server::FieldServer::Start(options_);
+    ASSERT_TRUE(first.ok()) << first.status();
+    server_ = *std::move(first);
+    options_.listen = server_->address();
+    FieldClientOptions client_options;
+    client_options.address = server_->address();
+    auto client = FieldClient::Create(client_options);
+    ASSERT_TRUE(client.ok()) << client.status();
+    client_ = *std::move(client);
+    basis_ = UploadAndBuild(*client_);
+    ASSERT_FALSE(basis_.id().empty());
+  }
+  void TearDown() override {
+    if (server_ != nullptr) server_->Shutdown(std::chrono::seconds(1));
+    server_.reset();
+    fs::remove_all(root_);
+  }
+
+  // Drains the server: its sessions end UNAVAILABLE, nothing answers at the address.
+  void Stop() {
+    server_->Shutdown(std::chrono::seconds(2));
+    server_.reset();
+  }
+  void StartNext() {
+    auto next = server::FieldServer::Start(options_);
+    ASSERT_TRUE(next.ok()) << next.status();
+    server_ = *std::move(next);
+  }
+
+  fs::path root_;
+  server::FieldServerOptions options_;
+  std::unique_ptr<server::FieldServer> server_;
+  std::unique_ptr<FieldClient> client_;
+  v1::BasisInfo basis_;
+};
+
 // ResumableDesign: a session whose server drains resumes on the next server on the same address
 // and shared store (what a router gives), with the same solution, and says so once.
-TEST(ResumableDesignTest, ADrainedSessionResumesOnTheNextServerWithTheSameSolution) {
-  const fs::path root =
-      fs::temp_directory_path() / absl::StrFormat("fs_client_%d_resumable", ::getpid());
-  fs::remove_all(root);
-  server::FieldServerOptions options;
-  options.listen = "127.0.0.1:0";
-  options.store_dir = (root / "store").string();
-  options.threads = 2;
-  options.store_lock = server::StoreLockMode::kShared;
-  auto first = server::FieldServer::Start(options);
-  ASSERT_TRUE(first.ok()) << first.status();
-  const std::string address = (*first)->address();
-  FieldClientOptions client_options;
-  client_options.address = address;
-  auto client = FieldClient::Create(client_options);
-  ASSERT_TRUE(client.ok()) << client.status();
-  const v1::BasisInfo basis = UploadAndBuild(**client);
-  ASSERT_FALSE(basis.id().empty());
-
-  v1::OpenDesign open = OpenRequest(basis.id());
+TEST_F(ResumableDesignTest, ADrainedSessionResumesOnTheNextServerWithTheSameSolution) {
+  v1::OpenDesign open = OpenRequest(basis_.id());
   open.add_watch_faces(3);
-  ResumableDesign session(client->get(), open);
+  ResumableDesign session(client_.get(), open);
   ASSERT_TRUE(session.Open(0).ok());
   ASSERT_TRUE(session.Edit(AddConstraint(1, 1, 10)).ok());
   ASSERT_TRUE(session.Edit(AddConstraint(2, 2, 20)).ok());
@@ -410,11 +442,8 @@ TEST(ResumableDesignTest, ADrainedSessionResumesOnTheNextServerWithTheSameSoluti
   ASSERT_TRUE(before.ok()) << before.status();
   EXPECT_FALSE(before->resumed);
 
-  (*first)->Shutdown(std::chrono::seconds(2));  // drains: the session ends UNAVAILABLE
-  first->reset();
-  options.listen = address;
-  auto second = server::FieldServer::Start(options);
-  ASSERT_TRUE(second.ok()) << second.status();
+  Stop();  // drains: the session ends UNAVAILABLE
+  StartNext();
 
   v1::DesignRequest watch;  // changes nothing
   watch.set_seq(7);
@@ -440,9 +469,35 @@ TEST(ResumableDesignTest, ADrainedSessionResumesOnTheNextServerWithTheSameSoluti
   EXPECT_TRUE(ReplicaLost(absl::InternalError("Received RST_STREAM with error code 2")));
   EXPECT_FALSE(ReplicaLost(absl::InternalError("basis build failed")));
   EXPECT_FALSE(ReplicaLost(absl::NotFoundError("no basis")));
-  (*second)->Shutdown(std::chrono::seconds(1));
-  second->reset();
-  fs::remove_all(root);
+}
+
+// The replica is lost while the open itself is pending (nothing answers at the address: it died
+// loading the basis): the open is sent again until a server answers, and its update is the one a
+// plain open gives, marked resumed.
+TEST_F(ResumableDesignTest, ALostOpenIsSentAgain) {
+  absl::StatusOr<v1::DesignUpdate> plain =
+      client_->Design(basis_.id())->Open(OpenRequest(basis_.id()), 0);
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  Stop();
+  std::thread restart([this] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    StartNext();
+  });
+  ResumableDesign session(client_.get(), OpenRequest(basis_.id()));
+  absl::StatusOr<ResumableDesign::Update> opened = session.Open(0);
+  restart.join();
+  ASSERT_TRUE(opened.ok()) << opened.status();
+  EXPECT_TRUE(opened->resumed);
+  EXPECT_EQ(session.resumes(), 1);
+  ASSERT_EQ(opened->update.coefficients_size(), plain->coefficients_size());
+  for (int i = 0; i < plain->coefficients_size(); ++i) {
+    EXPECT_NEAR(opened->update.coefficients(i), plain->coefficients(i), 1e-12) << i;
+  }
+  absl::StatusOr<ResumableDesign::Update> next = session.Edit(AddConstraint(1, 4, 40));
+  ASSERT_TRUE(next.ok()) << next.status();
+  EXPECT_FALSE(next->resumed);
+  EXPECT_EQ(next->update.num_constraints(), 1);
+  EXPECT_TRUE(session.Close().ok());
 }
 
 }  // namespace

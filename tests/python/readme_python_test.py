@@ -7,6 +7,7 @@ Exit 0 on success, 1 on failure.
 """
 
 import argparse
+import json
 import os
 import re
 import shutil
@@ -81,6 +82,12 @@ def main():
         m = re.search(r"\(49152, 3\) index sum (\S+) = Euler characteristic (\S+)", p.stdout)
         check(m is not None, "the lifted field and its singularities")
         check(float(m.group(1)) == float(m.group(2)) == 0.0, "Poincare-Hopf on the torus knot")
+        # The example asked for the demo's basis, not for a second one.
+        p = subprocess.run([os.path.join(prefix, "bin", "fieldspace"), "--server", demo.address,
+                            "bases"], stdout=subprocess.PIPE, text=True, timeout=60)
+        bases = json.loads(p.stdout)["bases"]
+        check(len(bases) == 1 and bases[0]["kernel_columns"] is False,
+              "the example built a second basis beside the demo's: %s" % bases)
         check(demo.stop() == 0, "the installed daemon exits 0 on SIGTERM")
         log("PASS")
         return 0

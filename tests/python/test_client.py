@@ -402,6 +402,11 @@ class SolveAndDesignTest(unittest.TestCase):
         by_dofs = CLIENT.solve(VECTOR, [5], [value], encoding="dof")
         np.testing.assert_allclose(by_dofs.coefficients, ambient.coefficients, atol=1e-9)
         self.assertEqual(dofs.shape, (1, 2))
+        # DOFs without encoding="dof" are refused, the message says what they would mean.
+        with self.assertRaises(fs.InvalidArgument) as caught:
+            CLIENT.solve(VECTOR, [5], [value])
+        self.assertIn("face-frame DOFs", str(caught.exception))
+        self.assertIn("encoding='dof'", str(caught.exception))
 
     def test_design_errors_end_the_session(self):
         s = CLIENT.design(VECTOR)

@@ -13,14 +13,21 @@ router by the Python package.
   coefficients they had before (to 1e-10);
 - every stored artifact is still listed and loads (no artifact lost or damaged);
 - the CLI's `design` through the router survives the SIGKILL of its replica mid-script: one update
-  says "resumed": true, the script runs to its end.
+  says "resumed": true, the script runs to its end;
+- behind a second router with 2 fresh replicas, the CLI's `design` survives the loss of its
+  replica while its `open` is pending (the replica SIGSTOPped as the open reaches it, then
+  SIGKILLed): the open's update says "resumed": true and the script's last update equals that of
+  the same script run again on the survivor;
+- no gRPC C-core log line (`E1127 12:00:00.000 ... hpack_parser.cc ...`) reaches the CLI's stderr.
 
 Exit 77 (skipped) when nginx is absent (.ci/install-deps installs nginx-light) or grpcio is.
 """
 
 import argparse
 import getpass
+import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -93,6 +100,31 @@ def start_nginx(nginx, prefix, upstreams):
     raise AssertionError("nginx did not listen within 15 s")
 
 
+# The form of gRPC C-core's log lines (severity letter, MMDD, time): never on the CLI's stderr.
+CORE_LOG_LINE = re.compile(r"^[EWID]\d{4} ", re.MULTILINE)
+
+
+def check_no_core_log(err, what):
+    check(not CORE_LOG_LINE.search(err), "%s: a gRPC log line on stderr: %s" % (what, err[-2000:]))
+
+
+def upstream_of_key(access_log, key):
+    """The upstream nginx chose for the last GetBasis with routing key `key`."""
+    lines = [x for x in read(access_log).splitlines()
+             if x.startswith("/fieldspace.v1.FieldSpace/GetBasis \"%s\"" % key)]
+    check(lines, "no GetBasis of %s in %s" % (key, access_log))
+    return lines[-1].split()[2]
+
+
+def _numbers(value):
+    """The numbers of a JSON value (nested lists and objects), in order."""
+    if isinstance(value, dict):
+        return [x for v in value.values() for x in _numbers(v)]
+    if isinstance(value, list):
+        return [x for v in value for x in _numbers(v)]
+    return [value] if isinstance(value, (int, float)) else []
+
+
 def read(path):
     with open(path, errors="replace") as f:
         return f.read()
@@ -120,7 +152,7 @@ def main():
     started = time.time()
     work = tempfile.mkdtemp(prefix="fs_scale_out_")
     store = os.path.join(work, "store")
-    replicas, nginx = [], None
+    replicas, routers = [], []
     try:
         for i in range(3):
             replicas.append(Daemon(args.daemon, store, threads=1,
@@ -128,6 +160,7 @@ def main():
                                    log=os.path.join(work, "r%d.log" % i)).start())
         by_address = {d.address: d for d in replicas}
         nginx, router = start_nginx(args.nginx, work, [d.address for d in replicas])
+        routers.append(nginx)
         log("3 replicas %s behind nginx on %s" % (", ".join(by_address), router))
         client = fs.Client(router, timeout=120)
         check(client.health() == "SERVING", "health through the router")
@@ -268,9 +301,7 @@ def main():
         # --- The CLI: a long design script through the router; SIGKILL its replica midway.
         client.basis(main_basis)
         time.sleep(0.2)
-        line = [x for x in read(os.path.join(work, "access.log")).splitlines()
-                if x.startswith("/fieldspace.v1.FieldSpace/GetBasis \"%s\"" % main_basis)][-1]
-        holder = by_address[line.split()[2]]
+        holder = by_address[upstream_of_key(os.path.join(work, "access.log"), main_basis)]
         check(holder is not victim_proc, "routed to the dead replica")
         script = os.path.join(work, "edits.jsonl")
         edits = 20000
@@ -295,17 +326,69 @@ def main():
         cli.wait(120)
         out += rest.splitlines()
         check(cli.returncode == 0, "CLI design exited %d: %s" % (cli.returncode, err[-2000:]))
+        check_no_core_log(err, "CLI design with a killed replica")
         check(len(out) == edits + 1, "CLI design printed %d updates of %d" % (len(out), edits + 1))
         resumed_lines = [x for x in out if '"resumed":true' in x.replace(" ", "")]
         check(len(resumed_lines) == 1, "CLI updates marked resumed: %d" % len(resumed_lines))
         log("CLI design: %d updates, replica %s killed after 200, one resumed" %
             (len(out), holder.address))
 
+        # --- The CLI again, its replica lost while the open is pending: 2 fresh replicas (they
+        # load the basis from the store on open) behind a second router.
+        prefix = os.path.join(work, "router2")
+        os.makedirs(prefix)
+        fresh = []
+        for i in (3, 4):
+            fresh.append(Daemon(args.daemon, store, threads=1,
+                                extra=["--shared-store", "--daemon-id", "r%d" % i],
+                                log=os.path.join(work, "r%d.log" % i)).start())
+            replicas.append(fresh[-1])
+        nginx2, router2 = start_nginx(args.nginx, prefix, [d.address for d in fresh])
+        routers.append(nginx2)
+        with fs.Client(router2, timeout=60) as c:
+            c.basis(main_basis)
+        time.sleep(0.2)
+        holder = {d.address: d for d in fresh}[upstream_of_key(
+            os.path.join(prefix, "access.log"), main_basis)]
+        script = os.path.join(work, "short.jsonl")
+        with open(script, "w") as f:
+            for i in range(1, 6):
+                f.write('{"add": {"id": %d, "face": %d, "vector": [1, %d, 0]}}\n' % (i, 50 * i, i))
+            f.write('{"move": {"id": 2, "face": 7, "vector": [0, 0, 1]}}\n')
+        design = [args.client, "--server", router2, "design", main_basis, "--script", script,
+                  "--watch", "0,1,2"]
+        holder.proc.send_signal(signal.SIGSTOP)
+        cli = subprocess.Popen(design, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(1.5)  # the open reaches the stopped replica and waits there
+        check(cli.poll() is None, "the CLI did not wait for the stopped replica")
+        holder.proc.kill()
+        holder.proc.wait(10)
+        out, err = cli.communicate(timeout=120)
+        check(cli.returncode == 0, "CLI design, open lost, exited %d: %s" %
+              (cli.returncode, err[-2000:]))
+        check_no_core_log(err, "CLI design with its open lost")
+        updates = [json.loads(x) for x in out.splitlines()]
+        check(len(updates) == 7, "CLI design, open lost: %d updates of 7" % len(updates))
+        check(updates[0]["edit"] == "open" and updates[0].get("resumed") is True,
+              "the open's update is not marked resumed: %s" % updates[0])
+        check(all("resumed" not in u for u in updates[1:]), "a later edit resumed too")
+        rc = subprocess.run(design, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            timeout=120)
+        check(rc.returncode == 0, "CLI design on the survivor: %s" % rc.stderr[-2000:])
+        reference = [json.loads(x) for x in rc.stdout.splitlines()]
+        for key in ("coefficients", "watched"):
+            a, b = updates[-1][key], reference[-1][key]
+            check(json.dumps(a) == json.dumps(b) or
+                  np.max(np.abs(np.array(_numbers(a)) - np.array(_numbers(b)))) <= 1e-10,
+                  "the resumed session's %s differ from a plain run's" % key)
+        log("CLI design: replica %s lost with the open pending; resumed, same result" %
+            holder.address)
+
         client.close()
         log("PASS in %.1f s" % (time.time() - started))
         return 0
     finally:
-        if nginx is not None:
+        for nginx in routers:
             nginx.send_signal(signal.SIGQUIT)
             try:
                 nginx.wait(10)

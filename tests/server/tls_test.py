@@ -5,7 +5,9 @@ such set whose CA nobody trusts.
 
 - fieldspaced --tls-cert --tls-key: the Python package with tls_ca lists meshes and checks health;
   a plaintext client and a client trusting the other CA get UNAVAILABLE; the CLI with --tls-ca
-  uploads, lists and checks health; reflection works over TLS; with --auth-token-file on top, a
+  uploads, lists and checks health; the CLI in plaintext is told to pass --tls-ca; no gRPC
+  C-core log line (`E1127 12:00:00.000 ... ssl_transport_security.cc ...`) reaches the CLI's
+  stderr; reflection works over TLS; with --auth-token-file on top, a
   call without the token is UNAUTHENTICATED and one with it succeeds;
 - --tls-client-ca (mutual TLS): a client without a certificate gets UNAVAILABLE, one with a
   certificate of the other CA too, one with a certificate of the CA succeeds (CLI and Python);
@@ -18,12 +20,26 @@ Exit 77 (skipped) without python3-grpcio or the openssl CLI (.ci/install-deps in
 
 import argparse
 import os
+import re
 import shutil
 import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from fs_testlib import Cli, Daemon, check, icosphere_obj, kill_all, log, run  # noqa: E402
+
+# The form of gRPC C-core's log lines (severity letter, MMDD, time): never on the CLI's stderr.
+CORE_LOG_LINE = re.compile(r"^[EWID]\d{4} ", re.MULTILINE)
+
+
+def cli_failure(cli, *args):
+    """Runs the CLI, which must fail with exit 1 and UNAVAILABLE, and no C-core log line."""
+    _, _, err = cli(*args, expect=1, timeout=60)
+    check("UNAVAILABLE" in err, "CLI %s: %s" % (" ".join(args), err))
+    check(not CORE_LOG_LINE.search(err), "CLI %s: a gRPC log line on stderr: %s" %
+          (" ".join(args), err))
+    return err
+
 
 def make_certs(script, folder):
     """deploy/make-certs.sh into `folder`: {"ca": (cert, key), "server": ..., "client": ...}."""
@@ -139,18 +155,16 @@ def main():
         uploaded = cli.json(*tls_cli, "upload", mesh)
         listed = cli.json(*tls_cli, "meshes")
         check(uploaded["id"] in str(listed), "CLI meshes over TLS lists the upload: %s" % listed)
-        _, _, err = cli("--token", token, "meshes", expect=1, timeout=60)
-        check("UNAVAILABLE" in err, "CLI in plaintext: %s" % err)
-        _, _, err = cli("--tls-ca", other_ca[0], "--token", token, "meshes", expect=1, timeout=60)
-        check("UNAVAILABLE" in err, "CLI trusting another CA: %s" % err)
+        err = cli_failure(cli, "--token", token, "meshes")
+        check("pass --tls-ca FILE" in err, "CLI in plaintext: no hint: %s" % err)
+        err = cli_failure(cli, "--tls-ca", other_ca[0], "--token", token, "meshes")
+        check("--tls-ca FILE" not in err, "CLI over TLS given the plaintext hint: %s" % err)
         _, _, err = cli("--tls-ca", os.path.join(work, "missing.pem"), "health", expect=2)
         check("missing.pem" in err, "CLI with a missing CA file names it: %s" % err)
         # --tls-server-name replaces the address's host in the certificate check.
         check(cli.json("--tls-ca", ca[0], "--tls-server-name", "localhost", "health")["status"]
               == "SERVING", "CLI with --tls-server-name localhost")
-        _, _, err = cli("--tls-ca", ca[0], "--tls-server-name", "elsewhere.example", "health",
-                        expect=1, timeout=60)
-        check("UNAVAILABLE" in err, "CLI expecting a name the certificate lacks: %s" % err)
+        cli_failure(cli, "--tls-ca", ca[0], "--tls-server-name", "elsewhere.example", "health")
         # export runs the Python package, which gets the --tls-* options passed on.
         vtu = os.path.join(work, "sphere.vtu")
         cli(*tls_cli, "export", uploaded["id"], "--out", vtu, timeout=120)
@@ -185,8 +199,7 @@ def main():
         listed = cli.json("--tls-ca", ca[0], "--tls-cert", client_cert[0], "--tls-key",
                           client_cert[1], "meshes")
         check(uploaded["id"] in str(listed), "CLI over mTLS: %s" % listed)
-        _, _, err = cli("--tls-ca", ca[0], "meshes", expect=1, timeout=60)
-        check("UNAVAILABLE" in err, "CLI without a client certificate: %s" % err)
+        cli_failure(cli, "--tls-ca", ca[0], "meshes")
         _, _, err = cli("--tls-ca", ca[0], "--tls-cert", client_cert[0], "meshes", expect=2)
         check("--tls-key" in err, "CLI with a certificate but no key: %s" % err)
         log("mutual TLS: the CA's client certificate works (CLI, Python); none or another CA's: "

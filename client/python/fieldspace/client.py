@@ -459,7 +459,9 @@ class Client:
         Args:
             faces: (k,) constrained faces.
             values: (k, 3) ambient vectors (n-fields: one direction each), (k, 3, 3) or (k, 6)
-                tensors, or DOFs (k, 2) / tensors (k, 3); see ``fieldspace.fields``.
+                tensors, or DOFs (k, 2) / tensors (k, 3) with ``encoding="dof"`` (DOFs
+                without it are refused, so that [[1, 0]] is not read as frame coordinates by
+                mistake); see ``fieldspace.fields``.
             weights: Weights(mu_s, mu_b, mu_c), a tuple or a dict (default (1, 0, 1)).
             constraint_weights: (k,) soft weights (default 1 each).
             hard: a bool, or (k,) bools: interpolate exactly instead of penalizing.
@@ -504,6 +506,13 @@ class Client:
         if values is None:
             raise InvalidArgument(what, "constraints on %d faces need values" % k)
         enc, flat = fld.encode(values, field_type, what, encoding, count=k)
+        if encoding is None and enc == fld.encoding_proto(fld.DOF, what):
+            # [[1, 0]] reads as frame coordinates, which differ from face to face: say so.
+            raise InvalidArgument(what, "%d values per face are face-frame DOFs for a %s basis, "
+                                  "not an ambient %s: pass encoding='dof' to mean them" %
+                                  (flat.shape[1], field_type,
+                                   "tensor (6 values or 3 x 3)" if field_type.kind == "tensor"
+                                   else "vector (3 values x y z)"))
         soft = None
         if constraint_weights is not None:
             soft = np.broadcast_to(np.asarray(constraint_weights, dtype=np.float64), (k,))
