@@ -161,7 +161,10 @@ const std::vector<CliCommand>& Commands() {
        /*new_group=*/true},
       {{"render",
         "MESH [FIELD_FILE]",
-        {{"out", "FILE.png", true}, {"style", "glyphs|streamlines|lic|surface"}},
+        {{"out", "FILE.png|.jpg", true},
+         {"style", "glyphs|streamlines|hatching|lic|surface"},
+         {"color", "none|magnitude"},
+         {"singularities", "FILE"}},
         "a picture, off screen (VTK); export and render run the Python package's `python3 -m "
         "fieldspace.export|render` (--help: all options)"},
        nullptr,

@@ -28,11 +28,13 @@ std::optional<std::string> OutArgument(absl::Span<const std::string> args) {
 }  // namespace
 
 int RunPythonTool(Cli& cli, const std::string& tool, absl::Span<const std::string> args) {
-  // render writes PNG only; another extension would get PNG bytes under its name.
+  // render writes PNG (.png) or JPEG (.jpg, .jpeg); another extension is refused here, before
+  // Python starts (render.py refuses it too).
   if (const std::optional<std::string> out = OutArgument(args); tool == "render" && out) {
     const std::string ext = absl::AsciiStrToLower(std::filesystem::path(*out).extension().string());
-    if (ext != ".png") {
-      throw UsageError(absl::StrCat("--out ", *out, ": render writes PNG pictures (.png)"));
+    if (ext != ".png" && ext != ".jpg" && ext != ".jpeg") {
+      throw UsageError(
+          absl::StrCat("--out ", *out, ": render writes PNG (.png) or JPEG (.jpg, .jpeg)"));
     }
   }
   // The package next to this program: build/bin/../python in the build tree,

@@ -259,10 +259,16 @@ def main():
                                    "160x120", expect=None)
                 check(rc == 0 and os.path.getsize(png) > 1000, "fieldspace render: %r" % err)
                 log("export and render through the CLI: ok")
-            # render writes PNG: another extension is refused before anything runs.
+            # render writes PNG or JPEG by extension; another extension is refused before anything
+            # runs.
             jpg = os.path.join(work, "field.jpg")
-            rc, _, err = cli("render", mesh["id"], lifted, "--out", jpg, expect=2)
-            check("render writes PNG" in err and not os.path.exists(jpg), "render .jpg: %r" % err)
+            rc, _, err = cli("render", mesh["id"], lifted, "--out", jpg, "--size", "160x120",
+                             expect=None)
+            check(rc == 0 and open(jpg, "rb").read(3) == b"\xff\xd8\xff",
+                  "render .jpg writes JPEG: %r" % err)
+            gif = os.path.join(work, "field.gif")
+            rc, _, err = cli("render", mesh["id"], lifted, "--out", gif, expect=2)
+            check("render writes PNG" in err and not os.path.exists(gif), "render .gif: %r" % err)
             rc, _, err = cli("export", "m-0000000000000000", lifted, "--out", vtu, expect=None)
             check(rc == 1 and "NOT_FOUND" in err, "export of an unknown mesh: %r" % err)
 
