@@ -31,8 +31,8 @@
 #include "core/linalg/sparse_cholesky.h"
 #include "core/linalg/supernodal_cholesky.h"
 #include "core/operators/field_operator.h"
-#include "core/operators/reference_solvers.h"
 #include "core/subspace/design_session.h"
+#include "core/subspace/full_space_solver.h"
 #include "core/subspace/projection.h"
 #include "core/subspace/reduced_system.h"
 

@@ -11,7 +11,7 @@
 #include "core/basis/basis.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_operator.h"
-#include "core/operators/reference_solvers.h"
+#include "core/subspace/problem.h"
 #include "core/subspace/reduced_system.h"
 
 namespace fieldspace::bench {

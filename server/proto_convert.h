@@ -15,7 +15,7 @@
 #include "core/operators/conversions.h"
 #include "core/operators/curvature.h"
 #include "core/operators/field_type.h"
-#include "core/operators/reference_solvers.h"
+#include "core/subspace/problem.h"
 #include "fieldspace/v1/fieldspace.pb.h"
 #include "server/registry.h"
 

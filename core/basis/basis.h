@@ -186,7 +186,8 @@ struct BasisLevel {
 enum class BasisQuality : uint8_t {
   // One level: the paper's construction with params.dimension and params.sigma.
   kPaper = 0,
-  // Three levels of d - d/10 - d/40, d/10 and d/40 fields, each with overlap sigma * 5/8: the
+  // Three levels of d - d/10 - d/40, d/10 and d/40 fields, each with overlap sigma * 5/8 (fewer
+  // for small d: QualityLevels): the
   // coarse levels' wide fields represent smooth large-scale fields (the lowest eigenfields), which
   // the fine level's small Dirichlet fields cannot combine into. At d = 2000, sigma 40: the lowest
   // 50 non-zero reduced eigenvalues within 1.8-2.0% mean, 3.1-3.9% max (paper: 20-29%, 128-173%)
@@ -201,6 +202,9 @@ enum class BasisQuality : uint8_t {
 };
 
 // The levels of `quality` for dimension d and overlap sigma: one level {d, sigma} for kPaper.
+// kLowModes and kSmooth leave out a coarse level of fewer than 5 sigma / 8 fields (d < 1000 for the
+// coarsest, d < 250 for the coarse one at sigma 40) and give its fields to the next finer level:
+// its regions would each be nearly the whole mesh (docs/conventions.md, Basis quality).
 // InvalidArgument for kLowModes and kSmooth with d < 40 (the coarsest level needs d / 40 >= 1
 // fields).
 absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int32_t dimension,

@@ -9,26 +9,18 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/string_view.h"
+#include "core/common/random.h"
 #include "core/linalg/lanczos.h"
 
 namespace fieldspace::basis_internal {
 namespace {
 
-uint64_t SplitMix64(uint64_t& state) {
-  uint64_t z = (state += 0x9e3779b97f4a7c15ull);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
-}
-
 // Deterministic start vectors, uniform in [-1, 1).
 Eigen::MatrixXd RandomBlock(int32_t n, int32_t p, uint64_t seed) {
   Eigen::MatrixXd X(n, p);
-  uint64_t state = seed;
+  SplitMix64 random(seed);
   for (int32_t j = 0; j < p; ++j) {
-    for (int32_t i = 0; i < n; ++i) {
-      X(i, j) = static_cast<double>(SplitMix64(state) >> 11) * 0x1.0p-52 - 1.0;
-    }
+    for (int32_t i = 0; i < n; ++i) X(i, j) = random.NextSigned();
   }
   return X;
 }
@@ -80,7 +72,7 @@ absl::StatusOr<LocalEigenResult> SolveLanczos(LocalOperator& op, int32_t m, doub
     return absl::FailedPreconditionError(
         absl::StrCat("local eigenproblem of a region of ", n,
                      " DOFs did not converge (LOBPCG, then Spectra's Lanczos): ", why,
-                     "; a larger dimension d (smaller regions) or a smaller n helps"));
+                     "; a larger dimension d (smaller regions) helps"));
   };
   if (absl::IsResourceExhausted(run.status())) return not_converged(run.status().message());
   if (!run.ok()) return run.status();

@@ -63,8 +63,8 @@ struct LocalEigenResult {
 // LOBPCG (block size m + guard) preconditioned with the exact shift-inverse (S_bar + tau I)^-1,
 // which converges in ~8-12 iterations to 1e-5 on mesh regions; if it has not converged within
 // max_iterations, Spectra's shift-invert Lanczos with the same inverse. Errors: Cancelled when
-// `cancel` is set, errors of PrepareShiftInverse, FailedPrecondition (advising a larger d or a
-// smaller n) when neither method converged.
+// `cancel` is set, errors of PrepareShiftInverse, FailedPrecondition (advising a larger d) when
+// neither method converged.
 absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
                                                         const LocalEigenOptions& options,
                                                         const CancelToken& cancel);

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "Eigen/SparseCore"
+#include "core/common/random.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -57,25 +58,6 @@ void AssembleUpper(int32_t n, const std::vector<int32_t>& cols, const std::vecto
     for (size_t q = col_begin; q < out->inner.size(); ++q) marker[out->inner[q]] = -1;
     out->outer[j + 1] = static_cast<int32_t>(out->inner.size());
   }
-}
-
-// Frame coordinates (t_x, t_y) of the edge vector p_{k+2} - p_{k+1} of face f, computed exactly
-// as the vector Laplacian's assembly does so that B B^T reproduces S to the last bits.
-inline void EdgeVectorInFrame(const TriangleMesh& mesh, int32_t f, int k, double* tx, double* ty) {
-  const FaceMatrix& F = mesh.faces();
-  const VertexMatrix& V = mesh.vertices();
-  const Eigen::Vector3d x = mesh.frame_x().row(f).transpose();
-  const Eigen::Vector3d y = mesh.frame_y().row(f).transpose();
-  const Eigen::Vector3d d = (V.row(F(f, (k + 2) % 3)) - V.row(F(f, (k + 1) % 3))).transpose();
-  *tx = d.dot(x);
-  *ty = d.dot(y);
-}
-
-uint64_t SplitMix64(uint64_t& state) {
-  uint64_t z = (state += 0x9e3779b97f4a7c15ull);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
 }
 
 }  // namespace
@@ -222,12 +204,12 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
   if (op.type.kind != FieldKind::kVector || S.rows() != k || S.cols() != k) return false;
   const FaceMatrix& F = mesh.faces();
   const FaceMatrix& FE = mesh.face_edges();
-  uint64_t state = 0x5eed5eedULL;
+  SplitMix64 random(0x5eed5eedULL);
   // One random vector: a mismatch anywhere shows up in S x with probability 1.
   for (int trial = 0; trial < 1; ++trial) {
     Eigen::VectorXd x(k);
     for (int64_t i = 0; i < k; ++i) {
-      x[i] = static_cast<double>(SplitMix64(state) >> 11) * 0x1.0p-52 - 1.0;
+      x[i] = random.NextSigned();
     }
     // y1 = S x and the entrywise scale |S| |x| (S symmetric: row i = column i).
     Eigen::VectorXd y1(k), scale(k);
@@ -256,8 +238,8 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
         return absl::CancelledError("basis construction cancelled");
       }
       for (int kk = 0; kk < 3; ++kk) {
-        double tx, ty;
-        EdgeVectorInFrame(mesh, f, kk, &tx, &ty);
+        const Eigen::Vector2d t = mesh.EdgeVectorInFrame(f, kk);
+        const double tx = t[0], ty = t[1];
         const int32_t v = F(f, kk);
         const int32_t e = FE(f, kk);
         zv[v] += (-0.5 * ty * x[2 * f] + 0.5 * tx * x[2 * f + 1]) * data.inv_sqrt_vertex_mass[v];
@@ -271,8 +253,8 @@ absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOpe
                         for (int32_t f = r.begin(); f != r.end(); ++f) {
                           double y2[2] = {0.0, 0.0};
                           for (int kk = 0; kk < 3; ++kk) {
-                            double tx, ty;
-                            EdgeVectorInFrame(mesh, f, kk, &tx, &ty);
+                            const Eigen::Vector2d t = mesh.EdgeVectorInFrame(f, kk);
+                            const double tx = t[0], ty = t[1];
                             const double a = zv[F(f, kk)] * data.inv_sqrt_vertex_mass[F(f, kk)];
                             const double b = ze[FE(f, kk)] * data.inv_sqrt_edge_mass[FE(f, kk)];
                             y2[0] += -0.5 * ty * a + tx * b;
@@ -344,8 +326,8 @@ HodgeLocalOperator::HodgeLocalOperator(const TriangleMesh& mesh, const HodgeFact
     double* row0 = &b_vals_[12 * i];
     double* row1 = row0 + 6;
     for (int k = 0; k < 3; ++k) {
-      double tx, ty;
-      EdgeVectorInFrame(mesh, f, k, &tx, &ty);
+      const Eigen::Vector2d t = mesh.EdgeVectorInFrame(f, k);
+      const double tx = t[0], ty = t[1];
       const double wv = s * data.inv_sqrt_vertex_mass[F(f, k)];
       const double we = s * data.inv_sqrt_edge_mass[FE(f, k)];
       row0[k] = -0.5 * ty * wv;

@@ -7,20 +7,9 @@
 #include <utility>
 
 #include "absl/strings/str_format.h"
+#include "core/common/random.h"
 
 namespace fieldspace {
-namespace {
-
-// SplitMix64: a tiny, well-mixed deterministic generator (the sample choice must not depend on
-// the platform's std::hash or distribution implementations).
-uint64_t SplitMix64(uint64_t x) {
-  x += 0x9e3779b97f4a7c15ull;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ull;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebull;
-  return x ^ (x >> 31);
-}
-
-}  // namespace
 
 absl::StatusOr<std::vector<int32_t>> AllocateSamplesPerComponent(const TriangleMesh& mesh,
                                                                  int32_t num_regions) {
@@ -187,7 +176,8 @@ absl::StatusOr<SamplingResult> FarthestPointSampling(const TriangleMesh& mesh,
           absl::StrFormat("component %d: %d samples for %d faces", c, want, size));
     }
     const int32_t first =
-        comp_faces[begin + static_cast<int32_t>(SplitMix64(seed ^ SplitMix64(c)) % size)];
+        comp_faces[begin +
+                   static_cast<int32_t>(SplitMix64::Hash(seed ^ SplitMix64::Hash(c)) % size)];
     result.samples.push_back(first);
     bucketing = false;
     relax_from(graph.face_node[first]);

@@ -17,6 +17,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/string_view.h"
+#include "core/common/file_util.h"
 #include "core/linalg/sparse_checks.h"
 #include "tbb/parallel_for.h"
 
@@ -28,11 +29,6 @@ using SpMat = Eigen::SparseMatrix<double>;
 // Entries formatted per batch; at ~40 bytes per line a batch is ~160 MB of text at most.
 constexpr int64_t kBatchEntries = int64_t{1} << 22;
 constexpr int64_t kChunkEntries = int64_t{1} << 16;
-
-absl::Status ErrnoStatus(int error_number, const std::string& what) {
-  return absl::Status(absl::ErrnoToStatusCode(error_number),
-                      absl::StrFormat("%s: %s", what, std::strerror(error_number)));
-}
 
 struct FileCloser {
   void operator()(std::FILE* f) const {

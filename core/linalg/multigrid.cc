@@ -11,6 +11,7 @@
 
 #include "Eigen/Dense"
 #include "absl/strings/str_format.h"
+#include "core/common/random.h"
 #include "tbb/blocked_range.h"
 #include "tbb/enumerable_thread_specific.h"
 #include "tbb/parallel_for.h"
@@ -257,11 +258,8 @@ int32_t Aggregate(const Csr<double>& A, const std::vector<double>& diag, double 
 double SpectralRadiusEstimate(const Csr<double>& A, const std::vector<double>& inv_diag) {
   const int32_t n = A.rows;
   std::vector<double> v(n), w(n);
-  uint64_t state = 0x9e3779b97f4a7c15ull;
-  for (int32_t i = 0; i < n; ++i) {
-    state = state * 6364136223846793005ull + 1442695040888963407ull;
-    v[i] = static_cast<double>(state >> 11) / 9007199254740992.0 - 0.5;
-  }
+  SplitMix64 random(0x9e3779b97f4a7c15ull);
+  for (int32_t i = 0; i < n; ++i) v[i] = 0.5 * random.NextSigned();
   double rho = 0.0;
   for (int it = 0; it < 12; ++it) {
     MultiplyVector(A, v.data(), w.data());

@@ -72,6 +72,16 @@ class TriangleMesh {
   const VertexMatrix& face_barycenters() const { return face_barycenters_; }
   const VertexMatrix& frame_x() const { return frame_x_; }
   const VertexMatrix& frame_y() const { return frame_y_; }
+  // The edge vector t_k = p_{k+2} - p_{k+1} of face f (opposite corner k, counter-clockwise) in
+  // f's frame: (t_k . x_f, t_k . y_f). The one definition every operator assembly uses, so that
+  // operators built from it agree to the last bit (the factored Hodge form B B^T reproduces S).
+  Eigen::Vector2d EdgeVectorInFrame(int32_t f, int k) const {
+    const Eigen::Vector3d x = frame_x_.row(f).transpose();
+    const Eigen::Vector3d y = frame_y_.row(f).transpose();
+    const Eigen::Vector3d t =
+        (vertices_.row(faces_(f, (k + 2) % 3)) - vertices_.row(faces_(f, (k + 1) % 3))).transpose();
+    return {t.dot(x), t.dot(y)};
+  }
 
   // Connected components: face_component()(f) in [0, num_components()).
   const Eigen::VectorXi& face_component() const { return face_component_; }

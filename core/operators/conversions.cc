@@ -6,6 +6,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
+#include "core/operators/complex_power.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -33,19 +34,7 @@ Eigen::Vector3d FromFrame(const TriangleMesh& mesh, int32_t f, const Eigen::Vect
 Eigen::Vector2d PowerRepresentation(const Eigen::Vector2d& d, int32_t n) {
   const double r = d.norm();
   if (r == 0.0) return Eigen::Vector2d::Zero();
-  double zr = d[0] / r, zi = d[1] / r, pr = 1.0, pi = 0.0;
-  for (int32_t m = n; m > 0; m >>= 1) {
-    if (m & 1) {
-      const double t = pr * zr - pi * zi;
-      pi = pr * zi + pi * zr;
-      pr = t;
-    }
-    const double t = zr * zr - zi * zi;
-    zi = 2.0 * zr * zi;
-    zr = t;
-  }
-  const double inv = r / std::hypot(pr, pi);
-  return {pr * inv, pi * inv};
+  return r * UnitComplexPower(d / r, n);
 }
 
 // The k-th n-th root direction of a representation vector, length kept.

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "Eigen/Core"
+#include "core/operators/complex_power.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -69,21 +70,9 @@ EdgeTransport ComputeEdgeTransport(const TriangleMesh& mesh) {
 }
 
 void TransportPower(const EdgeTransport::Edge& edge, int32_t n, double* cos_out, double* sin_out) {
-  double zr = edge.cos_delta, zi = edge.sin_delta;
-  double pr = 1.0, pi = 0.0;
-  for (int32_t m = n; m > 0; m >>= 1) {
-    if (m & 1) {
-      const double r = pr * zr - pi * zi;
-      pi = pr * zi + pi * zr;
-      pr = r;
-    }
-    const double r = zr * zr - zi * zi;
-    zi = 2.0 * zr * zi;
-    zr = r;
-  }
-  const double inv = 1.0 / std::sqrt(pr * pr + pi * pi);
-  *cos_out = pr * inv;
-  *sin_out = pi * inv;
+  const Eigen::Vector2d p = UnitComplexPower({edge.cos_delta, edge.sin_delta}, n);
+  *cos_out = p[0];
+  *sin_out = p[1];
 }
 
 }  // namespace fieldspace

@@ -1,5 +1,6 @@
 #include "core/operators/field_operator.h"
 
+#include "absl/strings/str_format.h"
 #include "core/common/status_macros.h"
 #include "core/operators/nfield_laplacian.h"
 #include "core/operators/tensor_laplacian.h"
@@ -8,6 +9,17 @@
 #include "tbb/parallel_for.h"
 
 namespace fieldspace {
+
+absl::Status ValidateOperatorShape(const FieldOperator& op) {
+  const int64_t k = op.dofs();
+  if (k == 0 || op.stiffness.rows() != k || op.stiffness.cols() != k ||
+      k % op.type.dofs_per_face() != 0) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "operator: stiffness %d x %d does not match mass of %d entries (%d per face)",
+        op.stiffness.rows(), op.stiffness.cols(), k, op.type.dofs_per_face()));
+  }
+  return absl::OkStatus();
+}
 
 Eigen::VectorXd BuildFaceMass(const TriangleMesh& mesh, int32_t dofs_per_face) {
   const int32_t nf = mesh.num_faces();

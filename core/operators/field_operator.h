@@ -5,6 +5,7 @@
 
 #include "Eigen/Core"
 #include "Eigen/SparseCore"
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_type.h"
@@ -45,6 +46,10 @@ struct FieldOperator {
 // InvalidArgument for an invalid type (FieldType::Validate), ResourceExhausted when S would need
 // more than 2^31 nonzeros.
 absl::StatusOr<FieldOperator> BuildFieldOperator(const TriangleMesh& mesh, const FieldType& type);
+
+// InvalidArgument unless `op` is non-empty, its stiffness is k x k for k = op.dofs(), and k is a
+// whole number of faces (a multiple of op.type.dofs_per_face()).
+absl::Status ValidateOperatorShape(const FieldOperator& op);
 
 // The diagonal of M: dofs_per_face * #F entries, entry p f + c = area of face f.
 Eigen::VectorXd BuildFaceMass(const TriangleMesh& mesh, int32_t dofs_per_face);

@@ -29,19 +29,10 @@ constexpr double kPoissonTolerance = 1e-12;
 
 absl::Status Cancelled() { return absl::CancelledError("kernel field computation cancelled"); }
 
-// Face f's edge vector t_k (opposite corner k, counter-clockwise: corner k+1 to k+2) in frame
-// coordinates.
-Eigen::Vector2d FrameEdge(const TriangleMesh& mesh, int32_t f, int k) {
-  const FaceMatrix& F = mesh.faces();
-  const Eigen::Vector3d e = mesh.vertices().row(F(f, (k + 2) % 3)).transpose() -
-                            mesh.vertices().row(F(f, (k + 1) % 3)).transpose();
-  return {e.dot(mesh.frame_x().row(f).transpose()), e.dot(mesh.frame_y().row(f).transpose())};
-}
-
-// All three, as columns.
+// Face f's edge vectors (TriangleMesh::EdgeVectorInFrame) as columns.
 Eigen::Matrix<double, 2, 3> FrameEdges(const TriangleMesh& mesh, int32_t f) {
   Eigen::Matrix<double, 2, 3> t;
-  for (int k = 0; k < 3; ++k) t.col(k) = FrameEdge(mesh, f, k);
+  for (int k = 0; k < 3; ++k) t.col(k) = mesh.EdgeVectorInFrame(f, k);
   return t;
 }
 
@@ -519,7 +510,7 @@ Eigen::MatrixXd HodgeGram(const TriangleMesh& mesh, const RowMatrix& Z) {
             const int32_t f = EF(e, side);
             if (f < 0) continue;
             const int k = FE(f, 0) == e ? 0 : (FE(f, 1) == e ? 1 : 2);
-            const Eigen::Vector2d t = FrameEdge(mesh, f, k);
+            const Eigen::Vector2d t = mesh.EdgeVectorInFrame(f, k);
             const double t0 = t[0], t1 = t[1];
             const double* z0 = Z.data() + 2 * static_cast<Eigen::Index>(f) * q;
             const double* z1 = z0 + q;

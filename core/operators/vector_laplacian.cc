@@ -128,7 +128,6 @@ absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const Tria
   const FaceMatrix& FE = mesh.face_edges();
   const FaceMatrix& FN = mesh.face_neighbors();
   const PairMatrix& EF = mesh.edge_faces();
-  const VertexMatrix& V = mesh.vertices();
   const Eigen::VectorXd& area = mesh.face_areas();
 
   const VertexStars stars = BuildVertexStars(mesh);
@@ -140,13 +139,10 @@ absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const Tria
   tbb::parallel_for(tbb::blocked_range<int32_t>(0, nf, kFaceGrain),
                     [&](const tbb::blocked_range<int32_t>& r) {
                       for (int32_t f = r.begin(); f != r.end(); ++f) {
-                        const Eigen::Vector3d x = mesh.frame_x().row(f).transpose();
-                        const Eigen::Vector3d y = mesh.frame_y().row(f).transpose();
                         for (int k = 0; k < 3; ++k) {
-                          const Eigen::Vector3d d =
-                              (V.row(F(f, (k + 2) % 3)) - V.row(F(f, (k + 1) % 3))).transpose();
-                          t[kStride * f + 2 * k] = d.dot(x);
-                          t[kStride * f + 2 * k + 1] = d.dot(y);
+                          const Eigen::Vector2d tk = mesh.EdgeVectorInFrame(f, k);
+                          t[kStride * f + 2 * k] = tk[0];
+                          t[kStride * f + 2 * k + 1] = tk[1];
                         }
                       }
                     });

@@ -10,23 +10,6 @@
 
 namespace fieldspace {
 
-namespace {
-
-// ValidateWeights, and mu_c > 0: a session keeps each soft constraint as the diagonal term
-// 1 / (mu_c weight) of its Woodbury update.
-absl::Status ValidateSessionWeights(const EnergyWeights& weights, bool data_term) {
-  RETURN_IF_ERROR(data_term ? ValidateWeights(weights) : ValidateWeightsWithoutDataTerm(weights));
-  if (!(weights.mu_c > 0)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("energy weight mu_c = ", weights.mu_c,
-                     " is invalid for a design session: must be > 0 (it scales every soft "
-                     "constraint)"));
-  }
-  return absl::OkStatus();
-}
-
-}  // namespace
-
 absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
     const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options,
     const ReducedSmoother* data) {
@@ -217,7 +200,7 @@ absl::Status DesignSession::AddConstraint(int64_t id, const FieldConstraint& con
     return absl::AlreadyExistsError(absl::StrCat("constraint id ", id, " already exists"));
   }
   const bool soft = !constraint.hard();
-  RETURN_IF_ERROR(ValidateConstraint(*system_, constraint));
+  RETURN_IF_ERROR(ValidateConstraint(constraint, system_->num_faces(), system_->type()));
   std::vector<SparseRow> rows = BasisRowsOfFace(*system_, constraint.face);
   double stiffness = 1.0;
   if (soft) {
@@ -261,7 +244,7 @@ absl::Status DesignSession::MoveConstraint(int64_t id, const FieldConstraint& ta
   FieldConstraint constraint = target;
   constraint.kind = record.kind;  // a move keeps the kind
   const bool soft = !record.hard();
-  RETURN_IF_ERROR(ValidateConstraint(*system_, constraint));
+  RETURN_IF_ERROR(ValidateConstraint(constraint, system_->num_faces(), system_->type()));
   double stiffness = stiffness_[slot];
   if (constraint.face == record.face) {
     kkt_->SetTarget(slot, constraint.value);

@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/linalg/supernodal_cholesky.h"
+#include "core/operators/reference_solvers.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/projection.h"
 

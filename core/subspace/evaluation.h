@@ -8,7 +8,7 @@
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
 #include "core/operators/field_operator.h"
-#include "core/operators/reference_solvers.h"
+#include "core/subspace/full_space_solver.h"
 #include "core/subspace/reduced_system.h"
 
 namespace fieldspace {

@@ -16,28 +16,6 @@
 
 namespace fieldspace {
 
-absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c) {
-  const bool soft = !c.hard();
-  if (c.face < 0 || c.face >= system.num_faces()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("constraint face id ", c.face, " is outside [0, ", system.num_faces(), ")"));
-  }
-  if (c.value.size() != system.dofs_per_face()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("constraint on face ", c.face, " has ", c.value.size(), " values; a ",
-                     system.type().ToString(), " field has ", system.dofs_per_face(), " per face"));
-  }
-  if (!c.value.allFinite()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("constraint on face ", c.face, " has a non-finite value"));
-  }
-  if (soft && (!std::isfinite(c.weight) || c.weight <= 0)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "soft constraint on face ", c.face, " has weight ", c.weight, "; must be finite and > 0"));
-  }
-  return absl::OkStatus();
-}
-
 EnergyWeights EffectiveEnergyWeights(const ReducedSystem& system, const EnergyWeights& weights,
                                      bool scale_free) {
   EnergyWeights w = weights;
@@ -64,7 +42,7 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
   RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
   const EnergyWeights w = EffectiveEnergyWeights(system, problem.weights, problem.scale_free);
   for (const FieldConstraint& c : problem.constraints) {
-    RETURN_IF_ERROR(ValidateConstraint(system, c));
+    RETURN_IF_ERROR(ValidateConstraint(c, system.num_faces(), system.type()));
   }
   const absl::Status cancelled_error = absl::CancelledError("reduced model solve cancelled");
   if (IsCancelled(options.cancel)) return cancelled_error;

@@ -8,22 +8,14 @@
 #include "Eigen/Core"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "core/operators/reference_solvers.h"
+#include "core/subspace/problem.h"
 #include "core/subspace/reduced_system.h"
 
 namespace fieldspace {
 
-// The problem itself is the full-space ModelProblem of core/operators/reference_solvers.h (eq. 8
-// with soft constraints weighted per constraint and optional hard constraints), so that callers
-// build one description and solve it in the full space (SolveModelProblem) or in a subspace
-// (SolveReducedModelProblem below) and compare.
-
-// The problem types (EnergyWeights, FieldConstraint, ModelProblem) and ValidateWeights live in
-// core/operators/reference_solvers.h: one description from core to the wire.
-
-// InvalidArgument unless `c` names a face of `system`, has dofs_per_face finite values and (for a
-// soft constraint) a finite positive weight.
-absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c);
+// The model problem (problem.h: eq. 8 with soft constraints weighted per constraint and optional
+// hard constraints) solved in a subspace; full_space_solver.h solves the same description in the
+// full space, so that callers can compare.
 
 // The energy weights a problem is factorized with: `weights`, with mu_b multiplied by the mesh's
 // total area A when scale_free (X^T B X scales like 1 / L^2 and A like L^2, so mu_b becomes

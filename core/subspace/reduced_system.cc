@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
 #include "core/common/status_macros.h"
+#include "core/common/timing.h"
 #include "core/linalg/sparse_checks.h"
 #include "core/subspace/subspace_util.h"
 #include "oneapi/tbb/blocked_range.h"
@@ -19,10 +20,6 @@
 
 namespace fieldspace {
 namespace {
-
-double SecondsSince(std::chrono::steady_clock::time_point start) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-}
 
 // Per-thread state of the product pass. Rows of U are processed in groups of spatially close
 // faces (rows sharing their dominant column): a group touches only a few hundred columns, so its

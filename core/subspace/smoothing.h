@@ -38,8 +38,8 @@
 #include "absl/types/span.h"
 #include "core/common/cancel.h"
 #include "core/linalg/supernodal_cholesky.h"
-#include "core/operators/reference_solvers.h"
 #include "core/subspace/model_problem.h"
+#include "core/subspace/problem.h"
 #include "core/subspace/reduced_system.h"
 
 namespace fieldspace {

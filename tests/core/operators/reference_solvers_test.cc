@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/mesh/shapes.h"
+#include "core/subspace/full_space_solver.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"

@@ -5,6 +5,7 @@
 
 #include "Eigen/Dense"
 #include "core/operators/reference_solvers.h"
+#include "core/subspace/problem.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"

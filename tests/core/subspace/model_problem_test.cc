@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "Eigen/Dense"
-#include "core/operators/reference_solvers.h"
+#include "core/subspace/full_space_solver.h"
 #include "core/subspace/projection.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"

@@ -14,6 +14,7 @@
 #include "core/subspace/design_session.h"
 #include "core/subspace/evaluation.h"
 #include "core/subspace/model_problem.h"
+#include "core/subspace/problem.h"
 #include "core/subspace/projection.h"
 #include "core/subspace/reduced_system.h"
 #include "core/subspace/spectrum.h"

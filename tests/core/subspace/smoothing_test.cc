@@ -9,6 +9,7 @@
 
 #include "Eigen/Dense"
 #include "core/operators/reference_solvers.h"
+#include "core/subspace/problem.h"
 #include "core/subspace/projection.h"
 #include "core/subspace/reduced_system.h"
 #include "gmock/gmock.h"

@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "Eigen/Dense"
-#include "core/operators/reference_solvers.h"
 #include "core/subspace/design_session.h"
+#include "core/subspace/full_space_solver.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/reduced_system.h"
 #include "core/subspace/smoothing.h"
