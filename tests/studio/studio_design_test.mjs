@@ -7,9 +7,9 @@
 import { writeFileSync } from "node:fs";
 import { join } from "node:path";
 import {
-  castRay, cameraRay, check, cleanup, decodePng, dot, faceCentroid, faceNormal, launchChromium,
-  parseArgs, project, relativeError, startDaemon, startGateway, torusObj, uploadAndBuild,
-  webModules,
+  castRay, cameraRay, check, chooseBasis, cleanup, decodePng, dot, faceCentroid, faceNormal,
+  launchChromium, pageProbe, parseArgs, project, startDaemon, startGateway, torusObj,
+  uploadAndBuild, webModules,
 } from "./studio_lib.mjs";
 
 const args = parseArgs(process.argv.slice(2));
@@ -30,39 +30,10 @@ const page = await browser.newPage({ viewport: { width: 1100, height: 760 } });
 page.on("pageerror", (e) => console.error(`page error: ${e.message}`));
 page.on("console", (m) => m.type() === "error" && console.error(`page console: ${m.text()}`));
 
-const state = () => page.evaluate(() => window.__studio.state());
-async function settled() {
-  try {
-    await page.waitForFunction(() => {
-      const s = window.__studio?.state();
-      return s && s.ready && s.idle;
-    }, null, { timeout: 30000 });
-  } catch (e) {
-    console.error(`the page did not settle: ${JSON.stringify(await state())}`);
-    throw e;
-  }
-  return state();
-}
-
-// The page's coefficients against a one-shot Solve of its constraints and weights.
-async function checkAgainstSolve(step) {
-  const s = await settled();
-  const solved = await client.solve({
-    basisId: basis.id,
-    weights: { muS: s.weights.muS, muB: s.weights.muB, muC: s.weights.muC },
-    constraints: s.constraints.map((c) => ({ face: c.face, value: c.value,
-      encoding: pb.FieldEncoding.AMBIENT, hard: c.hard, ...(c.hard ? {} : { weight: c.weight }) })),
-  });
-  const error = relativeError(s.coefficients, solved.coefficients);
-  check(s.coefficients.length === solved.coefficients.length && error <= 1e-9,
-    `${step}: session coefficients equal Solve (relative error ${error.toExponential(2)})`);
-  return s;
-}
+const { checkAgainstSolve } = pageProbe(page, client, pb);
 
 await page.goto(gateway.url);
-await page.waitForFunction((id) => [...document.querySelectorAll("#basis option")]
-  .some((o) => o.value === id), basis.id);
-await page.selectOption("#basis", basis.id);
+await chooseBasis(page, basis.id);
 let s = await checkAgainstSolve("open");
 check(s.constraints.length === 0 && s.sampleFaces > 100, `no constraints, ${s.sampleFaces} glyph faces`);
 

@@ -1,7 +1,7 @@
 // Helpers of the studio's browser tests: a daemon with a temporary store, a mesh made here, the
 // gateway, a headless Chromium, rays cast through the page's camera, and PNG pixels.
 import { spawn } from "node:child_process";
-import { mkdtempSync, rmSync } from "node:fs";
+import { existsSync, mkdtempSync, rmSync } from "node:fs";
 import { createRequire } from "node:module";
 import { tmpdir } from "node:os";
 import { join, resolve } from "node:path";
@@ -67,12 +67,18 @@ export function startProcess(command, args, pattern, { timeoutMs = 30000 } = {})
   });
 }
 
-/** fieldspaced on 127.0.0.1:0 with a temporary store; resolves to its address. */
-export async function startDaemon(bin, extra = []) {
-  const store = tempDir("studio-store-");
+/** fieldspaced (by default on 127.0.0.1:0 with a new temporary store); resolves to
+ *  { child, address, store, stop() }. */
+export async function startDaemon(bin, { listen = "127.0.0.1:0", store = null, extra = [] } = {}) {
+  store ??= tempDir("studio-store-");
   const [child, address] = await startProcess(bin,
-    ["--listen", "127.0.0.1:0", "--store", store, ...extra], /listening on (\S+)/);
-  return { child, address, store };
+    ["--listen", listen, "--store", store, ...extra], /listening on (\S+)/);
+  const stop = () => new Promise((resolve) => {
+    if (child.exitCode !== null) resolve();
+    child.once("exit", resolve);
+    child.kill("SIGTERM");
+  });
+  return { child, address, store, stop };
 }
 
 /** The gateway (client/web/gateway/main.mjs) on 127.0.0.1:0; resolves to its URL. */
@@ -104,13 +110,18 @@ export function torusObj(major = 48, minor = 24, R = 1.0, r = 0.4) {
   return `${lines.join("\n")}\n`;
 }
 
-/** Uploads OBJ text and builds a basis; resolves to the BasisInfo. */
-export async function uploadAndBuild(client, pb, objText, name, field, dimension) {
+/** Uploads OBJ text; resolves to the MeshInfo. */
+export function uploadMesh(client, pb, objText, name) {
   const data = new TextEncoder().encode(objText);
-  const mesh = await client.uploadMesh((async function* () {
+  return client.uploadMesh((async function* () {
     yield { header: { name, format: pb.MeshFormat.OBJ, totalBytes: BigInt(data.length) },
       offset: 0n, data };
   })());
+}
+
+/** Uploads OBJ text and builds a basis; resolves to { mesh, basis } (MeshInfo, BasisInfo). */
+export async function uploadAndBuild(client, pb, objText, name, field, dimension) {
+  const mesh = await uploadMesh(client, pb, objText, name);
   let basis = null;
   for await (const progress of client.buildBasis({ meshId: mesh.id, field, dimension })) {
     if (progress.basis) basis = progress.basis;
@@ -120,8 +131,13 @@ export async function uploadAndBuild(client, pb, objText, name, field, dimension
 
 /** Chromium (Debian's) headless with software GL and no background networking. */
 export function launchChromium(chromium) {
+  const executablePath = process.env.CHROMIUM || "/usr/bin/chromium";
+  if (!existsSync(executablePath)) {
+    console.log(`SKIP: no Chromium at ${executablePath} (.ci/install-deps installs it)`);
+    process.exit(77);
+  }
   return chromium.launch({
-    executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
+    executablePath,
     headless: true,
     args: ["--headless=new", "--no-sandbox", "--use-gl=angle", "--use-angle=swiftshader",
       "--enable-unsafe-swiftshader", "--disable-background-networking",
@@ -298,4 +314,57 @@ export function relativeError(a, b) {
     den += b[i] ** 2;
   }
   return Math.sqrt(num / Math.max(den, 1e-300));
+}
+
+// --- the page -----------------------------------------------------------------------------
+
+/** Reads and checks a studio page: its state, waiting until it settled, and its coefficients
+ *  against a one-shot Solve over the wire of the page's constraints and weights. */
+export function pageProbe(page, client, pb) {
+  const state = () => page.evaluate(() => window.__studio.state());
+  async function settled(timeout = 30000) {
+    try {
+      await page.waitForFunction(() => {
+        const s = window.__studio?.state();
+        return s && s.ready && s.idle;
+      }, null, { timeout });
+    } catch (e) {
+      console.error(`the page did not settle: ${JSON.stringify(await state())}`);
+      throw e;
+    }
+    return state();
+  }
+  async function checkAgainstSolve(step) {
+    const s = await settled();
+    const solved = await client.solve({
+      basisId: s.basisId,
+      weights: { muS: s.weights.muS, muB: s.weights.muB, muC: s.weights.muC },
+      constraints: s.constraints.map((c) => ({ face: c.face, value: c.value,
+        encoding: pb.FieldEncoding.AMBIENT, hard: c.hard,
+        ...(c.hard ? {} : { weight: c.weight }) })),
+    });
+    const error = relativeError(s.coefficients, solved.coefficients);
+    check(s.coefficients.length === solved.coefficients.length && error <= 1e-9,
+      `${step}: session coefficients equal Solve (relative error ${error.toExponential(2)})`);
+    return s;
+  }
+  async function waitForMessage(pattern, timeout = 30000) {
+    try {
+      await page.waitForFunction((source) => new RegExp(source).test(
+        window.__studio?.state().message ?? ""), pattern.source, { timeout });
+    } catch (e) {
+      console.error(`no message /${pattern.source}/: ${JSON.stringify(await state())}`);
+      throw e;
+    }
+    const message = (await state()).message;
+    check(pattern.test(message), `the page says: ${message}`);
+  }
+  return { state, settled, checkAgainstSolve, waitForMessage };
+}
+
+/** Opens the studio at `url` and chooses `basisId` once the list has it. */
+export async function chooseBasis(page, basisId) {
+  await page.waitForFunction((id) => [...document.querySelectorAll("#basis option")]
+    .some((o) => o.value === id), basisId, { timeout: 30000 });
+  await page.selectOption("#basis", basisId);
 }

@@ -73,6 +73,8 @@ export class DesignRelay {
     this.open = null;   // the confirmed OpenDesign, kept up to date with weights and watch
     this.constraints = new Map();  // id -> confirmed Constraint, in the order added
     this.resumes = 0;
+    this.resuming = false;
+    this.lost = null;  // the error that lost the stream while no edit was open: resume on the next
     this.closed = false;
     this.call = null;
     socket.on("message", (data, isBinary) => this.onFrame(data, isBinary));
@@ -101,20 +103,28 @@ export class DesignRelay {
         return;
       }
       this.key = request.edit.value.basisId;
-      this.startCall();
+      this.startCall(true);
     }
     this.pending.push(request);
+    if (this.resuming) return;  // sent after the replay
+    if (this.lost !== null) {
+      const lost = this.lost;
+      this.lost = null;
+      this.resume(lost);
+      return;
+    }
     this.call.requests.push(request);
   }
 
-  startCall() {
+  // A new gRPC Design stream; `pump`: forward its answers to the page now (not while replaying).
+  startCall(pump) {
     const requests = new Queue();
     const abort = new AbortController();
     const headers = new Headers(this.headers);
     if (this.key) headers.set("x-fieldspace-key", this.key);
     const responses = this.client.design(requests, { headers, signal: abort.signal });
     this.call = { requests, abort, responses: responses[Symbol.asyncIterator]() };
-    this.pump(this.call);
+    if (pump) this.pump(this.call);
   }
 
   // Forwards the answers of `call` to the page until it ends; on a lost replica, resumes.
@@ -133,7 +143,9 @@ export class DesignRelay {
     } catch (error) {
       if (call !== this.call || this.closed) return;
       if (replicaLost(error) && this.open !== null) {
-        this.resume(error);
+        // As the other clients: an edit in flight resumes now, else the next edit does.
+        if (this.pending.length) this.resume(error);
+        else this.lost = error;
       } else {
         this.fail(error);
       }
@@ -176,15 +188,17 @@ export class DesignRelay {
     }
   }
 
+  // Reopens the stream after `lost`, replays the confirmed state and sends the unanswered edits
+  // again; fails the session with `lost` when every attempt failed.
   async resume(lost) {
-    const unanswered = this.pending.splice(0);
+    this.resuming = true;
     this.log(`design session on ${this.key}: replica lost (${ConnectError.from(lost).message}), ` +
       "reopening");
     for (const pause of RESUME_PAUSES_MS) {
       await new Promise((resolve) => setTimeout(resolve, pause));
       if (this.closed) return;
       this.call.abort.abort();
-      this.startCall();
+      this.startCall(false);
       const call = this.call;
       try {
         const replay = [create(DesignRequestSchema, { edit: { case: "open", value: this.open } })];
@@ -199,18 +213,20 @@ export class DesignRelay {
         }
       } catch (error) {
         if (!replicaLost(error)) {
+          this.resuming = false;
           this.fail(error);
           return;
         }
         continue;
       }
+      this.resuming = false;
       this.resumes += 1;
       this.sendEvent({ resumed: this.resumes });
-      this.pending = unanswered;
-      for (const request of unanswered) call.requests.push(request);
+      for (const request of this.pending) call.requests.push(request);
       this.pump(call);
       return;
     }
+    this.resuming = false;
     this.fail(lost);
   }
 

@@ -37,6 +37,13 @@ function tokenMatches(expected, header) {
   return a.length === b.length && timingSafeEqual(a, b);
 }
 
+/** The daemon's error as code and message only: its gRPC metadata (content-type and the like)
+ *  must not become headers of the page's Connect response. */
+function statusOnly(error) {
+  const e = ConnectError.from(error);
+  return new ConnectError(e.rawMessage, e.code);
+}
+
 /** The routing key of a request: its basis id, else its mesh id (empty: none). */
 function routingKey(request) {
   return request?.basisId || request?.meshId || "";
@@ -78,17 +85,25 @@ export async function startGateway(options, { staticDir = join(here, "..", "dist
     };
     switch (method.methodKind) {
       case "unary":
-        relay[method.localName] = (request, ctx) => call(request, headersFor(ctx, routingKey(request)));
+        relay[method.localName] = async (request, ctx) => {
+          try {
+            return await call(request, headersFor(ctx, routingKey(request)));
+          } catch (e) {
+            throw statusOnly(e);
+          }
+        };
         break;
       case "server_streaming":
-        relay[method.localName] = (request, ctx) => call(request, headersFor(ctx, routingKey(request)));
+        relay[method.localName] = async function* (request, ctx) {
+          try {
+            yield* call(request, headersFor(ctx, routingKey(request)));
+          } catch (e) {
+            throw statusOnly(e);
+          }
+        };
         break;
-      case "client_streaming":  // UploadMesh: no key (the server computes the mesh id)
+      default:  // UploadMesh (no key: the server computes the mesh id) and Design, for gRPC clients
         relay[method.localName] = (requests, ctx) => call(requests, headersFor(ctx, ""));
-        break;
-      case "bidi_streaming":
-        relay[method.localName] = (requests, ctx) => call(requests, headersFor(ctx, ""));
-        break;
     }
   }
 

@@ -73,7 +73,7 @@ function describe(what, e) {
     case Code.InvalidArgument:
       return `${what} refused (invalid argument): ${err.rawMessage}`;
     default:
-      return `${what} failed (${Code[err.code] ?? err.code}): ${err.rawMessage}`;
+      return `${what} failed (${codeName(err.code)}): ${err.rawMessage}`;
   }
 }
 
@@ -320,9 +320,13 @@ function onSessionClosed(code, message, edit) {
     return;
   }
   // The server refused an edit and ended the stream: reopen with what it had confirmed.
-  showMessage(`${describe(`The edit '${edit.kind}'`, new ConnectError(message, code))}. ` +
+  showMessage(`The daemon refused the edit '${edit.kind}' (${codeName(code)}): ${message}. ` +
     "The session was reopened without it.", { error: true });
   openSession();
+}
+
+function codeName(code) {
+  return (Code[code] ?? String(code)).replace(/[A-Z]/g, (c, i) => (i ? " " : "") + c.toLowerCase());
 }
 
 function edit(e) {
@@ -608,6 +612,7 @@ window.__studio = {
   camera: () => view.cameraState(),
   frameTimes: () => [...view.frameTimes],
   showGlyphs: (on) => view.setGlyphsVisible(on),
+  edit,  // an edit as the gestures send them, for tests of refused edits
 };
 
 try {
