@@ -19,6 +19,16 @@ const client = daemonClient(daemon.address);
 const { mesh, basis } = await uploadAndBuild(client, pb, torusObj(), "torus.obj",
   { kind: pb.FieldKind.VECTOR }, 40);
 check(basis?.state === pb.BasisState.READY, `basis ${basis?.id} built`);
+// A 4-field and a tensor basis of the same mesh, for their glyphs and constraint values.
+const others = [];
+for (const [name, field] of [["4-field", { kind: pb.FieldKind.NFIELD, n: 4 }],
+  ["tensor", { kind: pb.FieldKind.TENSOR }]]) {
+  let built = null;
+  for await (const progress of client.buildBasis({ meshId: mesh.id, field, dimension: 40 })) {
+    if (progress.basis) built = progress.basis;
+  }
+  others.push({ name, basis: built });
+}
 const geometry = { vertices: [], faces: [] };
 for await (const chunk of client.getMeshGeometry({ meshId: mesh.id })) {
   geometry.vertices.push(...chunk.vertices);
@@ -57,6 +67,55 @@ function findPoint(x0, y0, avoidFace) {
 }
 const toPage = (p) => [canvasBox.x + p.x, canvasBox.y + p.y];
 
+// Drags from the face near canvas point (x0, y0) by (dx, dy) pixels; resolves to the face hit
+// (cast here) and the unit drag direction in its tangent plane.
+async function dragOnSurface(x0, y0, dx, dy) {
+  const start = findPoint(x0, y0);
+  const [x, y] = toPage(start);
+  await page.mouse.move(x, y);
+  await page.mouse.down();
+  await page.mouse.move(x + dx / 2, y + dy / 2, { steps: 4 });
+  await page.mouse.move(x + dx, y + dy, { steps: 4 });
+  await page.mouse.up();
+  const normal = faceNormal(geometry.vertices, geometry.faces, start.hit.face);
+  const ray = cameraRay(camera, start.x + dx, start.y + dy);
+  const t = dot(normal, start.hit.point.map((p, k) => p - ray.origin[k])) /
+    dot(normal, ray.direction);
+  const end = ray.origin.map((o, k) => o + t * ray.direction[k]);
+  const d = end.map((e, k) => e - start.hit.point[k]);
+  const l = Math.hypot(...d);
+  return { ...start, d: d.map((x) => x / l) };
+}
+
+// A screenshot must show glyphs over the mesh: pixels that change when the glyphs are hidden are
+// glyph pixels, and most of them lie where the mesh is (not the background).
+async function checkPicture(what, file) {
+  await page.waitForTimeout(200);  // the last update's frame
+  const shot = await page.screenshot({ clip: canvasBox });
+  writeFileSync(join(args.out, file), shot);
+  await page.evaluate(() => window.__studio.showGlyphs(false));
+  const bare = decodePng(await page.screenshot({ clip: canvasBox }));
+  await page.evaluate(() => window.__studio.showGlyphs(true));
+  const full = decodePng(shot);
+  const background = [0xf4, 0xf4, 0xf2];
+  let glyphPixels = 0, overMesh = 0, meshPixels = 0;
+  for (let i = 0; i < bare.width * bare.height; i++) {
+    const isBackground = [0, 1, 2].every((k) => Math.abs(bare.rgba[4 * i + k] - background[k]) <= 2);
+    if (!isBackground) meshPixels += 1;
+    let diff = 0;
+    for (let k = 0; k < 3; k++) diff = Math.max(diff, Math.abs(full.rgba[4 * i + k] - bare.rgba[4 * i + k]));
+    if (diff > 40) {
+      glyphPixels += 1;
+      if (!isBackground) overMesh += 1;
+    }
+  }
+  const area = bare.width * bare.height;
+  check(meshPixels > 0.1 * area,
+    `${what}: the mesh covers ${(100 * meshPixels / area).toFixed(1)}% of the view`);
+  check(glyphPixels > 0.005 * area && overMesh > 0.9 * glyphPixels, `${what}: ${glyphPixels} ` +
+    `glyph pixels, ${(100 * overMesh / Math.max(1, glyphPixels)).toFixed(1)}% over the mesh`);
+}
+
 // 1. Add: press on a face, drag 40 px to the right, release.
 const start = findPoint(camera.width * 0.45, camera.height * 0.55);
 const [px, py] = toPage(start);
@@ -93,6 +152,12 @@ check(s.constraints.length === 1 && s.constraints[0].face === target.hit.face,
   `the constraint moved to the face under the release (${target.hit.face}, page: ${s.constraints[0].face})`);
 check(s.constraints[0].value.every((v, k) => v === valueBefore[k]), "moving keeps its value");
 
+// A second constraint against the first's direction (the field turns between them).
+const second = await dragOnSurface(camera.width * 0.62, camera.height * 0.35, -40, 10);
+s = await checkAgainstSolve("a second constraint");
+check(s.constraints.length === 2 && s.constraints[1].face === second.hit.face,
+  `the second constraint is on face ${second.hit.face}`);
+
 // 3. A weight slider: five steps of mu_s by keyboard (each step re-solves; coalesced in flight).
 await page.focus("#mu-s");
 for (let i = 0; i < 5; i++) await page.keyboard.press("ArrowRight");
@@ -103,8 +168,8 @@ check(Math.abs(s.weights.muS - 10 ** 0.5) < 1e-9, `mu_s = 10^0.5 (${s.weights.mu
 await page.click("#undo");
 await page.waitForFunction(() => Math.abs(window.__studio.state().weights.muS - 10 ** 0.4) < 1e-9);
 s = await checkAgainstSolve("undo");
-check(s.constraints.length === 1 && s.constraints[0].face === target.hit.face,
-  "undo of a weight keeps the constraint");
+check(s.constraints.length === 2 && s.constraints[0].face === target.hit.face,
+  "undo of a weight keeps the constraints");
 
 // 5. Reload: the session comes back with its constraints and weights.
 const before = s;
@@ -118,30 +183,41 @@ const sing = await client.singularities({ basisId: basis.id, coefficients: s.coe
 check(s.singularities === sing.singularities.length,
   `singularities shown: ${s.singularities}, the daemon's: ${sing.singularities.length}`);
 
-// 6. The picture: glyphs drawn over the mesh. Pixels that change when the glyphs are hidden are
-// glyph pixels; most of them must lie where the mesh is (not the background).
-const clip = canvasBox;
-const shot = await page.screenshot({ clip });
-writeFileSync(join(args.out, "studio.png"), shot);
-await page.evaluate(() => window.__studio.showGlyphs(false));
-const bare = decodePng(await page.screenshot({ clip }));
-await page.evaluate(() => window.__studio.showGlyphs(true));
-const full = decodePng(shot);
-const background = [0xf4, 0xf4, 0xf2];
-let glyphPixels = 0, overMesh = 0, meshPixels = 0;
-for (let i = 0; i < bare.width * bare.height; i++) {
-  const isBackground = [0, 1, 2].every((k) => Math.abs(bare.rgba[4 * i + k] - background[k]) <= 2);
-  if (!isBackground) meshPixels += 1;
-  const diff = [0, 1, 2].reduce((m, k) => Math.max(m, Math.abs(full.rgba[4 * i + k] - bare.rgba[4 * i + k])), 0);
-  if (diff > 40) {
-    glyphPixels += 1;
-    if (!isBackground) overMesh += 1;
+// 6. The picture: glyphs drawn over the mesh.
+await checkPicture("vector field", "studio.png");
+
+// 7. A 4-field and a tensor field: a constraint by dragging (its value: the drag direction, or
+// d d^T for the tensor), the coefficients against Solve, the picture.
+for (const { name, basis: other } of others) {
+  await chooseBasis(page, other.id);
+  await checkAgainstSolve(`${name}: open`);
+  const { hit, d } = await dragOnSurface(camera.width * 0.55, camera.height * 0.4, 0, 40);
+  s = await checkAgainstSolve(`${name}: add by dragging`);
+  const c = s.constraints[0];
+  const want = name === "tensor" ? [d[0] * d[0], d[1] * d[1], d[2] * d[2], d[0] * d[1], d[1] * d[2],
+    d[2] * d[0]] : d;
+  const cos = want.reduce((acc, w, k) => acc + w * c.value[k], 0) /
+    Math.hypot(...want) / Math.hypot(...c.value);
+  check(s.constraints.length === 1 && c.face === hit.face && cos > 0.999,
+    `${name}: the constraint is on face ${hit.face} with the drag's value (cos ${cos.toFixed(5)})`);
+  if (name === "4-field") {
+    // Two hard constraints at odds with each other: the 4-field gets singular vertices, which the
+    // page marks as the daemon counts them.
+    await page.evaluate(() => {
+      window.__studio.edit({ kind: "add", id: 100,
+        constraint: { face: 0, value: [0, 0, 1], hard: true, weight: 1 } });
+      window.__studio.edit({ kind: "add", id: 101,
+        constraint: { face: 1200, value: [1, 0, 0], hard: true, weight: 1 } });
+    });
+    s = await checkAgainstSolve(`${name}: two hard constraints`);
+    const sing = await client.singularities({ basisId: other.id, coefficients: s.coefficients });
+    const labels = await page.locator(".labels span").count();
+    check(sing.singularities.length > 0 && s.singularities === sing.singularities.length &&
+      labels === s.singularities, `${name}: ${labels} singularities marked, the daemon's: ` +
+      `${sing.singularities.length}`);
   }
+  await checkPicture(name, `studio-${name}.png`);
 }
-const area = bare.width * bare.height;
-check(meshPixels > 0.1 * area, `the mesh covers ${(100 * meshPixels / area).toFixed(1)}% of the view`);
-check(glyphPixels > 0.005 * area && overMesh > 0.9 * glyphPixels,
-  `${glyphPixels} glyph pixels, ${(100 * overMesh / Math.max(1, glyphPixels)).toFixed(1)}% over the mesh`);
 
 await browser.close();
 cleanup();

@@ -83,8 +83,8 @@ function tangent(n) {
  *   values: the watched faces' ambient values (3 per face; 6 per face [xx yy zz xy yz zx] for
  *   tensors), in the order of `faces`.
  * Vectors are arrows, n-fields n-crosses (n spokes), tensors their principal crosses (both
- * eigen-directions in the tangent plane); lengths are proportional to the magnitude (largest:
- * 0.9 spacing) and colours follow it on the ramp.
+ * eigen-directions in the tangent plane). Lengths grow with the magnitude from 0.3 to 0.9 spacing
+ * (so that weak regions still show their directions) and colours follow it on the ramp.
  */
 export function fieldGlyphs(field, frames, faces, values, spacing) {
   const per = field.kind === "tensor" ? 6 : 3;
@@ -129,7 +129,8 @@ export function fieldGlyphs(field, frames, faces, values, spacing) {
   }
   let maxMag = 0;
   for (let i = 0; i < count; i++) maxMag = Math.max(maxMag, mags[i]);
-  const scale = maxMag > 0 ? (0.45 * spacing) / maxMag : 0;
+  // Half length of a glyph of magnitude m (tensor axes: of eigenvalue magnitude m).
+  const halfLength = (m) => (maxMag > 0 && m > 0 ? 0.45 * spacing * (0.3 + 0.7 * m / maxMag) : 0);
   const lift = 0.02 * spacing;  // above the surface, so the mesh does not hide the glyph
   const positions = [];
   const colors = [];
@@ -144,7 +145,7 @@ export function fieldGlyphs(field, frames, faces, values, spacing) {
     const color = rampColor(maxMag > 0 ? mags[i] / maxMag : 0);
     if (field.kind === "vector") {
       const [u, m] = dirs[i][0];
-      const half = scale * m;
+      const half = halfLength(m);
       const tail = [0, 1, 2].map((k) => c[k] - half * u[k]);
       const tip = [0, 1, 2].map((k) => c[k] + half * u[k]);
       segment(tail, tip, color);
@@ -155,7 +156,7 @@ export function fieldGlyphs(field, frames, faces, values, spacing) {
       }
     } else {
       for (const [u, m] of dirs[i]) {
-        segment(c, [0, 1, 2].map((k) => c[k] + scale * m * u[k]), color);
+        segment(c, [0, 1, 2].map((k) => c[k] + halfLength(m) * u[k]), color);
       }
     }
   }

@@ -261,6 +261,7 @@ function openSession() {
   });
   studio.session = session;
   studio.singularities = new Map();
+  view.setSingularities([]);
 }
 
 function onUpdate(session, update, edit, roundTripMs) {
@@ -285,11 +286,11 @@ function onUpdate(session, update, edit, roundTripMs) {
   if (changes) {
     studio.singularityN = changes.n || 1;
     for (const s of changes.appeared) {
-      studio.singularities.set(s.vertex, { index: s.index, position: s.position });
+      studio.singularities.set(s.vertex, { vertex: s.vertex, index: s.index, position: s.position });
     }
     for (const v of changes.vanished) studio.singularities.delete(v);
     view.setSingularities([...studio.singularities.values()].map((s) => ({ ...s,
-      n: studio.singularityN })));
+      n: studio.singularityN })), 0.15 * studio.sample.spacing);
   }
   drawMarkers();
   syncWeightSliders();

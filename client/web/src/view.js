@@ -113,8 +113,12 @@ export class View {
     this.requestRender();
   }
 
-  /** Singular vertices: [{ position, index, n }]; dots and their index as labels. */
-  setSingularities(list) {
+  /** Singular vertices: [{ vertex, position, index, n }]; round dots lifted off the surface
+   *  along the vertex normal (so the surface does not cut them) and their index as labels. */
+  setSingularities(list, lift = 0) {
+    const normals = this.mesh?.geometry.getAttribute("normal");
+    list = list.map((s) => (normals && lift > 0 ? { ...s, position: [0, 1, 2].map((k) =>
+      s.position[k] + lift * normals.array[3 * s.vertex + k]) } : s));
     this.singularityList = list;
     if (this.singularities) {
       this.scene.remove(this.singularities);
@@ -126,8 +130,10 @@ export class View {
     const geometry = new THREE.BufferGeometry();
     geometry.setAttribute("position", new THREE.BufferAttribute(positions, 3));
     geometry.setAttribute("color", new THREE.BufferAttribute(colors, 3));
+    this.dotTexture ??= roundDot();
     this.singularities = new THREE.Points(geometry, new THREE.PointsMaterial({
-      size: 11, sizeAttenuation: false, vertexColors: true, depthTest: true }));
+      size: 12, sizeAttenuation: false, vertexColors: true, map: this.dotTexture,
+      alphaTest: 0.5, transparent: true }));
     this.scene.add(this.singularities);
     this.labels.replaceChildren(...list.map((s) => {
       const label = document.createElement("span");
@@ -202,4 +208,16 @@ export class View {
     this.renderer.render(this.scene, this.camera);
     return new Promise((resolve) => this.renderer.domElement.toBlob(resolve, "image/png"));
   }
+}
+
+// A white disc on transparent ground: the shape of a point sprite.
+function roundDot() {
+  const canvas = document.createElement("canvas");
+  canvas.width = canvas.height = 64;
+  const g = canvas.getContext("2d");
+  g.fillStyle = "#fff";
+  g.beginPath();
+  g.arc(32, 32, 30, 0, 2 * Math.PI);
+  g.fill();
+  return new THREE.CanvasTexture(canvas);
 }
