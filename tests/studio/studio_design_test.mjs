@@ -178,6 +178,31 @@ s = await checkAgainstSolve("reload");
 check(JSON.stringify(s.constraints) === JSON.stringify(before.constraints) &&
   Math.abs(s.weights.muS - before.weights.muS) < 1e-15, "the reload resumed the constraints and weights");
 
+// Select the first constraint by clicking its marker, make it hard, then soft with weight 3,
+// delete it, and undo the delete.
+const first = s.constraints[0];
+const firstAt = project(camera, faceCentroid(geometry.vertices, geometry.faces, first.face));
+await page.mouse.click(...toPage({ x: firstAt[0], y: firstAt[1] }));
+await page.waitForFunction(() => !document.querySelector("#constraint").disabled);
+await page.check("#hard");
+s = await checkAgainstSolve("hard");
+check(s.constraints.find((c) => c.id === first.id)?.hard === true, "the selected constraint is hard");
+await page.uncheck("#hard");
+await page.fill("#weight", "3");
+await page.press("#weight", "Enter");
+await page.waitForFunction((id) => window.__studio.state().constraints
+  .some((c) => c.id === id && c.weight === 3 && !c.hard), first.id);
+s = await checkAgainstSolve("soft, weight 3");
+await page.click("#delete");
+await page.waitForFunction(() => window.__studio.state().constraints.length === 1);
+s = await checkAgainstSolve("delete");
+await page.click("#undo");
+await page.waitForFunction(() => window.__studio.state().constraints.length === 2);
+s = await checkAgainstSolve("undo the delete");
+const restored = s.constraints.find((c) => c.id === first.id);
+check(restored?.face === first.face && restored.weight === 3 && !restored.hard,
+  "undo brought the deleted constraint back as it was");
+
 // Singularities as the daemon counts them for the same coefficients.
 const sing = await client.singularities({ basisId: basis.id, coefficients: s.coefficients });
 check(s.singularities === sing.singularities.length,
