@@ -40,7 +40,7 @@ const page = await browser.newPage({ viewport: { width: 1100, height: 760 } });
 page.on("pageerror", (e) => console.error(`page error: ${e.message}`));
 page.on("console", (m) => m.type() === "error" && console.error(`page console: ${m.text()}`));
 
-const { checkAgainstSolve } = pageProbe(page, client, pb);
+const { checkAgainstSolve, until } = pageProbe(page, client, pb);
 
 await page.goto(gateway.url);
 await chooseBasis(page, basis.id);
@@ -166,7 +166,7 @@ check(Math.abs(s.weights.muS - 10 ** 0.5) < 1e-9, `mu_s = 10^0.5 (${s.weights.mu
 
 // 4. Undo: the last slider step.
 await page.click("#undo");
-await page.waitForFunction(() => Math.abs(window.__studio.state().weights.muS - 10 ** 0.4) < 1e-9);
+await until("mu_s undone", () => Math.abs(window.__studio.state().weights.muS - 10 ** 0.4) < 1e-9);
 s = await checkAgainstSolve("undo");
 check(s.constraints.length === 2 && s.constraints[0].face === target.hit.face,
   "undo of a weight keeps the constraints");
@@ -183,21 +183,21 @@ check(JSON.stringify(s.constraints) === JSON.stringify(before.constraints) &&
 const first = s.constraints[0];
 const firstAt = project(camera, faceCentroid(geometry.vertices, geometry.faces, first.face));
 await page.mouse.click(...toPage({ x: firstAt[0], y: firstAt[1] }));
-await page.waitForFunction(() => !document.querySelector("#constraint").disabled);
+await until("the selection", () => !document.querySelector("#constraint").disabled);
 await page.check("#hard");
 s = await checkAgainstSolve("hard");
 check(s.constraints.find((c) => c.id === first.id)?.hard === true, "the selected constraint is hard");
 await page.uncheck("#hard");
 await page.fill("#weight", "3");
 await page.press("#weight", "Enter");
-await page.waitForFunction((id) => window.__studio.state().constraints
+await until("weight 3", (id) => window.__studio.state().constraints
   .some((c) => c.id === id && c.weight === 3 && !c.hard), first.id);
 s = await checkAgainstSolve("soft, weight 3");
 await page.click("#delete");
-await page.waitForFunction(() => window.__studio.state().constraints.length === 1);
+await until("the delete", () => window.__studio.state().constraints.length === 1);
 s = await checkAgainstSolve("delete");
 await page.click("#undo");
-await page.waitForFunction(() => window.__studio.state().constraints.length === 2);
+await until("the undone delete", () => window.__studio.state().constraints.length === 2);
 s = await checkAgainstSolve("undo the delete");
 const restored = s.constraints.find((c) => c.id === first.id);
 check(restored?.face === first.face && restored.weight === 3 && !restored.hard,

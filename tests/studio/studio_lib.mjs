@@ -359,7 +359,16 @@ export function pageProbe(page, client, pb) {
     const message = (await state()).message;
     check(pattern.test(message), `the page says: ${message}`);
   }
-  return { state, settled, checkAgainstSolve, waitForMessage };
+  // page.waitForFunction that says what it waited for and the page's state when it times out.
+  async function until(what, fn, arg = null, timeout = 30000) {
+    try {
+      await page.waitForFunction(fn, arg, { timeout });
+    } catch (e) {
+      console.error(`timed out waiting for ${what}: ${JSON.stringify(await state())}`);
+      throw e;
+    }
+  }
+  return { state, settled, checkAgainstSolve, waitForMessage, until };
 }
 
 /** Opens the studio at `url` and chooses `basisId` once the list has it. */

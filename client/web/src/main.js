@@ -10,6 +10,8 @@ import { DesignSession, History } from "./session.js";
 import { View } from "./view.js";
 
 const GLYPH_TARGET = 2500;  // sampled faces that carry a glyph
+// Singularities cost the daemon a lift of the whole field per edit: on by default up to this size.
+const SINGULARITIES_MAX_FACES = 200000;
 const DRAG_START_PX = 4;    // a press moving less than this is a click
 const MARKER_PICK_PX = 12;  // a press this close to a constraint marker grabs it
 const STORE_PREFIX = "fieldspace.studio.v1.";
@@ -140,6 +142,12 @@ async function refreshBases() {
   }
 }
 
+$("show-singularities").addEventListener("change", () => {
+  if (!studio.session) return;
+  studio.session.close();
+  openSession();
+});
+
 $("basis").addEventListener("change", () => {
   if ($("basis").value) chooseBasis($("basis").value);
 });
@@ -180,6 +188,7 @@ async function chooseBasis(id) {
     if (mine !== chooseToken) return;
     view.setMesh(studio.geometry.positions, studio.geometry.faces);
     studio.sample = sampleFaces(studio.geometry.frames, GLYPH_TARGET);
+    $("show-singularities").checked = studio.geometry.faces.length / 3 <= SINGULARITIES_MAX_FACES;
   }
   restore(basis.id);
   showMessage("");
@@ -239,7 +248,7 @@ function openSession() {
     url: designUrl,
     token,
     open: { basisId: studio.basis.id, weights: studio.weights, watchFaces: studio.sample.faces,
-      singularities: studio.field.kind !== "tensor" },
+      singularities: studio.field.kind !== "tensor" && $("show-singularities").checked },
     confirmed: { weights: studio.weights, constraints: studio.constraints },
     handlers: {
       onUpdate: (update, edit, roundTripMs) => {
