@@ -240,6 +240,9 @@ for (const { name, basis: other } of others) {
     check(sing.singularities.length > 0 && s.singularities === sing.singularities.length &&
       labels === s.singularities, `${name}: ${labels} singularities marked, the daemon's: ` +
       `${sing.singularities.length}`);
+    // The whole page, as docs/images/studio.png shows it.
+    await page.waitForTimeout(200);
+    writeFileSync(join(args.out, "studio-page.png"), await page.screenshot());
   }
   await checkPicture(name, `studio-${name}.png`);
 }

@@ -322,7 +322,7 @@ export function relativeError(a, b) {
  *  against a one-shot Solve over the wire of the page's constraints and weights. */
 export function pageProbe(page, client, pb) {
   const state = () => page.evaluate(() => window.__studio.state());
-  async function settled(timeout = 30000) {
+  async function settled(timeout = 60000) {
     try {
       await page.waitForFunction(() => {
         const s = window.__studio?.state();
@@ -360,7 +360,7 @@ export function pageProbe(page, client, pb) {
     check(pattern.test(message), `the page says: ${message}`);
   }
   // page.waitForFunction that says what it waited for and the page's state when it times out.
-  async function until(what, fn, arg = null, timeout = 30000) {
+  async function until(what, fn, arg = null, timeout = 60000) {
     try {
       await page.waitForFunction(fn, arg, { timeout });
     } catch (e) {

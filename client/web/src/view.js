@@ -196,10 +196,21 @@ export class View {
     });
   }
 
+  // Labels follow their dots on screen; a label whose dot the mesh hides is hidden too.
   placeLabels() {
     const labels = this.labels.children;
+    const eye = this.camera.position;
+    const ray = new THREE.Raycaster();
+    ray.firstHitOnly = true;
     this.singularityList.forEach((s, i) => {
+      const point = new THREE.Vector3(...s.position);
+      const distance = point.distanceTo(eye);
+      ray.set(eye, point.clone().sub(eye).normalize());
+      ray.far = distance;
+      const hidden = this.mesh !== null &&
+        ray.intersectObject(this.mesh, false).some((hit) => hit.distance < distance * 0.999);
       const [x, y] = this.screenOf(s.position);
+      labels[i].style.visibility = hidden ? "hidden" : "visible";
       labels[i].style.transform = `translate(${x + 6}px, ${y - 18}px)`;
     });
   }
