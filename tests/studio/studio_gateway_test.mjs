@@ -7,7 +7,7 @@
 // Also the listen rules of the flags.
 //   node studio_gateway_test.mjs --web-dir client/web
 import { spawnSync } from "node:child_process";
-import { writeFileSync } from "node:fs";
+import { readFileSync, writeFileSync } from "node:fs";
 import http2 from "node:http2";
 import { createRequire } from "node:module";
 import { join, resolve } from "node:path";
@@ -168,6 +168,33 @@ check(badFlag.status === 2 && /--listen must be HOST:PORT/.test(badFlag.stderr),
 const tokenOpen = await startGateway(webDir, ["--listen", "0.0.0.0:0", "--daemon", daemonAddress,
   "--auth-token-file", join(dir, "token")]).catch((e) => e);
 check(!(tokenOpen instanceof Error), "0.0.0.0 with a token starts");
+
+// 7. TLS both ways: the gateway serves HTTPS (--tls-cert, --tls-key) and calls a daemon over TLS
+// (--daemon-ca); the stand-in answers over TLS with the same self-signed certificate.
+const cert = join(dir, "cert.pem"), key = join(dir, "key.pem");
+const openssl = spawnSync("openssl", ["req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1",
+  "-subj", "/CN=localhost", "-addext", "subjectAltName=DNS:localhost,IP:127.0.0.1",
+  "-keyout", key, "-out", cert], { encoding: "utf8" });
+check(openssl.status === 0, "a self-signed certificate for 127.0.0.1");
+const pem = readFileSync(cert, "utf8");
+const tlsStandIn = http2.createSecureServer({ cert: pem, key: readFileSync(key, "utf8") },
+  connectNode.connectNodeAdapter({ routes: (router) => router.service(pb.FieldSpace, {
+    getBasis: (req, ctx) => (meta("GetBasis over TLS", ctx), { id: req.basisId }),
+  }) }));
+await new Promise((done) => tlsStandIn.listen(0, "127.0.0.1", done));
+const tlsGateway = await startGateway(webDir, ["--daemon", `127.0.0.1:${tlsStandIn.address().port}`,
+  "--daemon-ca", cert, "--tls-cert", cert, "--tls-key", key]);
+check(tlsGateway.url.startsWith("https://"), `the gateway serves ${tlsGateway.url}`);
+const tlsApi = createClient(pb.FieldSpace, connectNode.createConnectTransport({
+  baseUrl: tlsGateway.url.replace(/\/$/, ""), httpVersion: "1.1", useBinaryFormat: true,
+  nodeOptions: { ca: pem } }));
+const tlsBasis = await tlsApi.getBasis({ basisId: "b-00000000000000ee" });
+check(tlsBasis.id === "b-00000000000000ee" && calls.at(-1).method === "GetBasis over TLS",
+  "a call through HTTPS reaches the daemon over TLS");
+const tlsOnly = spawnSync(process.execPath, [main, "--listen", "0.0.0.0:0", "--tls-cert", cert,
+  "--tls-key", key], { encoding: "utf8" });
+check(tlsOnly.status === 2, "0.0.0.0 with TLS but neither a token nor a client CA is refused");
+tlsStandIn.close();
 
 standIn.close();
 cleanup();
