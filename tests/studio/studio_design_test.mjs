@@ -4,7 +4,7 @@
 // weights (1e-9 relative), and the faces the page edited are the faces this test finds by casting
 // the same screen rays itself. A screenshot shows the glyphs over the mesh.
 //   node studio_design_test.mjs --web-dir client/web --daemon build/bin/fieldspaced --out DIR
-import { writeFileSync } from "node:fs";
+import { readFileSync, writeFileSync } from "node:fs";
 import { join } from "node:path";
 import {
   castRay, cameraRay, check, chooseBasis, cleanup, decodePng, dot, faceCentroid, faceNormal,
@@ -210,6 +210,13 @@ check(s.singularities === sing.singularities.length,
 
 // 6. The picture: glyphs drawn over the mesh.
 await checkPicture("vector field", "studio.png");
+
+// The PNG button downloads the view: a PNG of the canvas's size.
+const [download] = await Promise.all([page.waitForEvent("download"), page.click("#png")]);
+const png = decodePng(readFileSync(await download.path()));
+check(png.width === Math.round(canvasBox.width) && png.height === Math.round(canvasBox.height) &&
+  /\.png$/.test(download.suggestedFilename()), `PNG download: ${download.suggestedFilename()}, ` +
+  `${png.width}x${png.height}`);
 
 // 7. A 4-field and a tensor field: a constraint by dragging (its value: the drag direction, or
 // d d^T for the tensor), the coefficients against Solve, the picture.

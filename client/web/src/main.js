@@ -468,7 +468,14 @@ function endGesture(event) {
   const g = gesture;
   gesture = null;
   if (canvas.hasPointerCapture(event.pointerId)) canvas.releasePointerCapture(event.pointerId);
-  if (!g.started) return;
+  if (!g.started) {
+    if (g.kind === "add") {  // a click on the surface: nothing selected
+      studio.selected = null;
+      drawMarkers();
+      syncSelection();
+    }
+    return;
+  }
   if (g.kind === "add") {
     const c = { ...g.constraint, value: g.value };
     studio.history.push({ do: [{ kind: "add", id: g.id, constraint: c }],
