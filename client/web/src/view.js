@@ -67,8 +67,8 @@ export class View {
     geometry.computeVertexNormals();
     geometry.computeBoundingSphere();
     geometry.computeBoundsTree({ indirect: true });  // keeps the index: faceIndex = face id
-    this.mesh = new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({
-      color: 0xb9b9b9, roughness: 0.85, metalness: 0, flatShading: true,
+    this.mesh = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({
+      color: 0xb9b9b9, flatShading: true,
       side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1,
       polygonOffsetUnits: 1 }));
     this.scene.add(this.mesh);
