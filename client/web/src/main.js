@@ -499,7 +499,8 @@ function syncSelection() {
   }
   $("constraint-info").textContent = `#${studio.selected} on face ${c.face}`;
   $("hard").checked = c.hard;
-  $("weight").value = String(c.weight);
+  // Not while the user types a weight: an update arriving meanwhile must not undo the typing.
+  if (document.activeElement !== $("weight")) $("weight").value = String(c.weight);
   $("weight").disabled = c.hard;
 }
 
