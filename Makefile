@@ -1,6 +1,7 @@
-# Newcomer entry points. `make run`: install deps, build, start the daemon on a demo mesh.
-# `make test`: install deps, build, run the test suite. `make install PREFIX=DIR`: programs and
-# the Python package into DIR. `make fuzz`: the clang fuzz targets (fuzz/) in $(BUILD_DIR)/fuzz.
+# Newcomer entry points. `make run`: install deps, build, start the daemon on a demo mesh and the
+# studio (a browser client). `make test`: install deps, build, run the test suite.
+# `make install PREFIX=DIR`: programs and the Python package into DIR. `make fuzz`: the clang fuzz
+# targets (fuzz/) in $(BUILD_DIR)/fuzz.
 BUILD_DIR ?= build
 FUZZ_DIR ?= $(BUILD_DIR)/fuzz
 BUILD_TYPE ?= Release
@@ -44,13 +45,25 @@ install: build
 # Starts the daemon on loopback with the bundled demo mesh (a ~49k-face torus-knot tube made by
 # core/mesh/shapes.h), stored under STORE; its default vector basis builds in the background.
 # LoadMesh reads below DATA_ROOT (the shared meshes next to the checkout) when that folder exists.
+# With Node.js, the studio's gateway (client/web, docs/studio.md) serves the studio on STUDIO and
+# prints "studio: http://HOST:PORT/"; both stop together (the daemon in its own session, so that
+# Ctrl-C reaches it once, through the trap, and it drains).
 STORE ?= $(HOME)/.local/share/fieldspace
 LISTEN ?= 127.0.0.1:50051
+STUDIO ?= 127.0.0.1:8750
 DATA_ROOT ?= $(abspath ../shared/meshes)
+DAEMON_RUN = $(BUILD_DIR)/bin/fieldspaced --listen $(LISTEN) --store $(STORE) --demo \
+    $(if $(wildcard $(DATA_ROOT)),--data-root $(DATA_ROOT))
 run: build
 	mkdir -p $(STORE)
-	$(BUILD_DIR)/bin/fieldspaced --listen $(LISTEN) --store $(STORE) --demo \
-	    $(if $(wildcard $(DATA_ROOT)),--data-root $(DATA_ROOT))
+ifneq ($(shell command -v node),)
+	@setsid $(DAEMON_RUN) & daemon=$$!; \
+	trap 'kill $$daemon 2>/dev/null; wait $$daemon; trap - EXIT; exit' EXIT INT TERM; \
+	node client/web/gateway/main.mjs --listen $(STUDIO) --daemon $(LISTEN)
+else
+	@echo "node not found: starting the daemon without the studio"
+	$(DAEMON_RUN)
+endif
 
 format:
 	clang-format -i $$(git ls-files '*.h' '*.cc')

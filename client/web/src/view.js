@@ -1,0 +1,244 @@
+// The 3D view: the mesh, the field glyphs, the constraints and the singularities, with orbit and
+// zoom (OrbitControls) and picking (a raycaster on the mesh).
+import * as THREE from "three";
+import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
+import { acceleratedRaycast, computeBoundsTree, disposeBoundsTree } from "three-mesh-bvh";
+
+// Picking walks a bounding volume hierarchy instead of every triangle (a 1M-face mesh: ~1 s to
+// build once, then well under a millisecond per ray).
+THREE.BufferGeometry.prototype.computeBoundsTree = computeBoundsTree;
+THREE.BufferGeometry.prototype.disposeBoundsTree = disposeBoundsTree;
+THREE.Mesh.prototype.raycast = acceleratedRaycast;
+
+export class View {
+  constructor(container) {
+    this.container = container;
+    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.renderer.setPixelRatio(window.devicePixelRatio);
+    this.renderer.setClearColor(0xf4f4f2);
+    container.appendChild(this.renderer.domElement);
+    this.scene = new THREE.Scene();
+    this.camera = new THREE.PerspectiveCamera(40, 1, 0.01, 1000);
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x707070, 2.2));
+    const light = new THREE.DirectionalLight(0xffffff, 1.2);
+    light.position.set(1, 2, 3);
+    this.camera.add(light);
+    this.scene.add(this.camera);
+    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.controls.mouseButtons = { LEFT: THREE.MOUSE.ROTATE, MIDDLE: THREE.MOUSE.PAN,
+      RIGHT: THREE.MOUSE.ROTATE };
+    this.controls.addEventListener("change", () => this.requestRender());
+    this.raycaster = new THREE.Raycaster();
+    this.raycaster.firstHitOnly = true;  // three-mesh-bvh: the nearest hit only
+    this.mesh = null;
+    this.glyphs = null;
+    this.markers = new THREE.Group();
+    this.scene.add(this.markers);
+    this.singularities = null;
+    this.labels = document.createElement("div");
+    this.labels.className = "labels";
+    container.appendChild(this.labels);
+    this.singularityList = [];
+    this.frameTimes = [];
+    this.renderPending = false;
+    new ResizeObserver(() => this.resize()).observe(container);
+    this.resize();
+  }
+
+  resize() {
+    const { clientWidth: w, clientHeight: h } = this.container;
+    if (w === 0 || h === 0) return;
+    this.renderer.setSize(w, h);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.requestRender();
+  }
+
+  /** Shows a mesh (positions: 3 per vertex, faces: 3 per face) and frames the camera on it. */
+  setMesh(positions, faces) {
+    if (this.mesh) {
+      this.scene.remove(this.mesh);
+      this.mesh.geometry.disposeBoundsTree();
+      this.mesh.geometry.dispose();
+    }
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute("position", new THREE.BufferAttribute(Float32Array.from(positions), 3));
+    geometry.setIndex(new THREE.BufferAttribute(Uint32Array.from(faces), 1));
+    geometry.computeVertexNormals();
+    geometry.computeBoundingSphere();
+    geometry.computeBoundsTree({ indirect: true });  // keeps the index: faceIndex = face id
+    this.mesh = new THREE.Mesh(geometry, new THREE.MeshLambertMaterial({
+      color: 0xb9b9b9, flatShading: true,
+      side: THREE.DoubleSide, polygonOffset: true, polygonOffsetFactor: 1,
+      polygonOffsetUnits: 1 }));
+    this.scene.add(this.mesh);
+    const { center, radius } = geometry.boundingSphere;
+    this.radius = radius;
+    this.controls.target.copy(center);
+    this.camera.near = radius / 100;
+    this.camera.far = radius * 100;
+    this.camera.position.copy(center).add(new THREE.Vector3(0.35, 0.5, 1).normalize()
+      .multiplyScalar(radius * 2.9));
+    this.camera.updateProjectionMatrix();
+    this.controls.update();
+    this.requestRender();
+  }
+
+  /** Replaces the glyphs: line segments with per-vertex colours (glyphs.js, fieldGlyphs). */
+  setGlyphs(positions, colors) {
+    if (!this.glyphs) {
+      this.glyphs = new THREE.LineSegments(new THREE.BufferGeometry(),
+        new THREE.LineBasicMaterial({ vertexColors: true }));
+      this.glyphs.frustumCulled = false;
+      this.scene.add(this.glyphs);
+    }
+    const g = this.glyphs.geometry;
+    g.setAttribute("position", new THREE.BufferAttribute(positions, 3));
+    g.setAttribute("color", new THREE.BufferAttribute(colors, 3));
+    g.computeBoundingSphere();
+    this.requestRender();
+  }
+
+  setGlyphsVisible(on) {
+    if (this.glyphs) this.glyphs.visible = on;
+    this.renderer.render(this.scene, this.camera);
+  }
+
+  /** Constraint markers: [{ id, position, direction (unit, ambient), hard, selected }]. */
+  setMarkers(markers, size) {
+    for (const child of [...this.markers.children]) {
+      this.markers.remove(child);
+      child.geometry?.dispose();
+    }
+    for (const m of markers) {
+      const color = m.selected ? 0x1565c0 : m.hard ? 0xc62828 : 0xef6c00;
+      const dot = new THREE.Mesh(new THREE.SphereGeometry(0.3 * size, 12, 8),
+        new THREE.MeshBasicMaterial({ color }));
+      dot.position.set(...m.position);
+      this.markers.add(dot);
+      const arrow = new THREE.ArrowHelper(new THREE.Vector3(...m.direction),
+        new THREE.Vector3(...m.position), 2 * size, color, 0.6 * size, 0.35 * size);
+      this.markers.add(arrow);
+    }
+    this.requestRender();
+  }
+
+  /** Singular vertices: [{ vertex, position, index, n }]; round dots lifted off the surface
+   *  along the vertex normal (so the surface does not cut them) and their index as labels. */
+  setSingularities(list, lift = 0) {
+    const normals = this.mesh?.geometry.getAttribute("normal");
+    list = list.map((s) => (normals && lift > 0 ? { ...s, position: [0, 1, 2].map((k) =>
+      s.position[k] + lift * normals.array[3 * s.vertex + k]) } : s));
+    this.singularityList = list;
+    if (this.singularities) {
+      this.scene.remove(this.singularities);
+      this.singularities.geometry.dispose();
+    }
+    const positions = new Float32Array(list.flatMap((s) => s.position));
+    const colors = new Float32Array(list.flatMap((s) => (s.index > 0 ? [0.85, 0.1, 0.1]
+      : [0.1, 0.3, 0.9])));
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute("position", new THREE.BufferAttribute(positions, 3));
+    geometry.setAttribute("color", new THREE.BufferAttribute(colors, 3));
+    this.dotTexture ??= roundDot();
+    this.singularities = new THREE.Points(geometry, new THREE.PointsMaterial({
+      size: 12, sizeAttenuation: false, vertexColors: true, map: this.dotTexture,
+      alphaTest: 0.5, transparent: true }));
+    this.scene.add(this.singularities);
+    this.labels.replaceChildren(...list.map((s) => {
+      const label = document.createElement("span");
+      label.textContent = s.n === 1 ? String(s.index) : `${s.index}/${s.n}`;
+      return label;
+    }));
+    this.requestRender();
+  }
+
+  /** The face under a canvas point (CSS pixels from the canvas's top left) and the point hit,
+   *  or null. */
+  pick(x, y) {
+    if (!this.mesh) return null;
+    this.raycaster.setFromCamera(this.ndc(x, y), this.camera);
+    const hit = this.raycaster.intersectObject(this.mesh, false)[0];
+    return hit ? { face: hit.faceIndex, point: hit.point.toArray() } : null;
+  }
+
+  /** Where the ray through a canvas point meets the plane through `point` with `normal`. */
+  planePoint(x, y, point, normal) {
+    this.raycaster.setFromCamera(this.ndc(x, y), this.camera);
+    const plane = new THREE.Plane().setFromNormalAndCoplanarPoint(
+      new THREE.Vector3(...normal), new THREE.Vector3(...point));
+    const hit = this.raycaster.ray.intersectPlane(plane, new THREE.Vector3());
+    return hit ? hit.toArray() : null;
+  }
+
+  /** Canvas CSS pixel position of an ambient point. */
+  screenOf(point) {
+    const v = new THREE.Vector3(...point).project(this.camera);
+    const { clientWidth: w, clientHeight: h } = this.renderer.domElement;
+    return [(v.x + 1) / 2 * w, (1 - v.y) / 2 * h];
+  }
+
+  ndc(x, y) {
+    const { clientWidth: w, clientHeight: h } = this.renderer.domElement;
+    return new THREE.Vector2((x / w) * 2 - 1, -(y / h) * 2 + 1);
+  }
+
+  requestRender() {
+    if (this.renderPending) return;
+    this.renderPending = true;
+    requestAnimationFrame(() => {
+      this.renderPending = false;
+      const start = performance.now();
+      this.renderer.render(this.scene, this.camera);
+      this.placeLabels();
+      this.frameTimes.push(performance.now() - start);
+      if (this.frameTimes.length > 100) this.frameTimes.shift();
+    });
+  }
+
+  // Labels follow their dots on screen; a label whose dot the mesh hides is hidden too.
+  placeLabels() {
+    const labels = this.labels.children;
+    const eye = this.camera.position;
+    const ray = new THREE.Raycaster();
+    ray.firstHitOnly = true;
+    this.singularityList.forEach((s, i) => {
+      const point = new THREE.Vector3(...s.position);
+      const distance = point.distanceTo(eye);
+      ray.set(eye, point.clone().sub(eye).normalize());
+      ray.far = distance;
+      const hidden = this.mesh !== null &&
+        ray.intersectObject(this.mesh, false).some((hit) => hit.distance < distance * 0.999);
+      const [x, y] = this.screenOf(s.position);
+      labels[i].style.visibility = hidden ? "hidden" : "visible";
+      labels[i].style.transform = `translate(${x + 6}px, ${y - 18}px)`;
+    });
+  }
+
+  /** The camera as the tests need it to cast rays themselves (column-major matrices). */
+  cameraState() {
+    this.camera.updateMatrixWorld();
+    const { clientWidth: width, clientHeight: height } = this.renderer.domElement;
+    return { position: this.camera.position.toArray(),
+      projectionMatrixInverse: this.camera.projectionMatrixInverse.toArray(),
+      matrixWorld: this.camera.matrixWorld.toArray(), width, height };
+  }
+
+  /** A PNG of the view. */
+  png() {
+    this.renderer.render(this.scene, this.camera);
+    return new Promise((resolve) => this.renderer.domElement.toBlob(resolve, "image/png"));
+  }
+}
+
+// A white disc on transparent ground: the shape of a point sprite.
+function roundDot() {
+  const canvas = document.createElement("canvas");
+  canvas.width = canvas.height = 64;
+  const g = canvas.getContext("2d");
+  g.fillStyle = "#fff";
+  g.beginPath();
+  g.arc(32, 32, 30, 0, 2 * Math.PI);
+  g.fill();
+  return new THREE.CanvasTexture(canvas);
+}
