@@ -10,10 +10,6 @@
 
 namespace fieldspace {
 
-namespace {
-
-// ValidateWeights, and mu_c > 0: a session keeps each soft constraint as the diagonal term
-// 1 / (mu_c weight) of its Woodbury update.
 absl::Status ValidateSessionWeights(const EnergyWeights& weights, bool data_term) {
   RETURN_IF_ERROR(data_term ? ValidateWeights(weights) : ValidateWeightsWithoutDataTerm(weights));
   if (!(weights.mu_c > 0)) {
@@ -24,8 +20,6 @@ absl::Status ValidateSessionWeights(const EnergyWeights& weights, bool data_term
   }
   return absl::OkStatus();
 }
-
-}  // namespace
 
 absl::StatusOr<std::shared_ptr<const EnergyFactorization>> FactorizeEnergy(
     const ReducedSystem& system, const EnergyWeights& weights, const ReducedSolveOptions& options,

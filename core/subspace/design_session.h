@@ -125,6 +125,11 @@ struct DesignSessionOptions {
 // constraint set, equal (up to the solver tolerance) to SolveReducedModelProblem(problem()).
 // A failed call leaves the session exactly as it was.
 //
+// The weights a session takes: ValidateWeights (with a data term) or
+// ValidateWeightsWithoutDataTerm (without), and mu_c > 0 (each soft constraint enters as the
+// diagonal term 1 / (mu_c weight) of its Woodbury update). InvalidArgument otherwise.
+absl::Status ValidateSessionWeights(const EnergyWeights& weights, bool data_term);
+
 // Thread-compatible: one session per thread (or external locking); any number of sessions share
 // the immutable ReducedSystem.
 class DesignSession {

@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
+#include "core/common/index_check.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/kkt_solver.h"
 #include "oneapi/tbb/blocked_range.h"
@@ -18,10 +19,7 @@ namespace fieldspace {
 
 absl::Status ValidateConstraint(const ReducedSystem& system, const FieldConstraint& c) {
   const bool soft = !c.hard();
-  if (c.face < 0 || c.face >= system.num_faces()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("constraint face id ", c.face, " is outside [0, ", system.num_faces(), ")"));
-  }
+  RETURN_IF_ERROR(CheckFace(c.face, system.num_faces(), "constraint"));
   if (c.value.size() != system.dofs_per_face()) {
     return absl::InvalidArgumentError(
         absl::StrCat("constraint on face ", c.face, " has ", c.value.size(), " values; a ",

@@ -307,13 +307,17 @@ TEST_F(FieldClientBasisTest, DesignStreamRoundTrip) {
   EXPECT_TRUE(stream->Close().ok());  // the same status again
   EXPECT_EQ(stream->Edit(remove).status().code(), absl::StatusCode::kFailedPrecondition);
 
-  // An edit the server refuses ends the session with its code, and Close reports it.
+  // An edit the server refuses returns its code; the session goes on as it was, and Close is OK.
   std::unique_ptr<DesignStream> refused = client->Design();
   ASSERT_TRUE(refused->Open(open).ok());
   ASSERT_TRUE(refused->Edit(AddConstraint(1, 1, 10)).ok());
   EXPECT_EQ(refused->Edit(AddConstraint(2, 1, 20)).status().code(),
             absl::StatusCode::kAlreadyExists);
-  EXPECT_EQ(refused->Close().code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_FALSE(refused->is_closed());
+  absl::StatusOr<v1::DesignUpdate> after = refused->Edit(AddConstraint(3, 2, 20));
+  ASSERT_TRUE(after.ok()) << after.status();
+  EXPECT_EQ(after->num_constraints(), 2);
+  EXPECT_TRUE(refused->Close().ok());
 
   // Dropping an open stream cancels it; the client goes on working.
   {
