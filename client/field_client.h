@@ -249,6 +249,9 @@ class ResumableDesign {
   // One edit (not an open).
   absl::StatusOr<Update> Edit(const fieldspace::v1::DesignRequest& request);
   absl::Status Close();
+  // Whether the session's stream is open: after a refused edit it is (the session goes on as it
+  // was); after any other error it is not.
+  bool is_open() const { return stream_ != nullptr && !stream_->is_closed(); }
   int resumes() const { return resumes_; }
 
  private:

@@ -438,7 +438,16 @@ TEST(ResumableDesignTest, ADrainedSessionResumesOnTheNextServerWithTheSameSoluti
   ASSERT_TRUE(next.ok()) << next.status();
   EXPECT_FALSE(next->resumed);
   EXPECT_EQ(next->update.num_constraints(), 3);
+  // A refused edit returns its error, is neither retried nor remembered, and the session goes on.
+  EXPECT_EQ(session.Edit(AddConstraint(9, 4, 50)).status().code(),
+            absl::StatusCode::kAlreadyExists);
+  EXPECT_TRUE(session.is_open());
+  EXPECT_EQ(session.resumes(), 1);
+  absl::StatusOr<ResumableDesign::Update> last = session.Edit(AddConstraint(10, 5, 50));
+  ASSERT_TRUE(last.ok()) << last.status();
+  EXPECT_EQ(last->update.num_constraints(), 4);
   EXPECT_TRUE(session.Close().ok());
+  EXPECT_FALSE(session.is_open());
   // Other errors are not retried.
   EXPECT_TRUE(ReplicaLost(absl::UnavailableError("x")));
   EXPECT_TRUE(ReplicaLost(absl::InternalError("Received RST_STREAM with error code 2")));
