@@ -384,6 +384,11 @@ absl::StatusOr<v1::DesignUpdate> DesignStream::ReadUpdate() {
   if (final_status_) return absl::FailedPreconditionError("the design stream is closed");
   v1::DesignUpdate update;
   if (!stream_->Read(&update)) return Broken();
+  // A refused edit: the session is as before and the stream stays open.
+  if (update.has_error()) {
+    return absl::Status(static_cast<absl::StatusCode>(update.error().code()),
+                        update.error().message());
+  }
   return update;
 }
 

@@ -178,9 +178,10 @@ class FieldClient {
 };
 
 // One interactive session (the bidirectional Design stream): Open, then one Edit per change
-// (or SendEdit / ReadUpdate to pipeline), then Close. When the stream breaks, the failing call
-// returns the call's final status and the stream is closed. Destroying an unclosed stream
-// cancels the call.
+// (or SendEdit / ReadUpdate to pipeline), then Close. An edit the server refuses (its update
+// carries an EditError) returns that error, and the session goes on as it was before the edit.
+// When the stream breaks, the failing call returns the call's final status and the stream is
+// closed (is_closed). Destroying an unclosed stream cancels the call.
 class DesignStream {
  public:
   ~DesignStream();
@@ -198,6 +199,8 @@ class DesignStream {
   // the updates of all sent edits first. The same status on every call; calls after it are
   // FailedPrecondition.
   absl::Status Close();
+  // Whether the stream has ended (Close, or a broken stream); a refused edit does not end it.
+  bool is_closed() const { return final_status_.has_value(); }
 
  private:
   friend class FieldClient;
@@ -225,8 +228,9 @@ bool ReplicaLost(const absl::Status& status);
 // order they were added); when an edit fails with ReplicaLost, it reopens the stream (through a
 // router: on another replica), replays that state, sends the edit again and returns its update
 // marked `resumed`, with the coefficients the lost session would have given (a lost open, e.g. a
-// replica that died while loading the basis, is sent again the same way). Other errors end the
-// session as with DesignStream; when every reopen fails, the edit fails with the status that lost
+// replica that died while loading the basis, is sent again the same way). A refused edit
+// returns its error and the session goes on; other errors end the session as with DesignStream;
+// when every reopen fails, the edit fails with the status that lost
 // the session (its message says why reopening failed). Belongs to one thread.
 class ResumableDesign {
  public:
@@ -246,6 +250,9 @@ class ResumableDesign {
   // One edit (not an open).
   absl::StatusOr<Update> Edit(const fieldspace::v1::DesignRequest& request);
   absl::Status Close();
+  // Whether the session's stream is open: after a refused edit it is (the session goes on as it
+  // was); after any other error it is not.
+  bool is_open() const { return stream_ != nullptr && !stream_->is_closed(); }
   int resumes() const { return resumes_; }
 
  private:

@@ -1,9 +1,8 @@
-// proto -> core conversion of every request that carries numbers for core (server/proto_convert.h),
-// followed by the core call the service makes with the result, on a small basis of the fixture.
-// Input: byte 0 picks the request type, byte 1 the basis (vector, 2-field, tensor), the rest is
-// the serialized request. Each case calls what FieldService (field_service.cc, chunk_writers.cc)
-// calls for that RPC, minus the transport and the registry lookup (basis_id / mesh_id are
-// ignored: the fixture's basis and mesh are used).
+// The request handlers (server/handlers.h) of every RPC that carries numbers for core, on a small
+// basis of the fixture. Input: byte 0 picks the request type, byte 1 the basis (vector, 2-field,
+// tensor), the rest is the serialized request. Each case calls the handler FieldService calls for
+// that RPC, minus the transport; basis_id and mesh_id lead to the fixture's basis and its mesh
+// (HandlerContext's lookups), LoadMesh adds to a registry on a temporary store.
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -11,21 +10,18 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
-#include <numeric>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
-#include "core/mesh/mesh_io.h"
-#include "core/operators/curvature.h"
-#include "core/subspace/model_problem.h"
-#include "core/subspace/projection.h"
-#include "core/subspace/smoothing.h"
-#include "core/subspace/spectrum.h"
 #include "fuzz/tiny_bases.h"
-#include "server/data_root.h"
-#include "server/proto_convert.h"
+#include "server/compute_pool.h"
+#include "server/handlers.h"
+#include "server/record_convert.h"
+#include "server/registry.h"
+#include "server/store.h"
 
 namespace fieldspace::fuzz {
 namespace {
@@ -60,140 +56,95 @@ bool Parse(Message* m, const uint8_t* data, size_t size) {
   return m->ParseFromArray(data, static_cast<int>(size));
 }
 
-// The lifted field and singularities a response may carry (Solve, Smooth, Align).
-absl::Status Outputs(const ServedBasis& basis, const Eigen::VectorXd& x, bool return_field,
-                     int encoding, bool singularities) {
-  ASSIGN_OR_RETURN(FieldEncoding e, server::EncodingFromProto(encoding));
-  Eigen::VectorXd dofs;
-  if (return_field) {
-    google::protobuf::RepeatedField<float> values;
-    RETURN_IF_ERROR(server::LiftAllToValues(basis, x, e, &values, &dofs));
-  }
-  if (singularities && basis.basis->type.kind != FieldKind::kTensor) {
-    if (dofs.size() == 0) {
-      ASSIGN_OR_RETURN(dofs, Lift(*basis.system, x));
-    }
-    v1::SingularitiesResponse out;
-    RETURN_IF_ERROR(server::SingularitiesToProto(basis, dofs, 0, &out));
-  }
-  return absl::OkStatus();
+// The registry of LoadMesh (on a temporary store) and of the memory budget the handlers admit
+// their work against; built once per process.
+server::Registry& FuzzRegistry() {
+  static server::Registry* registry = [] {
+    absl::StatusOr<std::unique_ptr<server::Store>> opened =
+        server::Store::Open(DataRoot() + "/store");
+    if (!opened.ok()) std::abort();
+    static std::unique_ptr<server::Store> store = *std::move(opened);
+    static server::ComputePool pool(server::ComputePool::Options{});
+    absl::StatusOr<std::unique_ptr<server::Registry>> made =
+        server::Registry::Create(store.get(), &pool, server::RegistryOptions{});
+    if (!made.ok()) std::abort();
+    return made->release();
+  }();
+  return *registry;
 }
 
-absl::Status Smooth(const ServedBasis& basis, const Eigen::VectorXd& X0,
-                    const EnergyWeights& weights, absl::Span<const double> face_weights,
-                    bool scale_free) {
-  RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(weights));
-  SmoothingOptions options;
-  options.scale_free = scale_free;
-  ASSIGN_OR_RETURN(SmoothingResult r,
-                   SmoothReduced(*basis.system, X0, weights, face_weights, options));
-  return server::CheckSolutionFinite(r.coefficients);
+// The handlers' context: basis_id and mesh_id lead to the fixture's basis and its mesh.
+server::HandlerContext Context(const std::shared_ptr<const ServedBasis>& basis) {
+  static const server::ServiceOptions options = [] {
+    server::ServiceOptions o;
+    o.data_root = DataRoot();
+    return o;
+  }();
+  server::HandlerContext ctx;
+  ctx.registry = &FuzzRegistry();
+  ctx.options = &options;
+  ctx.basis_lookup = [basis](const std::string&) { return basis; };
+  ctx.mesh_lookup = [basis](const std::string&) { return basis->mesh; };
+  return ctx;
 }
 
-absl::Status Run(uint8_t type, const ServedBasis& basis, const uint8_t* data, size_t size) {
+// Opens a server-streaming answer and reads it to the end.
+template <typename Message, typename Request>
+absl::Status Drain(absl::StatusOr<std::unique_ptr<server::ChunkStream<Message>>> (*open)(
+                       const server::HandlerContext&, const Request&),
+                   const server::HandlerContext& ctx, const Request& request) {
+  ASSIGN_OR_RETURN(std::unique_ptr<server::ChunkStream<Message>> stream, open(ctx, request));
+  for (;;) {
+    Message chunk;
+    ASSIGN_OR_RETURN(bool more, stream->Next(&chunk));
+    if (!more) return absl::OkStatus();
+  }
+}
+
+// Parses the request and calls its handler.
+template <typename Request, typename Response>
+absl::Status Call(absl::Status (*handler)(const server::HandlerContext&, const Request&, Response*),
+                  const server::HandlerContext& ctx, const uint8_t* data, size_t size) {
+  Request request;
+  if (!Parse(&request, data, size)) return absl::OkStatus();
+  Response response;
+  return handler(ctx, request, &response);
+}
+
+absl::Status Run(uint8_t type, const std::shared_ptr<const ServedBasis>& basis, const uint8_t* data,
+                 size_t size) {
+  const server::HandlerContext ctx = Context(basis);
   switch (type % 10) {
-    case 0: {
-      v1::LoadMeshRequest r;
-      if (!Parse(&r, data, size)) return absl::OkStatus();
-      ASSIGN_OR_RETURN(ReadableFile file, server::OpenDataFile(DataRoot(), r.path()));
-      ASSIGN_OR_RETURN(MeshReadResult parsed, ReadMeshFile(std::move(file), r.path()));
-      return TriangleMesh::Create(std::move(parsed.arrays)).status();
-    }
+    case 0:
+      return Call(&server::LoadMesh, ctx, data, size);
     case 1: {
+      // Only the conversion: a registry build would run in the background, beyond this input.
       v1::BuildBasisRequest r;
       if (!Parse(&r, data, size)) return absl::OkStatus();
       return server::BuildRequestFromProto(r).status();
     }
-    case 2: {
-      v1::ProjectRequest r;
-      if (!Parse(&r, data, size)) return absl::OkStatus();
-      ASSIGN_OR_RETURN(Eigen::VectorXd X, server::FieldFromProto(r.field(), basis));
-      return Project(*basis.system, X).status();
-    }
-    case 3: {
-      v1::SolveRequest r;
-      if (!Parse(&r, data, size)) return absl::OkStatus();
-      ModelProblem problem;
-      problem.weights = server::WeightsFromProto(r.weights(), EnergyWeights{});
-      problem.scale_free = !r.raw_weights();
-      RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
-      for (int i = 0; i < r.constraints_size(); ++i) {
-        ASSIGN_OR_RETURN(FieldConstraint c, server::ConstraintFromProto(basis, r.constraints(i),
-                                                                        absl::StrCat("c ", i)));
-        problem.constraints.push_back(std::move(c));
-      }
-      RETURN_IF_ERROR(server::EncodingFromProto(r.field_encoding()).status());
-      ASSIGN_OR_RETURN(ReducedSolution result, SolveReducedModelProblem(*basis.system, problem));
-      RETURN_IF_ERROR(server::CheckSolutionFinite(result.coefficients));
-      return Outputs(basis, result.coefficients, r.return_field(), r.field_encoding(),
-                     r.singularities());
-    }
+    case 2:
+      return Call(&server::Project, ctx, data, size);
+    case 3:
+      return Call(&server::Solve, ctx, data, size);
     case 4: {
       v1::LiftRequest r;
       if (!Parse(&r, data, size)) return absl::OkStatus();
-      ASSIGN_OR_RETURN(Eigen::VectorXd x, server::CoefficientsFromProto(r.coefficients(), basis));
-      ASSIGN_OR_RETURN(FieldEncoding e, server::EncodingFromProto(r.encoding()));
-      RETURN_IF_ERROR(server::CheckFaces(r.faces(), basis.mesh->num_faces(), "lift"));
-      google::protobuf::RepeatedField<float> values;
-      if (r.faces().empty()) return server::LiftAllToValues(basis, x, e, &values);
-      return server::LiftToValues(basis, x, r.faces(), e, &values);
+      return Drain(&server::OpenLift, ctx, r);
     }
-    case 5: {
-      v1::EigenfieldsRequest r;
-      if (!Parse(&r, data, size)) return absl::OkStatus();
-      if (r.count() < 1 || r.count() > basis.basis->dimension()) return absl::OkStatus();
-      ReducedEigenOptions options;
-      options.count = r.count();
-      return ReducedEigenpairs(*basis.system, options).status();
-    }
+    case 5:
+      return Call(&server::Eigenfields, ctx, data, size);
     case 6: {
       v1::CurvatureRequest r;
       if (!Parse(&r, data, size)) return absl::OkStatus();
-      ASSIGN_OR_RETURN(FieldEncoding e, server::EncodingFromProto(r.encoding()));
-      ShapeOperatorOptions options;
-      ASSIGN_OR_RETURN(options.estimator, server::EstimatorFromProto(r.estimator()));
-      ASSIGN_OR_RETURN(Eigen::VectorXd dofs, ComputeShapeOperator(*basis.mesh, options));
-      if (r.principal()) RETURN_IF_ERROR(ComputePrincipalCurvatures(*basis.mesh, dofs).status());
-      const int32_t nf = basis.mesh->num_faces();
-      std::vector<int32_t> faces(nf);
-      std::iota(faces.begin(), faces.end(), 0);
-      std::vector<float> values(int64_t{nf} * ValuesPerFace(FieldType::Tensor(), e));
-      return DofsToValues(*basis.mesh, FieldType::Tensor(), e, faces, dofs, absl::MakeSpan(values));
+      return Drain(&server::OpenCurvature, ctx, r);
     }
-    case 7: {
-      v1::SingularitiesRequest r;
-      if (!Parse(&r, data, size)) return absl::OkStatus();
-      if (basis.basis->type.kind == FieldKind::kTensor) return absl::OkStatus();
-      const bool has_field = !r.field().values().empty();
-      if (has_field == !r.coefficients().empty()) return absl::OkStatus();
-      Eigen::VectorXd dofs;
-      if (has_field) {
-        ASSIGN_OR_RETURN(dofs, server::FieldFromProto(r.field(), basis));
-      } else {
-        ASSIGN_OR_RETURN(Eigen::VectorXd x, server::CoefficientsFromProto(r.coefficients(), basis));
-        ASSIGN_OR_RETURN(dofs, Lift(*basis.system, x));
-      }
-      v1::SingularitiesResponse out;
-      return server::SingularitiesToProto(basis, dofs, r.zero_tolerance(), &out);
-    }
-    case 8: {
-      v1::SmoothRequest r;
-      if (!Parse(&r, data, size)) return absl::OkStatus();
-      ASSIGN_OR_RETURN(Eigen::VectorXd X0, server::FieldFromProto(r.field(), basis));
-      return Smooth(basis, X0, server::WeightsFromProto(r.weights(), kDefaultSmoothingWeights),
-                    r.face_weights(), r.scale_free());
-    }
-    default: {
-      v1::AlignRequest r;
-      if (!Parse(&r, data, size)) return absl::OkStatus();
-      ASSIGN_OR_RETURN(CurvatureEstimator estimator, server::EstimatorFromProto(r.estimator()));
-      ASSIGN_OR_RETURN(server::AlignmentTarget target,
-                       server::CurvatureAlignmentTarget(basis, estimator));
-      return Smooth(basis, target.dofs,
-                    server::WeightsFromProto(r.weights(), kDefaultSmoothingWeights),
-                    absl::MakeConstSpan(target.face_weights.data(), target.face_weights.size()),
-                    /*scale_free=*/true);
-    }
+    case 7:
+      return Call(&server::Singularities, ctx, data, size);
+    case 8:
+      return Call(&server::Smooth, ctx, data, size);
+    default:
+      return Call(&server::Align, ctx, data, size);
   }
 }
 
@@ -202,7 +153,6 @@ absl::Status Run(uint8_t type, const ServedBasis& basis, const uint8_t* data, si
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 2) return 0;
-  const auto& basis = fieldspace::fuzz::TinyBasis(data[1]);
-  (void)fieldspace::fuzz::Run(data[0], *basis, data + 2, size - 2);
+  (void)fieldspace::fuzz::Run(data[0], fieldspace::fuzz::TinyBasis(data[1]), data + 2, size - 2);
   return 0;
 }

@@ -1,8 +1,8 @@
-// BuildJob: one basis build shared by every request that asked for it (registry.h).
+// BuildJob: one basis build shared by every request that asked for it.
+
+#include "server/build_job.h"
 
 #include <utility>
-
-#include "server/registry.h"
 
 namespace fieldspace::server {
 

@@ -5,8 +5,9 @@
 #include <mutex>
 
 #include "core/common/status_macros.h"
-#include "server/proto_convert.h"
+#include "server/handlers.h"
 #include "server/reactors.h"
+#include "server/record_convert.h"
 #include "server/rpc_util.h"
 
 namespace fieldspace::server {
@@ -18,14 +19,10 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
                            public RefCounted {
  public:
   BuildWatcher(FieldService* service, const v1::BuildBasisRequest& request)
-      : registry_(service->registry()) {
+      : context_(service->Context(nullptr)) {
     absl::Status st = service->Admit();
-    absl::StatusOr<Registry::StartedBuild> started = Registry::StartedBuild{};
-    if (st.ok()) {
-      started = Start(service, request);
-    } else {
-      started = st;
-    }
+    absl::StatusOr<Registry::StartedBuild> started =
+        st.ok() ? StartBuild(context_, request) : absl::StatusOr<Registry::StartedBuild>(st);
     if (!started.ok()) {
       finished_ = true;
       FinishWith(this, (started.status()));
@@ -33,13 +30,7 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
     }
     if (started->existing.has_value()) {
       finished_ = true;
-      msg_.set_basis_id(started->existing->id);
-      msg_.set_phase(v1::BUILD_PHASE_DONE);
-      msg_.set_fraction(1.0);
-      msg_.set_overall_fraction(1.0);
-      BasisInfoFromRecord(*started->existing, msg_.mutable_basis());
-      auto status = service->registry()->GetBasisStatus(started->existing->id);
-      if (status.ok()) BasisInfoFromStatus(*status, msg_.mutable_basis());
+      BuiltBasisToProto(context_, *started->existing, &msg_);
       StartWriteAndFinish(&msg_, grpc::WriteOptions(), grpc::Status::OK);
       return;
     }
@@ -109,12 +100,6 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
     BuildWatcher* watcher = nullptr;
   };
 
-  static absl::StatusOr<Registry::StartedBuild> Start(FieldService* service,
-                                                      const v1::BuildBasisRequest& request) {
-    ASSIGN_OR_RETURN(BuildRequest build, BuildRequestFromProto(request));
-    return service->registry()->StartBuild(std::move(build));
-  }
-
   // Sends the job's current state unless a write is in flight (then once it completes).
   void Pump() {
     BuildJob::Progress progress = job_->progress();
@@ -132,28 +117,13 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
           std::abs(progress.fraction - msg_.fraction()) < 0.005) {
         return;
       }
-      msg_.Clear();
-      msg_.set_basis_id(job_->basis_id());
-      msg_.set_phase(phase);
-      msg_.set_fraction(progress.fraction);
-      msg_.set_overall_fraction(OverallFraction(progress.stage, progress.fraction));
-      msg_.set_joined(joined_);
-      msg_.set_waiting_for(progress.waiting_for);
       sent_any_ = true;
       if (progress.finished) {
         finished_ = true;
-        if (progress.status.ok()) {
-          final_ok = true;
-          absl::StatusOr<BasisStatus> s = registry_->GetBasisStatus(progress.record.id);
-          if (s.ok()) {
-            BasisInfoFromStatus(*s, msg_.mutable_basis());
-          } else {  // deleted in the meantime: report what was built
-            BasisInfoFromRecord(progress.record, msg_.mutable_basis());
-          }
-        } else {
-          final_error = true;
-        }
+        final_ok = progress.status.ok();
+        final_error = !final_ok;
       }
+      BuildProgressToProto(context_, *job_, progress, joined_, &msg_);
       writing_ = !final_error;
     }
     if (final_ok) {
@@ -165,7 +135,7 @@ class BuildWatcher final : public grpc::ServerWriteReactor<v1::BuildBasisProgres
     }
   }
 
-  Registry* const registry_;
+  const HandlerContext context_;
   std::shared_ptr<BuildJob> job_;
   std::shared_ptr<Gate> gate_;
   uint64_t token_ = 0;

@@ -3,10 +3,13 @@
 #include <algorithm>
 
 #include "absl/strings/str_cat.h"
+#include "core/common/index_check.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/projection.h"
+#include "server/clock.h"
+#include "server/curvature_alignment.h"
+#include "server/field_answers.h"
 #include "server/proto_convert.h"
-#include "server/rpc_util.h"
 
 namespace fieldspace::server {
 
@@ -69,6 +72,13 @@ absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* u
   return status;
 }
 
+void DesignEditor::ErrorUpdate(uint64_t seq, const absl::Status& status, v1::DesignUpdate* update) {
+  update->Clear();
+  update->set_seq(seq);
+  update->mutable_error()->set_code(static_cast<int32_t>(status.code()));
+  update->mutable_error()->set_message(std::string(status.message()));
+}
+
 absl::Status DesignEditor::Answer(v1::DesignUpdate* update) {
   const double edit_ms = MsSince(edit_start_);
   const Eigen::VectorXd& x = session_->coefficients();
@@ -124,12 +134,9 @@ absl::Status DesignEditor::Open(const v1::OpenDesign& open) {
   const bool data_term = open.has_data();
   const EnergyWeights weights = WeightsFromProto(
       open.weights(), data_term ? kDefaultDataTermSessionWeights : EnergyWeights{});
-  RETURN_IF_ERROR(data_term ? ValidateWeights(weights) : ValidateWeightsWithoutDataTerm(weights));
+  RETURN_IF_ERROR(ValidateSessionWeights(weights, data_term));
   ASSIGN_OR_RETURN(const BiharmonicForm biharmonic, BiharmonicFormFromProto(open.biharmonic()));
-  if (open.singularities() && basis->basis->type.kind == FieldKind::kTensor) {
-    return absl::InvalidArgumentError(
-        "singularities are defined for vector and n-field bases, not tensor bases");
-  }
+  if (open.singularities()) RETURN_IF_ERROR(CheckHasSingularities(*basis));
   WorkGrant grant;
   if (options_.admit_work) {
     ASSIGN_OR_RETURN(

@@ -33,12 +33,10 @@ struct DesignEditorOptions {
 // core DesignSession on a basis (weights, watched faces), every later one is an edit
 // (add / move / remove / set_weights / watch), and each is answered by one DesignUpdate with the
 // coefficients, the watched faces' lifted values (through the basis's LiftPlan) and timings.
-// A request that fails leaves the session exactly as it was. Thread-compatible (one stream).
+// A request that fails leaves the session exactly as it was: the stream answers it with
+// ErrorUpdate and goes on, unless EndsSession. Thread-compatible (one stream).
 class DesignEditor {
  public:
-  using BasisLookup =
-      std::function<absl::StatusOr<std::shared_ptr<const ServedBasis>>(const std::string& id)>;
-
   DesignEditor(BasisLookup lookup, const DesignEditorOptions& options)
       : lookup_(std::move(lookup)), options_(options) {}
 
@@ -48,6 +46,17 @@ class DesignEditor {
   // ResourceExhausted for too many constraints or watched faces.
   absl::Status Apply(const fieldspace::v1::DesignRequest& request,
                      fieldspace::v1::DesignUpdate* update);
+
+  // Whether the stream must end after `status`, an error of Apply: no session is open (the
+  // request was an edit before `open`, or an `open` that failed), or the session may not be as
+  // it was (Internal: a failed edit could not be undone). Any other error is the edit's alone:
+  // the session is as it was, and the answer is ErrorUpdate.
+  bool EndsSession(const absl::Status& status) const {
+    return !is_open() || status.code() == absl::StatusCode::kInternal;
+  }
+  // The answer to the refused request `seq`: only its seq and the error (code and message).
+  static void ErrorUpdate(uint64_t seq, const absl::Status& status,
+                          fieldspace::v1::DesignUpdate* update);
 
   bool is_open() const { return session_ != nullptr; }
   const DesignSession* session() const { return session_.get(); }

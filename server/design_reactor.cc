@@ -1,5 +1,5 @@
 // Design (bidirectional streaming): one DesignEditor per stream. Strictly sequential: read an
-// edit, apply it on the pool, write the answer, read the next one.
+// edit, apply it on the pool, write the answer (an update, or the edit's error), read the next.
 
 #include <atomic>
 #include <cstdint>
@@ -169,13 +169,27 @@ class DesignReactor final : public grpc::ServerBidiReactor<grpc::ByteBuffer, grp
 
   void Work() {
     update_.Clear();
+    // Whether the editor answered (an exception inside it leaves the session in doubt: the
+    // stream ends).
+    bool applied = false;
     absl::Status status =
-        cancelled_.load() ? absl::CancelledError("cancelled") : Guarded([this]() -> absl::Status {
+        cancelled_.load() ? absl::CancelledError("cancelled") : Guarded([this, &applied] {
           RETURN_IF_ERROR(ParseStreamMessage(&in_, "Design", ++messages_, &request_));
-          RETURN_IF_ERROR(editor_.Apply(request_, &update_));
-          update_.mutable_timings()->set_total_ms(MsSince(received_));
-          return SerializeToBuffer(update_, &out_);
+          absl::Status s = editor_.Apply(request_, &update_);
+          applied = true;
+          return s;
         });
+    if (applied && !status.ok() && !editor_.EndsSession(status)) {
+      // A refused edit costs that edit, not the session: answer it and read the next one.
+      DesignEditor::ErrorUpdate(request_.seq(), status, &update_);
+      status = absl::OkStatus();
+    }
+    if (status.ok()) {
+      status = Guarded([this] {
+        if (!update_.has_error()) update_.mutable_timings()->set_total_ms(MsSince(received_));
+        return SerializeToBuffer(update_, &out_);
+      });
+    }
     bool finish = false;
     {
       std::lock_guard<std::mutex> lock(mu_);

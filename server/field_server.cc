@@ -15,6 +15,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "core/common/file_util.h"
 #include "core/common/status_macros.h"
 #include "grpc/grpc.h"
 #include "grpc/health/v1/health.pb.h"
@@ -62,15 +63,14 @@ std::string ListenFailureReason(const std::string& host, int port) {
   }
   std::string reason;
   for (addrinfo* a = found; a != nullptr && reason.empty(); a = a->ai_next) {
-    const int fd = ::socket(a->ai_family, a->ai_socktype | SOCK_CLOEXEC, a->ai_protocol);
-    if (fd < 0) continue;
+    const ScopedFd fd(::socket(a->ai_family, a->ai_socktype | SOCK_CLOEXEC, a->ai_protocol));
+    if (!fd.is_open()) continue;
     const int one = 1;
-    ::setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));  // as gRPC does
-    if (::bind(fd, a->ai_addr, a->ai_addrlen) != 0) {
+    ::setsockopt(fd.get(), SOL_SOCKET, SO_REUSEADDR, &one, sizeof(one));  // as gRPC does
+    if (::bind(fd.get(), a->ai_addr, a->ai_addrlen) != 0) {
       reason = errno == EADDRINUSE ? ": address already in use"
                                    : absl::StrCat(": ", std::strerror(errno));
     }
-    ::close(fd);
   }
   ::freeaddrinfo(found);
   return reason;

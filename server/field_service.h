@@ -4,7 +4,6 @@
 // Includes generated code: keep this header out of widely included headers (only field_server.cc
 // and tests include it).
 
-#include <algorithm>
 #include <atomic>
 #include <cstdint>
 #include <mutex>
@@ -13,28 +12,11 @@
 
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
 #include "server/compute_pool.h"
+#include "server/handlers.h"
 #include "server/registry.h"
+#include "server/service_options.h"
 
 namespace fieldspace::server {
-
-struct ServiceOptions {
-  std::string data_root;  // LoadMesh reads only below it; empty disables LoadMesh
-  int64_t max_upload_bytes = int64_t{2} << 30;
-  int64_t max_message_bytes = int64_t{64} << 20;  // responses larger than this are refused
-  // Design sessions check every k-th edit's solution against the true system (and the risky
-  // ones always): DesignSessionOptions::verify_interval.
-  int32_t design_verify_interval = 16;
-  int32_t max_design_sessions = 256;
-
-  // Bytes of payload (numbers) one response message may carry: the message limit less room for
-  // the rest of the message (ids, timings, framing): 1/8 of the limit, at most 1 MiB.
-  int64_t message_room() const {
-    return max_message_bytes - std::min<int64_t>(int64_t{1} << 20, max_message_bytes / 8);
-  }
-  // Faces per streamed chunk for `bytes_per_face` of payload each: `requested` (0: 65,536),
-  // at most 2^19 and at most what fits in message_room().
-  int32_t ChunkFaces(int32_t requested, int64_t bytes_per_face) const;
-};
 
 // Reference counting for reactors that other threads may touch after gRPC is done with them:
 // gRPC's own reference is dropped in OnDone.
@@ -90,8 +72,8 @@ using FieldServiceBase = StackMixins<
     FieldSpaceService::WithCallbackMethod_Align>::type;
 
 // fieldspace.v1.FieldSpace on the callback API. Stateless apart from the set of open streams: it
-// translates protos to core types, asks the registry for handles, runs heavy work on the compute
-// pool and translates results back.
+// admits a call, runs its handler (handlers.h: proto in, proto out) on the compute pool or inline,
+// and finishes the call with the handler's status.
 class FieldService final : public FieldServiceBase {
  public:
   FieldService(Registry* registry, ComputePool* pool, ServiceOptions options);
@@ -111,6 +93,9 @@ class FieldService final : public FieldServiceBase {
   // The drain check for a new RPC: Unavailable once the server is shutting down. (Tokens are
   // checked before a call reaches the service: server/auth.h.)
   absl::Status Admit() const;
+
+  // The context of a handler run for a call; `cancel`: the call's cancellation flag.
+  HandlerContext Context(const std::atomic<bool>* cancel) const;
 
   Registry* registry() const { return registry_; }
   ComputePool* pool() const { return pool_; }

@@ -14,15 +14,10 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "core/common/file_util.h"
 
 namespace fieldspace::server {
 namespace {
-
-absl::Status ErrnoError(int err, const std::string& what) {
-  const std::string message = absl::StrCat(what, ": ", std::strerror(err));
-  if (err == EACCES || err == EPERM || err == EROFS) return absl::PermissionDeniedError(message);
-  return absl::InternalError(message);
-}
 
 std::string RandomHex(int digits) {
   static thread_local std::mt19937_64 rng(std::random_device{}() ^ static_cast<uint64_t>(::getpid())
@@ -74,17 +69,16 @@ LeaseOwner LocalLeaseOwner(const std::string& daemon_id) {
 
 absl::StatusOr<Lease::State> Lease::Read(const std::string& dir, const std::string& name) {
   const std::string path = LeasePath(dir, name);
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) {
+  const ScopedFd fd(::open(path.c_str(), O_RDONLY | O_CLOEXEC));
+  if (!fd.is_open()) {
     if (errno == ENOENT) return absl::NotFoundError(absl::StrCat("no lease ", path));
-    return ErrnoError(errno, absl::StrCat("cannot open ", path));
+    return ErrnoStatus(errno, absl::StrCat("cannot open ", path));
   }
   struct stat st;
   char buf[512] = {};
-  const bool stat_ok = ::fstat(fd, &st) == 0;
-  const ssize_t n = ::pread(fd, buf, sizeof(buf) - 1, 0);
-  ::close(fd);
-  if (!stat_ok || n < 0) return ErrnoError(errno, absl::StrCat("cannot read ", path));
+  const bool stat_ok = ::fstat(fd.get(), &st) == 0;
+  const ssize_t n = ::pread(fd.get(), buf, sizeof(buf) - 1, 0);
+  if (!stat_ok || n < 0) return ErrnoStatus(errno, absl::StrCat("cannot read ", path));
   State state;
   absl::StatusOr<LeaseOwner> owner = ParseOwner(std::string(buf, n), path);
   if (!owner.ok()) {
@@ -107,16 +101,16 @@ absl::StatusOr<std::unique_ptr<Lease>> Lease::TryAcquire(const std::string& dir,
   const std::string tmp =
       absl::StrCat(dir, "/.", name, ".lease.tmp-", me.daemon_id, "-", RandomHex(8));
   const std::string content = absl::StrCat(me.host, " ", me.pid, " ", me.daemon_id, "\n");
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) return ErrnoError(errno, absl::StrCat("cannot create ", tmp));
+  ScopedFd fd(::open(tmp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644));
+  if (!fd.is_open()) return ErrnoStatus(errno, absl::StrCat("cannot create ", tmp));
   const bool written =
-      ::write(fd, content.data(), content.size()) == static_cast<ssize_t>(content.size()) &&
-      ::fsync(fd) == 0;
+      ::write(fd.get(), content.data(), content.size()) == static_cast<ssize_t>(content.size()) &&
+      ::fsync(fd.get()) == 0;
   const int write_errno = errno;
-  ::close(fd);
+  fd.reset();
   if (!written) {
     ::unlink(tmp.c_str());
-    return ErrnoError(write_errno, absl::StrCat("cannot write ", tmp));
+    return ErrnoStatus(write_errno, absl::StrCat("cannot write ", tmp));
   }
   // link() is atomic and fails with EEXIST if the lease exists, also on NFS (where O_EXCL on
   // open was not reliable before NFSv3).
@@ -124,7 +118,7 @@ absl::StatusOr<std::unique_ptr<Lease>> Lease::TryAcquire(const std::string& dir,
   const int link_errno = errno;
   ::unlink(tmp.c_str());
   if (rc == 0) return std::unique_ptr<Lease>(new Lease(path, me, options));
-  if (link_errno != EEXIST) return ErrnoError(link_errno, absl::StrCat("cannot create ", path));
+  if (link_errno != EEXIST) return ErrnoStatus(link_errno, absl::StrCat("cannot create ", path));
   absl::StatusOr<State> state = Read(dir, name);
   if (holder != nullptr) {
     *holder = state.ok() ? state->owner : LeaseOwner{"unknown", 0, "released"};
@@ -140,7 +134,7 @@ absl::Status Lease::BreakStale(const std::string& dir, const std::string& name,
   const std::string aside = absl::StrCat(dir, "/.", name, ".lease.stale-", RandomHex(8));
   if (::rename(path.c_str(), aside.c_str()) != 0) {
     if (errno == ENOENT) return absl::OkStatus();
-    return ErrnoError(errno, absl::StrCat("cannot break stale lease ", path));
+    return ErrnoStatus(errno, absl::StrCat("cannot break stale lease ", path));
   }
   struct stat st;
   std::ifstream in(aside);

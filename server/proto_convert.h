@@ -17,7 +17,7 @@
 #include "core/operators/field_type.h"
 #include "core/subspace/problem.h"
 #include "fieldspace/v1/fieldspace.pb.h"
-#include "server/registry.h"
+#include "server/served_basis.h"
 
 namespace fieldspace::server {
 
@@ -31,29 +31,12 @@ absl::StatusOr<FieldEncoding> EncodingFromProto(int encoding);
 absl::StatusOr<CurvatureEstimator> EstimatorFromProto(int estimator);
 v1::FieldEncoding EncodingToProto(FieldEncoding e);
 
-v1::BuildPhase PhaseToProto(BuildStage stage);
-
-void MeshInfoFromRecord(const MeshRecord& r, bool loaded, v1::MeshInfo* p);
-void BasisInfoFromStatus(const BasisStatus& s, v1::BasisInfo* p);
-void BasisInfoFromRecord(const BasisRecord& r, v1::BasisInfo* p);
-
-// The build a BuildBasisRequest asks for (validated further by Registry::StartBuild).
-absl::StatusOr<BuildRequest> BuildRequestFromProto(const v1::BuildBasisRequest& p);
-
 // InvalidArgument for a value the enum does not name.
 absl::StatusOr<BiharmonicForm> BiharmonicFormFromProto(int form);
 
 // The weights of a request; a weight the message leaves out is taken from `defaults` (the
 // operation's defaults, or a Design session's current weights).
 EnergyWeights WeightsFromProto(const v1::Weights& w, const EnergyWeights& defaults);
-
-// The singularities of the field `dofs` (all faces) of `basis` (vector or n-field), as the
-// Singularities RPC answers them; InvalidArgument for tensor bases.
-absl::Status SingularitiesToProto(const ServedBasis& basis, const Eigen::VectorXd& dofs,
-                                  double zero_tolerance, v1::SingularitiesResponse* out);
-
-// InvalidArgument naming `what` unless every face is in [0, num_faces).
-absl::Status CheckFaces(absl::Span<const int32_t> faces, int32_t num_faces, absl::string_view what);
 
 // One face's value in `encoding` -> its DOFs in the face frame. `what` names the request part in
 // messages ("add id 3", "constraint 7").
@@ -75,23 +58,6 @@ absl::StatusOr<Eigen::VectorXd> FieldFromProto(const v1::FieldValues& field,
 // InvalidArgument unless every coefficient is finite: huge inputs (e.g. a constraint value of
 // 1e308) can overflow a solve, and the answer must then be an error, not infinities with OK.
 absl::Status CheckSolutionFinite(const Eigen::VectorXd& x);
-
-// Appends the DOFs of `faces` (faces.size() * dofs_per_face, in face order) to `out` in
-// `encoding` (InvalidArgument when a value overflows float).
-absl::Status EncodeDofs(const ServedBasis& basis, absl::Span<const int32_t> faces,
-                        absl::Span<const double> dofs, FieldEncoding encoding,
-                        google::protobuf::RepeatedField<float>* out);
-
-// Lifts `x` at `faces` through the basis's LiftPlan and appends the values in `encoding` to `out`.
-absl::Status LiftToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
-                          absl::Span<const int32_t> faces, FieldEncoding encoding,
-                          google::protobuf::RepeatedField<float>* out);
-
-// The same for all faces: one parallel pass of the LiftPlan over every row of U. `dofs`
-// (optional) receives the lifted field, for a caller that needs it too (singularities).
-absl::Status LiftAllToValues(const ServedBasis& basis, const Eigen::VectorXd& x,
-                             FieldEncoding encoding, google::protobuf::RepeatedField<float>* out,
-                             Eigen::VectorXd* dofs = nullptr);
 
 }  // namespace fieldspace::server
 

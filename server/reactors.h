@@ -1,8 +1,9 @@
 #ifndef FIELDSPACE_SERVER_REACTORS_H_
 #define FIELDSPACE_SERVER_REACTORS_H_
 
-// The streaming RPCs' reactors, one file each (upload_reactor.cc, chunk_writers.cc,
-// build_watcher.cc, design_reactor.cc). Each deletes itself when gRPC is done with it.
+// The streaming RPCs' reactors with state of their own, one file each (upload_reactor.cc,
+// build_watcher.cc, design_reactor.cc; the chunked answers are rpc_util.h's ChunkWriter). Each
+// deletes itself when gRPC is done with it.
 
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
 #include "grpcpp/grpcpp.h"
@@ -15,16 +16,6 @@ class FieldService;
 // and registers the mesh on the pool.
 grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
                                                             grpc::ByteBuffer* response);
-
-// GetMeshGeometry and Lift: chunks produced on the pool.
-grpc::ServerWriteReactor<fieldspace::v1::MeshGeometryChunk>* NewGeometryWriter(
-    FieldService* service, const fieldspace::v1::GetMeshGeometryRequest& request);
-grpc::ServerWriteReactor<fieldspace::v1::FieldChunk>* NewLiftWriter(
-    FieldService* service, const fieldspace::v1::LiftRequest& request);
-
-// Curvature: the mesh's shape operator, computed on the pool, sent in chunks.
-grpc::ServerWriteReactor<fieldspace::v1::CurvatureChunk>* NewCurvatureWriter(
-    FieldService* service, const fieldspace::v1::CurvatureRequest& request);
 
 // BuildBasis: watches a (possibly shared) build job; the job outlives the stream.
 grpc::ServerWriteReactor<fieldspace::v1::BuildBasisProgress>* NewBuildWatcher(

@@ -48,17 +48,21 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
   if (key.field.kind != FieldKind::kNField) key.field.n = 1;
   RETURN_IF_ERROR(key.field.Validate());
   const int64_t dofs = int64_t{key.field.dofs_per_face()} * mesh.num_faces;
-  if (key.dimension < 1) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("dimension must be at least 1, got ", key.dimension));
-  }
   if (key.dimension > options_.max_dimension) {
     return absl::ResourceExhaustedError(absl::StrCat(
         "dimension ", key.dimension, " exceeds this server's limit of ", options_.max_dimension));
   }
-  if (key.dimension > dofs) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("dimension ", key.dimension, " exceeds the number of DOFs (", dofs, ")"));
+  if (key.fields_per_region == 0) key.fields_per_region = key.field.default_fields_per_region();
+  {
+    // The core's bounds (d, sigma, m, weights), on the parameters as the build will see them.
+    BasisParams params;
+    params.dimension = key.dimension;
+    params.sigma = key.sigma;
+    params.fields_per_region = key.fields_per_region;
+    params.face_weights = std::move(request.face_weights);
+    const absl::Status valid = ValidateBasisParams(params, key.field, mesh.num_faces);
+    request.face_weights = std::move(params.face_weights);
+    RETURN_IF_ERROR(valid);
   }
   if (key.coarse_dimension < 0 || key.coarse_dimension >= key.dimension) {
     return absl::InvalidArgumentError(absl::StrCat("coarse_dimension must be in [0, dimension = ",
@@ -71,32 +75,11 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
     }
     RETURN_IF_ERROR(QualityLevels(key.quality, key.dimension, key.sigma).status());
   }
-  if (!std::isfinite(key.sigma) || key.sigma <= 0 || key.sigma > 1e6) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("sigma must be finite and in (0, 1e6], got ", key.sigma));
-  }
-  if (key.fields_per_region == 0) key.fields_per_region = key.field.default_fields_per_region();
-  if (key.fields_per_region < 1 || key.fields_per_region > 64) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("fields_per_region must be in [1, 64], got ", key.fields_per_region));
-  }
   // A vector field's kernel is the harmonic fields: none on a genus-0 mesh (with or without
   // boundary), so the option would not change the basis and must not change its id.
   if (key.field.kind == FieldKind::kVector && mesh.genus == 0) key.kernel_columns = false;
   key.weights_hash = 0;
   if (request.face_weights.size() > 0) {
-    if (request.face_weights.size() != mesh.num_faces) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("face_weights has ", request.face_weights.size(), " values; the mesh has ",
-                       mesh.num_faces, " faces"));
-    }
-    for (Eigen::Index f = 0; f < request.face_weights.size(); ++f) {
-      const double w = request.face_weights[f];
-      if (!std::isfinite(w) || w <= 0) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("face_weights[", f, "] = ", w, " must be finite and > 0"));
-      }
-    }
     // Salted with the construction's revision for weighted bases (2: eq. 12's radius from the
     // weighted area), so that bases built by the earlier rule keep their ids and new requests get
     // new ones. Never 0, which means uniform.

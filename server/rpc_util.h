@@ -3,14 +3,14 @@
 
 // Building blocks of the RPC layer: how a call ends (FinishWith: the one place a reactor turns
 // an absl::Status into the call's grpc::Status), how exceptions from core are contained
-// (Guarded), reference counting for reactors other threads touch, unary calls on the compute
-// pool (RunUnary), server-streaming calls that produce chunks on the pool (ChunkWriter), and the
+// (Guarded), unary calls on the compute pool (RunUnary, RunHandler), server-streaming calls whose
+// chunks a handler produces on the pool (ChunkWriter), and the
 // parsing and serializing of messages on raw (grpc::ByteBuffer) streams.
 
 #include <atomic>
-#include <chrono>
 #include <cstdint>
 #include <exception>
+#include <memory>
 #include <new>
 #include <utility>
 
@@ -19,18 +19,15 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "grpcpp/grpcpp.h"
+#include "server/clock.h"
 #include "server/compute_pool.h"
 #include "server/field_service.h"
+#include "server/handlers.h"
 #include "server/status_util.h"
 
 namespace fieldspace::server {
 
 namespace v1 = ::fieldspace::v1;
-using Clock = std::chrono::steady_clock;
-
-inline double MsSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
 
 // Ends a call of any reactor type with `status`.
 template <typename Reactor>
@@ -117,16 +114,29 @@ grpc::ServerUnaryReactor* RunUnary(FieldService* service, Where where, Work work
   return call;
 }
 
-// Server-streaming calls that produce chunks on the pool, one write at a time.
-template <typename Message>
-class ChunkWriter : public grpc::ServerWriteReactor<Message> {
- public:
-  explicit ChunkWriter(FieldService* service) : service_(service) { admitted_ = service->Admit(); }
+// Unary calls whose work is a handler (handlers.h).
+template <typename Request, typename Response>
+grpc::ServerUnaryReactor* RunHandler(FieldService* service, Where where,
+                                     absl::Status (*handler)(const HandlerContext&, const Request&,
+                                                             Response*),
+                                     const Request* request, Response* response) {
+  return RunUnary(service, where,
+                  [service, handler, request, response](const std::atomic<bool>* cancel) {
+                    return handler(service->Context(cancel), *request, response);
+                  });
+}
 
-  // Call once from the subclass constructor.
-  void Begin() {
-    if (!admitted_.ok()) {
-      FinishWith(this, admitted_);
+// Server-streaming calls whose chunks a handler's ChunkStream produces on the pool, one write at
+// a time: `open` (e.g. OpenLift) runs once, then Next for each chunk.
+template <typename Message, typename Request>
+class ChunkWriter final : public grpc::ServerWriteReactor<Message> {
+ public:
+  using OpenFn = absl::StatusOr<std::unique_ptr<ChunkStream<Message>>> (*)(const HandlerContext&,
+                                                                           const Request&);
+  ChunkWriter(FieldService* service, const Request& request, OpenFn open)
+      : service_(service), request_(request), open_(open) {
+    if (absl::Status admitted = service->Admit(); !admitted.ok()) {
+      FinishWith(this, admitted);
       return;
     }
     Schedule(true);
@@ -142,23 +152,17 @@ class ChunkWriter : public grpc::ServerWriteReactor<Message> {
   void OnCancel() override { cancelled_.store(true); }
   void OnDone() override { delete this; }
 
- protected:
-  // On the pool: Prepare() once, then Next() for each chunk. Next() fills `chunk` and returns
-  // true, or returns false when there is nothing more to send.
-  virtual absl::Status Prepare(const std::atomic<bool>* cancel) = 0;
-  virtual absl::StatusOr<bool> Next(Message* chunk) = 0;
-
-  FieldService* service() const { return service_; }
-
  private:
   void Schedule(bool first) {
     const bool submitted = service_->pool()->Submit(ComputePool::Lane::kInteractive, [this, first] {
       bool has_chunk = false;
       absl::Status status = Guarded([&]() -> absl::Status {
         if (cancelled_.load()) return absl::CancelledError("cancelled");
-        if (first) RETURN_IF_ERROR(Prepare(&cancelled_));
+        if (first) {
+          ASSIGN_OR_RETURN(stream_, open_(service_->Context(&cancelled_), request_));
+        }
         chunk_.Clear();
-        ASSIGN_OR_RETURN(has_chunk, Next(&chunk_));
+        ASSIGN_OR_RETURN(has_chunk, stream_->Next(&chunk_));
         return absl::OkStatus();
       });
       if (!status.ok() || !has_chunk) {
@@ -171,7 +175,9 @@ class ChunkWriter : public grpc::ServerWriteReactor<Message> {
   }
 
   FieldService* const service_;
-  absl::Status admitted_;
+  const Request request_;
+  const OpenFn open_;
+  std::unique_ptr<ChunkStream<Message>> stream_;
   std::atomic<bool> cancelled_{false};
   Message chunk_;
 };

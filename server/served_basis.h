@@ -9,13 +9,12 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
-#include <mutex>
+#include <string>
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "core/basis/basis.h"
 #include "core/mesh/triangle_mesh.h"
-#include "core/operators/curvature.h"
 #include "core/operators/field_operator.h"
 #include "core/subspace/design_session.h"
 #include "core/subspace/reduced_system.h"
@@ -51,9 +50,14 @@ struct ServedBasis {
   std::shared_ptr<EnergyFactorCache> energy_cache;  // shared by this basis's design sessions
   int64_t memory_bytes = 0;  // basis + system, as core counts them (for the memory budget)
   // The curvature-aligned data terms of design sessions, per estimator, shared while any session
-  // holds one (so that sessions with the same weights also share their energy factorization).
+  // holds one (so that sessions with the same weights also share their energy factorization):
+  // curvature_alignment.h.
   std::shared_ptr<struct AlignmentCache> alignment_cache;
 };
+
+// Where a request finds the basis it names (Registry::GetBasis in the daemon).
+using BasisLookup =
+    std::function<absl::StatusOr<std::shared_ptr<const ServedBasis>>(const std::string& id)>;
 
 struct BuildContext {
   std::function<void(BuildStage stage, double fraction)> progress;  // any thread
@@ -76,29 +80,6 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
 absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
     std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context);
-
-// The curvature-aligned target of an n-field basis with n = 2 (maximum principal direction) or
-// n = 4 (principal cross): unit representation vectors per face (`dofs`) and their weights, the
-// anisotropy |k1 - k2| divided by its area-weighted mean (dimensionless, like the scale-free
-// weights). Used by Align and by Design's data term. InvalidArgument for other bases;
-// FailedPrecondition where the surface has no anisotropy anywhere.
-struct AlignmentTarget {
-  Eigen::VectorXd dofs;
-  Eigen::VectorXd face_weights;
-};
-absl::StatusOr<AlignmentTarget> CurvatureAlignmentTarget(const ServedBasis& basis,
-                                                         CurvatureEstimator estimator);
-
-// The data term (a ReducedSmoother of the basis's system) of CurvatureAlignmentTarget, computed
-// once per estimator while any caller holds it (ServedBasis::alignment_cache); thread-safe.
-// `computed` (optional): whether this call computed it.
-absl::StatusOr<std::shared_ptr<const ReducedSmoother>> CurvatureAlignmentDataTerm(
-    const ServedBasis& basis, CurvatureEstimator estimator, bool* computed = nullptr);
-
-struct AlignmentCache {
-  std::mutex mu;  // held while a data term is computed: concurrent opens wait for one
-  std::weak_ptr<const ReducedSmoother> by_estimator[2];
-};
 
 }  // namespace fieldspace::server
 

@@ -31,28 +31,6 @@ constexpr uint32_t kMaxMetaBytes = 1 << 20;
 constexpr char kMeshExt[] = ".fsmesh";
 constexpr char kBasisExt[] = ".fsbasis";
 
-// The store's errno codes: anything not listed is Internal.
-absl::Status StoreErrnoStatus(int err, std::string_view what) {
-  std::string message =
-      absl::StrCat(absl::string_view(what.data(), what.size()), ": ", std::strerror(err));
-  switch (err) {
-    case ENOENT:
-      return absl::NotFoundError(message);
-    case ENOSPC:
-    case EDQUOT:
-    case ENOMEM:
-    case EMFILE:
-    case ENFILE:
-      return absl::ResourceExhaustedError(message);
-    case EACCES:
-    case EPERM:
-    case EROFS:
-      return absl::PermissionDeniedError(message);
-    default:
-      return absl::InternalError(message);
-  }
-}
-
 // Little-endian metadata encoding: fixed-width values and length-prefixed strings.
 class MetaWriter {
  public:
@@ -229,7 +207,6 @@ absl::Status WriteAtomically(const std::string& path, const std::string& header,
   pieces.insert(pieces.end(), payload.begin(), payload.end());
   AtomicWriteOptions options;
   options.mode = 0644;
-  options.errno_status = StoreErrnoStatus;
   if (pause_ms > 0) {
     uint64_t total = 0;
     for (std::string_view piece : payload) total += piece.size();
@@ -250,14 +227,14 @@ struct OpenedFile {
 
 absl::StatusOr<OpenedFile> OpenContainer(const std::string& path, const char (&magic)[8]) {
   OpenedFile f;
-  ASSIGN_OR_RETURN(f.file, OpenForReading(path, StoreErrnoStatus));
+  ASSIGN_OR_RETURN(f.file, OpenForReading(path));
   const auto file_size = static_cast<uint64_t>(f.file.size);
   if (file_size < kHeaderBytes) {
     return absl::DataLossError(
         absl::StrCat(path, ": truncated (", file_size, " bytes, shorter than the header)"));
   }
   char h[kHeaderBytes];
-  RETURN_IF_ERROR(ReadExactlyAt(f.file.fd.get(), 0, h, kHeaderBytes, path, StoreErrnoStatus));
+  RETURN_IF_ERROR(ReadExactlyAt(f.file.fd.get(), 0, h, kHeaderBytes, path));
   if (std::memcmp(h, magic, 8) != 0) {
     return absl::DataLossError(absl::StrCat(path, ": not a fieldspace store file (bad magic)"));
   }
@@ -275,8 +252,7 @@ absl::StatusOr<OpenedFile> OpenContainer(const std::string& path, const char (&m
     return absl::DataLossError(absl::StrCat(path, ": corrupt header (metadata length)"));
   }
   f.meta.resize(f.header.meta_len);
-  RETURN_IF_ERROR(ReadExactlyAt(f.file.fd.get(), kHeaderBytes, f.meta.data(), f.meta.size(), path,
-                                StoreErrnoStatus));
+  RETURN_IF_ERROR(ReadExactlyAt(f.file.fd.get(), kHeaderBytes, f.meta.data(), f.meta.size(), path));
   Hasher hasher;
   hasher.Update(h, 32);
   hasher.Update(f.meta);
@@ -301,8 +277,7 @@ absl::Status ReadPayload(const OpenedFile& f, const std::vector<std::pair<char*,
     size_t done = 0;
     while (done < size) {
       const size_t n = std::min<size_t>(size - done, size_t{8} << 20);
-      RETURN_IF_ERROR(
-          ReadExactlyAt(f.file.fd.get(), offset, data + done, n, path, StoreErrnoStatus));
+      RETURN_IF_ERROR(ReadExactlyAt(f.file.fd.get(), offset, data + done, n, path));
       hasher.Update(data + done, n);
       offset += n;
       done += n;
@@ -517,17 +492,17 @@ bool Store::HasBasis(const std::string& id) const {
 absl::Status Store::DeleteMesh(const std::string& id) const {
   if (!IsFileStem(id)) return absl::OkStatus();
   if (::unlink(MeshPath(id).c_str()) != 0 && errno != ENOENT) {
-    return StoreErrnoStatus(errno, "deleting " + MeshPath(id));
+    return ErrnoStatus(errno, "deleting " + MeshPath(id));
   }
-  return FsyncDirectory(dir_ + "/meshes", StoreErrnoStatus);
+  return FsyncDirectory(dir_ + "/meshes");
 }
 
 absl::Status Store::DeleteBasis(const std::string& id) const {
   if (!IsFileStem(id)) return absl::OkStatus();
   if (::unlink(BasisPath(id).c_str()) != 0 && errno != ENOENT) {
-    return StoreErrnoStatus(errno, "deleting " + BasisPath(id));
+    return ErrnoStatus(errno, "deleting " + BasisPath(id));
   }
-  return FsyncDirectory(dir_ + "/bases", StoreErrnoStatus);
+  return FsyncDirectory(dir_ + "/bases");
 }
 
 }  // namespace fieldspace::server

@@ -5,9 +5,9 @@
 #include <unistd.h>
 
 #include <cerrno>
-#include <cstring>
 #include <filesystem>
 #include <string>
+#include <utility>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
@@ -16,10 +16,6 @@ namespace fieldspace::server {
 namespace {
 
 constexpr char kLockFile[] = "LOCK";
-
-absl::Status ErrnoError(int err, const std::string& what) {
-  return absl::InternalError(absl::StrCat(what, ": ", std::strerror(err)));
-}
 
 // The pid recorded in the lock file, or "unknown" (it may be mid-write by its holder).
 std::string RecordedPid(int fd) {
@@ -38,9 +34,10 @@ absl::StatusOr<StoreLock> StoreLock::Acquire(const std::string& dir, StoreLockMo
     return absl::InternalError(absl::StrCat("cannot create store ", dir, ": ", ec.message()));
   }
   const std::string path = (std::filesystem::path(dir) / kLockFile).string();
-  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (fd < 0) return ErrnoError(errno, absl::StrCat("cannot open ", path));
-  StoreLock lock(fd);
+  ScopedFd owned(::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644));
+  if (!owned.is_open()) return ErrnoStatus(errno, absl::StrCat("cannot open ", path));
+  const int fd = owned.get();
+  StoreLock lock(std::move(owned));
   const int op = (mode == StoreLockMode::kExclusive ? LOCK_EX : LOCK_SH) | LOCK_NB;
   int rc;
   do {
@@ -53,29 +50,16 @@ absl::StatusOr<StoreLock> StoreLock::Acquire(const std::string& dir, StoreLockMo
                        "); one store serves one daemon unless every daemon on it is started "
                        "in shared mode"));
     }
-    return ErrnoError(errno, absl::StrCat("cannot lock ", path));
+    return ErrnoStatus(errno, absl::StrCat("cannot lock ", path));
   }
   // Record our pid (in shared mode the last daemon to start wins; any holder names the store's
   // users well enough for the error above).
   const std::string pid = absl::StrCat(::getpid(), "\n");
   if (::ftruncate(fd, 0) != 0 ||
       ::pwrite(fd, pid.data(), pid.size(), 0) != static_cast<ssize_t>(pid.size())) {
-    return ErrnoError(errno, absl::StrCat("cannot write ", path));
+    return ErrnoStatus(errno, absl::StrCat("cannot write ", path));
   }
   return lock;
-}
-
-StoreLock& StoreLock::operator=(StoreLock&& other) noexcept {
-  if (this != &other) {
-    if (fd_ >= 0) ::close(fd_);
-    fd_ = other.fd_;
-    other.fd_ = -1;
-  }
-  return *this;
-}
-
-StoreLock::~StoreLock() {
-  if (fd_ >= 0) ::close(fd_);  // releases the flock
 }
 
 }  // namespace fieldspace::server

@@ -2,8 +2,10 @@
 #define FIELDSPACE_SERVER_STORE_LOCK_H_
 
 #include <string>
+#include <utility>
 
 #include "absl/status/statusor.h"
+#include "core/common/file_util.h"
 
 namespace fieldspace::server {
 
@@ -23,18 +25,16 @@ enum class StoreLockMode {
 class StoreLock {
  public:
   // Creates DIR if needed and takes the lock without waiting. FailedPrecondition naming the
-  // holder's pid when another daemon holds it in a conflicting mode; Internal for I/O errors.
+  // holder's pid when another daemon holds it in a conflicting mode; the errno's status
+  // (ErrnoStatus) for I/O errors.
   static absl::StatusOr<StoreLock> Acquire(const std::string& dir, StoreLockMode mode);
 
-  StoreLock(StoreLock&& other) noexcept : fd_(other.fd_) { other.fd_ = -1; }
-  StoreLock& operator=(StoreLock&& other) noexcept;
-  StoreLock(const StoreLock&) = delete;
-  StoreLock& operator=(const StoreLock&) = delete;
-  ~StoreLock();
+  StoreLock(StoreLock&& other) noexcept = default;
+  StoreLock& operator=(StoreLock&& other) noexcept = default;
 
  private:
-  explicit StoreLock(int fd) : fd_(fd) {}
-  int fd_ = -1;
+  explicit StoreLock(ScopedFd fd) : fd_(std::move(fd)) {}
+  ScopedFd fd_;  // closing it releases the flock
 };
 
 }  // namespace fieldspace::server

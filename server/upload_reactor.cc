@@ -11,6 +11,7 @@
 #include "core/mesh/mesh_io.h"
 #include "server/proto_convert.h"
 #include "server/reactors.h"
+#include "server/record_convert.h"
 #include "server/rpc_util.h"
 
 namespace fieldspace::server {

@@ -30,6 +30,42 @@
 #include "tbb/task_group.h"
 
 namespace fieldspace {
+
+absl::Status ValidateBasisParams(const BasisParams& p, const FieldType& type, int64_t num_faces) {
+  const int64_t k = static_cast<int64_t>(type.dofs_per_face()) * num_faces;
+  if (p.dimension < 1) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("dimension must be >= 1 (got %d)", p.dimension));
+  }
+  if (p.dimension > k) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("dimension %d exceeds the number of DOFs (%d) of %s fields on this mesh",
+                        p.dimension, k, type.ToString()));
+  }
+  if (!std::isfinite(p.sigma) || !(p.sigma > 0.0) || p.sigma > kMaxSigma) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("sigma must be finite and in (0, %g] (got %g)", kMaxSigma, p.sigma));
+  }
+  const int32_t m = p.fields_per_region.value_or(type.default_fields_per_region());
+  if (m < 1 || m > kMaxFieldsPerRegion) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("fields_per_region must be in [1, %d] (got %d)", kMaxFieldsPerRegion, m));
+  }
+  if (p.face_weights.size() != 0 && p.face_weights.size() != num_faces) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "face_weights has %d entries; the mesh has %d faces (one weight per face, or none)",
+        p.face_weights.size(), num_faces));
+  }
+  for (Eigen::Index f = 0; f < p.face_weights.size(); ++f) {
+    const double w = p.face_weights[f];
+    if (!std::isfinite(w) || !(w > 0.0)) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "face_weights[%d] = %g; adaptivity weights must be finite and > 0", f, w));
+    }
+  }
+  return absl::OkStatus();
+}
+
 namespace {
 
 using basis_internal::DiskEigenvalueEstimate;
@@ -51,36 +87,8 @@ absl::Status ValidateInputs(const TriangleMesh& mesh, const FieldOperator& op,
         "operator size (S %d x %d, mass %d) does not match the mesh: %d faces x %d DOFs = %d",
         op.stiffness.rows(), op.stiffness.cols(), op.dofs(), mesh.num_faces(), dpf, k));
   }
-  if (p.dimension < 1) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("dimension must be >= 1 (got %d)", p.dimension));
-  }
-  if (p.dimension > k) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("dimension %d exceeds the number of DOFs (%d) of %s fields on this mesh",
-                        p.dimension, k, op.type.ToString()));
-  }
-  if (!std::isfinite(p.sigma) || !(p.sigma > 0.0)) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("sigma must be finite and > 0 (got %g)", p.sigma));
-  }
+  RETURN_IF_ERROR(ValidateBasisParams(p, op.type, mesh.num_faces()));
   const int32_t m = p.fields_per_region.value_or(op.type.default_fields_per_region());
-  if (m < 1) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("fields_per_region must be >= 1 (got %d)", m));
-  }
-  if (p.face_weights.size() != 0 && p.face_weights.size() != mesh.num_faces()) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "face_weights has %d entries; the mesh has %d faces (one weight per face, or none)",
-        p.face_weights.size(), mesh.num_faces()));
-  }
-  for (Eigen::Index f = 0; f < p.face_weights.size(); ++f) {
-    const double w = p.face_weights[f];
-    if (!std::isfinite(w) || !(w > 0.0)) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "face_weights[%d] = %g; adaptivity weights must be finite and > 0", f, w));
-    }
-  }
   if (!std::isfinite(options.eigen_tolerance) || !(options.eigen_tolerance > 0.0) ||
       options.eigen_tolerance >= 1.0) {
     return absl::InvalidArgumentError(

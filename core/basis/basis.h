@@ -30,6 +30,17 @@ struct BasisParams {
   Eigen::VectorXd face_weights;
 };
 
+// Bounds of the parameters (sigma up to kMaxSigma, m up to kMaxFieldsPerRegion: beyond them a
+// build would only exhaust memory or time).
+inline constexpr double kMaxSigma = 1e6;
+inline constexpr int32_t kMaxFieldsPerRegion = 64;
+
+// InvalidArgument unless `p` is valid for `type` fields on a mesh of `num_faces` faces:
+// 1 <= d <= k, sigma finite in (0, kMaxSigma], m in [1, kMaxFieldsPerRegion] (after its default),
+// face_weights empty or #F finite values > 0. The one check of a basis request (the builders and
+// the server's registry call it).
+absl::Status ValidateBasisParams(const BasisParams& p, const FieldType& type, int64_t num_faces);
+
 struct BasisOptions {
   BasisParams params;
   int32_t threads = 0;  // 0: all available cores

@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/index_check.h"
 #include "core/common/status_macros.h"
 #include "core/operators/complex_power.h"
 #include "tbb/blocked_range.h"
@@ -59,14 +60,6 @@ Eigen::Matrix3d MandelVoigtToTensor(const TriangleMesh& mesh, int32_t f, const E
 }
 
 absl::Status CheckN(int32_t n) { return FieldType::NField(n).Validate(); }
-
-absl::Status CheckFace(const TriangleMesh& mesh, int32_t f) {
-  if (f < 0 || f >= mesh.num_faces()) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("face index %d out of range [0, %d)", f, mesh.num_faces()));
-  }
-  return absl::OkStatus();
-}
 
 // Rows of `values` (one per face f = face_of(i)) must be finite (and symmetric tensors).
 template <typename Values, typename FaceOf>
@@ -225,7 +218,7 @@ absl::StatusOr<Eigen::VectorXd> DofsFromAmbient(const TriangleMesh& mesh, const 
         absl::StrFormat("expected %d x %d values (one row per listed face), got %d x %d", rows,
                         cols, values.rows(), values.cols()));
   }
-  for (int32_t f : faces) RETURN_IF_ERROR(CheckFace(mesh, f));
+  RETURN_IF_ERROR(CheckFaces(faces, mesh.num_faces(), ""));
   auto face_of = [&](int64_t i) { return faces[i]; };
   RETURN_IF_ERROR(CheckRows(values, rows, face_of, type.kind == FieldKind::kTensor));
   const int32_t p = type.dofs_per_face();
@@ -258,7 +251,7 @@ absl::StatusOr<Eigen::MatrixXd> AmbientFromDofs(const TriangleMesh& mesh, const 
                                                 const Eigen::Ref<const Eigen::VectorXd>& dofs) {
   RETURN_IF_ERROR(type.Validate());
   const int64_t rows = static_cast<int64_t>(faces.size());
-  for (int32_t f : faces) RETURN_IF_ERROR(CheckFace(mesh, f));
+  RETURN_IF_ERROR(CheckFaces(faces, mesh.num_faces(), ""));
   const int32_t p = type.dofs_per_face();
   RETURN_IF_ERROR(CheckDofs(dofs, rows, p, [&](int64_t i) { return faces[i]; }));
   Eigen::MatrixXd out(rows, type.kind == FieldKind::kTensor ? 9 : 3);
@@ -297,13 +290,7 @@ absl::Status CheckFacesAndSizes(const TriangleMesh& mesh, absl::Span<const int32
     return absl::InvalidArgumentError(
         absl::StrCat("expected ", expected_values, " values, got ", values));
   }
-  for (int32_t f : faces) {
-    if (f < 0 || f >= mesh.num_faces()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("face ", f, " is out of range [0, ", mesh.num_faces(), ")"));
-    }
-  }
-  return absl::OkStatus();
+  return CheckFaces(faces, mesh.num_faces(), "");
 }
 
 }  // namespace

@@ -125,6 +125,8 @@ struct DesignSessionOptions {
 // constraint set, equal (up to the solver tolerance) to SolveReducedModelProblem(problem()).
 // A failed call leaves the session exactly as it was.
 //
+// The weights a session takes: ValidateSessionWeights (core/subspace/problem.h).
+
 // Thread-compatible: one session per thread (or external locking); any number of sessions share
 // the immutable ReducedSystem.
 class DesignSession {

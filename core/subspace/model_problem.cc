@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
+#include "core/common/index_check.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/kkt_solver.h"
 #include "oneapi/tbb/blocked_range.h"

@@ -4,6 +4,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/index_check.h"
 #include "core/common/status_macros.h"
 
 namespace fieldspace {
@@ -52,10 +53,7 @@ absl::Status ValidateSessionWeights(const EnergyWeights& weights, bool data_term
 
 absl::Status ValidateConstraint(const FieldConstraint& c, int64_t num_faces,
                                 const FieldType& type) {
-  if (c.face < 0 || c.face >= num_faces) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("constraint face id ", c.face, " is outside [0, ", num_faces, ")"));
-  }
+  RETURN_IF_ERROR(CheckFace(c.face, num_faces, "constraint"));
   if (c.value.size() != type.dofs_per_face()) {
     return absl::InvalidArgumentError(
         absl::StrCat("constraint on face ", c.face, " has ", c.value.size(), " values; a ",

@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
+#include "core/common/index_check.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/subspace_util.h"
 #include "oneapi/tbb/blocked_range.h"
@@ -190,12 +191,7 @@ absl::Status LiftFacesInto(const Basis& basis,
     return absl::InvalidArgumentError(
         absl::StrCat("LiftFaces: output has ", out.size(), " values, expected ", faces.size() * p));
   }
-  for (size_t t = 0; t < faces.size(); ++t) {
-    if (faces[t] < 0 || faces[t] >= num_faces) {
-      return absl::InvalidArgumentError(absl::StrCat("LiftFaces: face id ", faces[t], " (entry ", t,
-                                                     ") is outside [0, ", num_faces, ")"));
-    }
-  }
+  RETURN_IF_ERROR(CheckFaces(faces, num_faces, "LiftFaces"));
   const Eigen::VectorXd x = coefficients;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, faces.size(), 4096),
                     [&](const tbb::blocked_range<size_t>& r) {
@@ -270,12 +266,7 @@ absl::Status LiftFacesInto(const ReducedSystem& system,
     return absl::InvalidArgumentError(
         absl::StrCat("LiftFaces: output has ", out.size(), " values, expected ", faces.size() * p));
   }
-  for (size_t t = 0; t < faces.size(); ++t) {
-    if (faces[t] < 0 || faces[t] >= system.num_faces()) {
-      return absl::InvalidArgumentError(absl::StrCat("LiftFaces: face id ", faces[t], " (entry ", t,
-                                                     ") is outside [0, ", system.num_faces(), ")"));
-    }
-  }
+  RETURN_IF_ERROR(CheckFaces(faces, system.num_faces(), "LiftFaces"));
   const Eigen::VectorXd x = coefficients;
   const LiftPlan& plan = system.lift_plan();
   tbb::parallel_for(tbb::blocked_range<size_t>(0, faces.size(), 4096),

@@ -307,13 +307,17 @@ TEST_F(FieldClientBasisTest, DesignStreamRoundTrip) {
   EXPECT_TRUE(stream->Close().ok());  // the same status again
   EXPECT_EQ(stream->Edit(remove).status().code(), absl::StatusCode::kFailedPrecondition);
 
-  // An edit the server refuses ends the session with its code, and Close reports it.
+  // An edit the server refuses returns its code; the session goes on as it was, and Close is OK.
   std::unique_ptr<DesignStream> refused = client->Design();
   ASSERT_TRUE(refused->Open(open).ok());
   ASSERT_TRUE(refused->Edit(AddConstraint(1, 1, 10)).ok());
   EXPECT_EQ(refused->Edit(AddConstraint(2, 1, 20)).status().code(),
             absl::StatusCode::kAlreadyExists);
-  EXPECT_EQ(refused->Close().code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_FALSE(refused->is_closed());
+  absl::StatusOr<v1::DesignUpdate> after = refused->Edit(AddConstraint(3, 2, 20));
+  ASSERT_TRUE(after.ok()) << after.status();
+  EXPECT_EQ(after->num_constraints(), 2);
+  EXPECT_TRUE(refused->Close().ok());
 
   // Dropping an open stream cancels it; the client goes on working.
   {
@@ -463,7 +467,16 @@ TEST_F(ResumableDesignTest, ADrainedSessionResumesOnTheNextServerWithTheSameSolu
   ASSERT_TRUE(next.ok()) << next.status();
   EXPECT_FALSE(next->resumed);
   EXPECT_EQ(next->update.num_constraints(), 3);
+  // A refused edit returns its error, is neither retried nor remembered, and the session goes on.
+  EXPECT_EQ(session.Edit(AddConstraint(9, 4, 50)).status().code(),
+            absl::StatusCode::kAlreadyExists);
+  EXPECT_TRUE(session.is_open());
+  EXPECT_EQ(session.resumes(), 1);
+  absl::StatusOr<ResumableDesign::Update> last = session.Edit(AddConstraint(10, 5, 50));
+  ASSERT_TRUE(last.ok()) << last.status();
+  EXPECT_EQ(last->update.num_constraints(), 4);
   EXPECT_TRUE(session.Close().ok());
+  EXPECT_FALSE(session.is_open());
   // Other errors are not retried.
   EXPECT_TRUE(ReplicaLost(absl::UnavailableError("x")));
   EXPECT_TRUE(ReplicaLost(absl::InternalError("Received RST_STREAM with error code 2")));

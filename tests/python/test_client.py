@@ -408,15 +408,20 @@ class SolveAndDesignTest(unittest.TestCase):
         self.assertIn("face-frame DOFs", str(caught.exception))
         self.assertIn("encoding='dof'", str(caught.exception))
 
-    def test_design_errors_end_the_session(self):
+    def test_a_refused_edit_costs_only_that_edit(self):
         s = CLIENT.design(VECTOR)
-        s.add(3, [1, 0, 0], id=7)
+        before = s.add(3, [1, 0, 0], id=7)
         with self.assertRaises(fs.AlreadyExists) as caught:
             s.add(4, [0, 1, 0], id=7)
         self.assertEqual(caught.exception.code, grpc.StatusCode.ALREADY_EXISTS)
         self.assertTrue(str(caught.exception).startswith("Design add failed: ALREADY_EXISTS: "))
-        with self.assertRaises(fs.FailedPrecondition):
-            s.remove(7)  # the server ended the stream: the session is over
+        # The session is open and as it was: the last update is the one before the refused edit,
+        # and the next edit applies to it.
+        self.assertIs(s.last, before)
+        np.testing.assert_array_equal(s.coefficients, before.coefficients)
+        removed = s.remove(7)
+        self.assertEqual(removed.num_constraints, 0)
+        s.close()
         # A bad value is refused before anything is sent; the session goes on.
         with CLIENT.design(VECTOR) as s2:
             with self.assertRaises(fs.InvalidArgument):

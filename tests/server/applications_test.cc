@@ -3,10 +3,7 @@
 // wrong implementation would get wrong: the sphere's shape operator (1/r) (I - n n^T), the Euler
 // characteristic as the sum of indices (Poincare-Hopf), exact status codes.
 
-#include <unistd.h>
-
 #include <cmath>
-#include <filesystem>
 #include <functional>
 #include <memory>
 #include <random>
@@ -20,27 +17,21 @@
 #include "gtest/gtest.h"
 #include "server/field_server.h"
 #include "tests/testing/matchers.h"
+#include "tests/testing/server_fixture.h"
 
 namespace fieldspace::server {
 namespace {
 
-namespace fs = std::filesystem;
 namespace v1 = ::fieldspace::v1;
 using ::fieldspace::testing::IsOk;
 using ::fieldspace::testing::StatusIs;
+using ::fieldspace::testing::TestServer;
 
 class ApplicationsTest : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    root_ = new fs::path(fs::temp_directory_path() / absl::StrCat("fs_apps_", ::getpid()));
-    fs::remove_all(*root_);
-    FieldServerOptions options;
-    options.listen = "127.0.0.1:0";
-    options.store_dir = (*root_ / "store").string();
-    options.threads = 2;
-    auto started = FieldServer::Start(options);
-    ASSERT_TRUE(started.ok()) << started.status();
-    server_ = started->release();
+    server_ = TestServer::Start("apps").release();
+    ASSERT_NE(server_, nullptr);
     client::FieldClientOptions client_options;
     client_options.address = server_->address();
     auto client = client::FieldClient::Create(client_options);
@@ -49,10 +40,7 @@ class ApplicationsTest : public ::testing::Test {
   }
   static void TearDownTestSuite() {
     delete client_;
-    if (server_ != nullptr) server_->Shutdown(std::chrono::seconds(5));
     delete server_;
-    fs::remove_all(*root_);
-    delete root_;
   }
   void SetUp() override { ASSERT_NE(client_, nullptr) << "the server did not start"; }
 
@@ -83,13 +71,11 @@ class ApplicationsTest : public ::testing::Test {
     return {response->coefficients().begin(), response->coefficients().end()};
   }
 
-  static fs::path* root_;
-  static FieldServer* server_;
+  static TestServer* server_;
   static client::FieldClient* client_;
 };
 
-fs::path* ApplicationsTest::root_ = nullptr;
-FieldServer* ApplicationsTest::server_ = nullptr;
+TestServer* ApplicationsTest::server_ = nullptr;
 client::FieldClient* ApplicationsTest::client_ = nullptr;
 
 TEST_F(ApplicationsTest, CurvatureOfASphereIsOneOverRTimesTheTangentProjector) {

@@ -15,6 +15,7 @@
 #include "core/subspace/projection.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "server/field_answers.h"
 #include "server/proto_convert.h"
 
 namespace fieldspace::server {

@@ -27,12 +27,14 @@
 #include "server/field_server.h"
 #include "server/registry.h"
 #include "server/served_basis.h"
+#include "tests/testing/server_fixture.h"
 
 namespace fieldspace::server {
 namespace {
 
 namespace fs = std::filesystem;
 namespace v1 = ::fieldspace::v1;
+using ::fieldspace::testing::TestServer;
 using ::testing::HasSubstr;
 using ::testing::MatchesRegex;
 
@@ -60,44 +62,6 @@ std::string RawBytes(const MeshArrays& m) {
   out.append(reinterpret_cast<const char*>(m.faces.data()), sizeof(int32_t) * m.faces.size());
   return out;
 }
-
-// A running server with a stub; owns its store directory.
-struct Harness {
-  fs::path root;
-  std::unique_ptr<FieldServer> server;
-  std::shared_ptr<grpc::Channel> channel;
-  std::unique_ptr<v1::FieldSpace::Stub> stub;
-
-  static std::unique_ptr<Harness> Start(const std::string& name, FieldServerOptions options,
-                                        bool fresh = true) {
-    auto h = std::make_unique<Harness>();
-    h->root = fs::temp_directory_path() / absl::StrFormat("fs_service_%d_%s", ::getpid(), name);
-    if (fresh) fs::remove_all(h->root);
-    fs::create_directories(h->root);
-    options.listen = "127.0.0.1:0";
-    if (options.store_dir.empty()) options.store_dir = (h->root / "store").string();
-    if (options.threads == 0) options.threads = 2;
-    auto server = FieldServer::Start(options);
-    EXPECT_TRUE(server.ok()) << server.status();
-    if (!server.ok()) return nullptr;
-    h->server = std::move(*server);
-    grpc::ChannelArguments args;
-    args.SetMaxReceiveMessageSize(-1);
-    args.SetMaxSendMessageSize(-1);
-    h->channel =
-        grpc::CreateCustomChannel(h->server->address(), grpc::InsecureChannelCredentials(), args);
-    h->stub = v1::FieldSpace::NewStub(h->channel);
-    return h;
-  }
-  void Stop() {
-    if (server) server->Shutdown(std::chrono::seconds(5));
-    server.reset();
-  }
-  ~Harness() {
-    Stop();
-    fs::remove_all(root);
-  }
-};
 
 struct Uploaded {
   grpc::Status status;
@@ -278,7 +242,7 @@ class ServiceTest : public ::testing::Test {
     options.max_message_mb = 4;
     options.max_upload_mb = 8;
     options.max_dimension = 500;
-    h_ = Harness::Start("shared", options).release();
+    h_ = TestServer::Start("shared", options).release();
     ASSERT_NE(h_, nullptr);
     mesh_ = new MeshArrays(Icosphere(3));
     Uploaded up = Upload(h_->stub.get(), Chunked(RawBytes(*mesh_), RawHeader(*mesh_), 1 << 16));
@@ -307,7 +271,7 @@ class ServiceTest : public ::testing::Test {
     return *b;
   }
 
-  static Harness* h_;
+  static TestServer* h_;
   static MeshArrays* mesh_;
   static std::string* mesh_id_;
   static std::string* vector_id_;
@@ -315,7 +279,7 @@ class ServiceTest : public ::testing::Test {
   static std::string* tensor_id_;
 };
 
-Harness* ServiceTest::h_ = nullptr;
+TestServer* ServiceTest::h_ = nullptr;
 MeshArrays* ServiceTest::mesh_ = nullptr;
 std::string* ServiceTest::mesh_id_ = nullptr;
 std::string* ServiceTest::vector_id_ = nullptr;
@@ -504,7 +468,7 @@ TEST_F(ServiceTest, LoadMeshStaysInsideTheDataRoot) {
   FieldServerOptions options;
   options.data_root = data.string();
   options.max_upload_mb = 1;
-  auto h = Harness::Start("dataroot", options);
+  auto h = TestServer::Start("dataroot", options);
   ASSERT_NE(h, nullptr);
   auto load = [&](const std::string& path, v1::MeshInfo* info) {
     v1::LoadMeshRequest r;
@@ -1149,7 +1113,7 @@ TEST_F(ServiceTest, EigenfieldsApproximateTheSphereSpectrumFromAbove) {
 TEST_F(ServiceTest, DesignSessionsBeyondTheCapAreResourceExhausted) {
   FieldServerOptions options;
   options.max_design_sessions = 2;
-  auto h = Harness::Start("session_cap", options);
+  auto h = TestServer::Start("session_cap", options);
   ASSERT_NE(h, nullptr);
   MeshArrays m = Icosphere(2);
   Uploaded up = Upload(h->stub.get(), Chunked(RawBytes(m), RawHeader(m), 1 << 20));
@@ -1348,45 +1312,102 @@ TEST_F(ServiceTest, MixedBiharmonicSolveAndDesignAgreeAndDifferFromTheExactForm)
   EXPECT_EQ(RunSession(stub(), {open}).status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
 }
 
-TEST_F(ServiceTest, DesignErrorsEndTheSessionWithExactCodes) {
-  const v1::Constraint c = MakeConstraint(20, {1, 0, 0}, v1::FIELD_ENCODING_AMBIENT, false);
+TEST_F(ServiceTest, DesignErrorsThatLeaveNoSessionEndTheStreamWithExactCodes) {
   auto final_code = [&](std::vector<v1::DesignRequest> requests) {
     return RunSession(stub(), requests).status.error_code();
   };
-  EXPECT_EQ(final_code({Add(1, c)}), grpc::StatusCode::FAILED_PRECONDITION);
+  const v1::Constraint c = MakeConstraint(20, {1, 0, 0}, v1::FIELD_ENCODING_AMBIENT, false);
+  EXPECT_EQ(final_code({Add(1, c)}), grpc::StatusCode::FAILED_PRECONDITION);  // before open
   EXPECT_EQ(final_code({Open("b-0000000000000000", 1, 0, 1)}), grpc::StatusCode::NOT_FOUND);
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1), Open(*vector_id_, 1, 0, 1)}),
-            grpc::StatusCode::FAILED_PRECONDITION);
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1), v1::DesignRequest()}),
-            grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(final_code({Open(*vector_id_, -1, 0, 1)}), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 0)}), grpc::StatusCode::INVALID_ARGUMENT);
   EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1, {5000})}), grpc::StatusCode::INVALID_ARGUMENT);
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1), Add(1, c), Add(1, c)}),
-            grpc::StatusCode::ALREADY_EXISTS);
+  // A session that is simply closed by the client ends OK.
+  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1)}), grpc::StatusCode::OK);
+}
+
+// One bad edit costs that edit, not the session: it is answered by an update with its seq and
+// error code only, the session stays open and exactly as it was.
+TEST_F(ServiceTest, ARefusedEditIsAnsweredWithItsErrorAndTheSessionGoesOn) {
+  const v1::Constraint c = MakeConstraint(20, {1, 0, 0}, v1::FIELD_ENCODING_AMBIENT, false);
   v1::Constraint bad_face = c;
-  bad_face.set_face(-5);
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1), Add(1, bad_face)}),
-            grpc::StatusCode::INVALID_ARGUMENT);
+  bad_face.set_face(5000);
+  v1::Constraint negative_face = c;
+  negative_face.set_face(-5);
   v1::Constraint nan_value = c;
   nan_value.set_value(0, std::nan(""));
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1), Add(1, nan_value)}),
-            grpc::StatusCode::INVALID_ARGUMENT);
   v1::DesignRequest move_unknown;
   move_unknown.mutable_move()->set_id(9);
   move_unknown.mutable_move()->set_face(1);
   move_unknown.mutable_move()->add_value(1);
   move_unknown.mutable_move()->add_value(0);
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1), move_unknown}), grpc::StatusCode::NOT_FOUND);
   v1::DesignRequest remove_unknown;
   remove_unknown.mutable_remove()->set_id(9);
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1), remove_unknown}), grpc::StatusCode::NOT_FOUND);
-  v1::DesignRequest bad_weights;
-  bad_weights.mutable_set_weights()->set_mu_s(INFINITY);
-  bad_weights.mutable_set_weights()->set_mu_c(1);
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1), bad_weights}),
-            grpc::StatusCode::INVALID_ARGUMENT);
-  // A session that is simply closed by the client ends OK.
-  EXPECT_EQ(final_code({Open(*vector_id_, 1, 0, 1)}), grpc::StatusCode::OK);
+  v1::DesignRequest mu_c_zero;
+  mu_c_zero.mutable_set_weights()->set_mu_c(0);
+  v1::DesignRequest infinite_weight;
+  infinite_weight.mutable_set_weights()->set_mu_s(INFINITY);
+  v1::DesignRequest watch_out_of_range;
+  watch_out_of_range.mutable_watch()->add_faces(5000);
+  struct Refused {
+    v1::DesignRequest request;
+    grpc::StatusCode code;
+  };
+  const std::vector<Refused> refused = {
+      {move_unknown, grpc::StatusCode::NOT_FOUND},
+      {remove_unknown, grpc::StatusCode::NOT_FOUND},
+      {Add(2, bad_face), grpc::StatusCode::INVALID_ARGUMENT},
+      {Add(2, negative_face), grpc::StatusCode::INVALID_ARGUMENT},
+      {Add(1, c), grpc::StatusCode::ALREADY_EXISTS},
+      {Add(2, nan_value), grpc::StatusCode::INVALID_ARGUMENT},
+      {mu_c_zero, grpc::StatusCode::INVALID_ARGUMENT},
+      {infinite_weight, grpc::StatusCode::INVALID_ARGUMENT},
+      {watch_out_of_range, grpc::StatusCode::INVALID_ARGUMENT},
+      {Open(*vector_id_, 1, 0, 1), grpc::StatusCode::FAILED_PRECONDITION},
+      {v1::DesignRequest(), grpc::StatusCode::INVALID_ARGUMENT},
+  };
+  std::vector<v1::DesignRequest> requests = {Open(*vector_id_, 1, 0, 1, {20, 21}), Add(1, c)};
+  for (const Refused& r : refused) requests.push_back(r.request);
+  // After the refused edits: a watch of the same faces (answers the session as it is, solves
+  // nothing), then an edit that must apply to the session as it was.
+  v1::DesignRequest same_watch;
+  same_watch.mutable_watch()->add_faces(20);
+  same_watch.mutable_watch()->add_faces(21);
+  same_watch.mutable_watch()->set_encoding(v1::FIELD_ENCODING_DOF);
+  requests.push_back(same_watch);
+  v1::Constraint other = c;
+  other.set_face(40);
+  requests.push_back(Add(2, other));
+  for (size_t i = 0; i < requests.size(); ++i) requests[i].set_seq(100 + i);
+
+  const Session s = RunSession(stub(), requests);
+  ASSERT_TRUE(s.status.ok()) << s.status.error_message();
+  ASSERT_EQ(s.updates.size(), requests.size());
+  const v1::DesignUpdate& before = s.updates[1];
+  EXPECT_FALSE(before.has_error());
+  EXPECT_GT(MaxAbs(before.coefficients()), 0);
+  for (size_t k = 0; k < refused.size(); ++k) {
+    const v1::DesignUpdate& u = s.updates[2 + k];
+    SCOPED_TRACE(absl::StrFormat("refused edit %d: %s", k, u.error().message()));
+    EXPECT_EQ(u.seq(), 102 + k);
+    ASSERT_TRUE(u.has_error());
+    EXPECT_EQ(u.error().code(), static_cast<int32_t>(refused[k].code));
+    EXPECT_FALSE(u.error().message().empty());
+    EXPECT_TRUE(u.coefficients().empty());
+    EXPECT_EQ(u.num_constraints(), 0);
+  }
+  const v1::DesignUpdate& unchanged = s.updates[2 + refused.size()];
+  ASSERT_FALSE(unchanged.has_error()) << unchanged.error().message();
+  EXPECT_EQ(unchanged.num_constraints(), 1);
+  ASSERT_EQ(unchanged.coefficients().size(), before.coefficients().size());
+  for (int i = 0; i < before.coefficients().size(); ++i) {
+    EXPECT_EQ(unchanged.coefficients(i), before.coefficients(i)) << "coefficient " << i;
+  }
+  EXPECT_EQ(unchanged.watched().values_size(), before.watched().values_size());
+  const v1::DesignUpdate& next = s.updates.back();
+  ASSERT_FALSE(next.has_error()) << next.error().message();
+  EXPECT_EQ(next.num_constraints(), 2);
+  EXPECT_GT(MaxAbsDiff(next.coefficients(), before.coefficients()), 0);
 }
 
 TEST_F(ServiceTest, ManyConcurrentSessions) {
@@ -1448,7 +1469,7 @@ TEST_F(ServiceTest, HealthServesTheServiceAndOverall) {
 TEST(ServerLifecycleTest, TokenIsRequiredWhenConfigured) {
   FieldServerOptions options;
   options.auth_token = "s3cret";
-  auto h = Harness::Start("auth", options);
+  auto h = TestServer::Start("auth", options);
   ASSERT_NE(h, nullptr);
   v1::ListMeshesResponse resp;
   {
@@ -1479,7 +1500,7 @@ TEST(ServerLifecycleTest, TokenIsRequiredWhenConfigured) {
 }
 
 TEST(ServerLifecycleTest, ShutdownDrainsSessionsAndReportsNotServing) {
-  auto h = Harness::Start("drain", {});
+  auto h = TestServer::Start("drain", {});
   ASSERT_NE(h, nullptr);
   MeshArrays m = Icosphere(2);
   Uploaded up = Upload(h->stub.get(), Chunked(RawBytes(m), RawHeader(m), 1 << 20));
@@ -1518,7 +1539,7 @@ TEST(ServerLifecycleTest, ShutdownDrainsSessionsAndReportsNotServing) {
 }
 
 TEST(ServerLifecycleTest, RestartKeepsEverythingAndDetectsCorruption) {
-  auto h = Harness::Start("restart", {});
+  auto h = TestServer::Start("restart", {});
   ASSERT_NE(h, nullptr);
   MeshArrays m = Icosphere(2);
   Uploaded up = Upload(h->stub.get(), Chunked(RawBytes(m), RawHeader(m), 1 << 20));
@@ -1534,7 +1555,7 @@ TEST(ServerLifecycleTest, RestartKeepsEverythingAndDetectsCorruption) {
 
   FieldServerOptions options;
   options.store_dir = store;
-  auto h2 = Harness::Start("restart", options, /*fresh=*/false);
+  auto h2 = TestServer::StartIn(h->root, options, /*fresh=*/false);
   ASSERT_NE(h2, nullptr);
   v1::GetMeshRequest gm;
   gm.set_mesh_id(up.info.id());
@@ -1569,7 +1590,7 @@ TEST(ServerLifecycleTest, RestartKeepsEverythingAndDetectsCorruption) {
   }
   // Truncate the mesh file of a mesh without bases.
   MeshArrays m2 = Icosphere(1);
-  auto h3 = Harness::Start("restart", options, false);
+  auto h3 = TestServer::StartIn(h->root, options, false);
   ASSERT_NE(h3, nullptr);
   Uploaded up2 = Upload(h3->stub.get(), Chunked(RawBytes(m2), RawHeader(m2), 1 << 20));
   ASSERT_TRUE(up2.status.ok());
@@ -1577,7 +1598,7 @@ TEST(ServerLifecycleTest, RestartKeepsEverythingAndDetectsCorruption) {
   const std::string mesh_path = store + "/meshes/" + up2.info.id() + ".fsmesh";
   fs::resize_file(mesh_path, fs::file_size(mesh_path) / 2);
 
-  auto h4 = Harness::Start("restart", options, false);
+  auto h4 = TestServer::StartIn(h->root, options, false);
   ASSERT_NE(h4, nullptr);
   const std::vector<double> xt = TestCoefficients(tb.basis().columns());
   Lifted corrupt = Lift(h4->stub.get(), LiftRequest(tb.basis().id(), xt, v1::FIELD_ENCODING_DOF));
@@ -1602,7 +1623,7 @@ TEST(ServerLifecycleTest, RestartKeepsEverythingAndDetectsCorruption) {
 TEST(ServerLifecycleTest, MemoryBudgetEvictsIdleBasesWhichReloadIdentically) {
   FieldServerOptions options;
   options.memory_budget_mb = 0;  // evict whatever is idle as soon as something else loads
-  auto h = Harness::Start("budget", options);
+  auto h = TestServer::Start("budget", options);
   ASSERT_NE(h, nullptr);
   MeshArrays m = Icosphere(2);
   Uploaded up = Upload(h->stub.get(), Chunked(RawBytes(m), RawHeader(m), 1 << 20));
@@ -1640,7 +1661,7 @@ TEST(ServerLifecycleTest, DeadlineStopsEigenfieldsWorkOnTheServer) {
   // d = 1200 eigensolve, seconds of work), the Project call right after it would wait for it.
   FieldServerOptions options;
   options.threads = 1;
-  auto h = Harness::Start("deadline", options);
+  auto h = TestServer::Start("deadline", options);
   ASSERT_NE(h, nullptr);
   MeshArrays m = Icosphere(4);  // 5120 faces
   Uploaded up = Upload(h->stub.get(), Chunked(RawBytes(m), RawHeader(m), 1 << 20));

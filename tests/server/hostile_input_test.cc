@@ -26,6 +26,7 @@
 #include "gtest/gtest.h"
 #include "server/field_server.h"
 #include "server/registry.h"
+#include "tests/testing/server_fixture.h"
 
 namespace fieldspace::server {
 namespace {
@@ -35,26 +36,16 @@ namespace v1 = ::fieldspace::v1;
 
 class HostileInputTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    root_ = fs::temp_directory_path() /
-            absl::StrCat("fs_hostile_", ::getpid(), "_",
-                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(root_);
-  }
   void TearDown() override {
-    if (server_ != nullptr) server_->Shutdown(std::chrono::seconds(2));
-    server_.reset();
-    fs::remove_all(root_);
+    if (test_server_ != nullptr) test_server_->Stop(std::chrono::seconds(2));
+    test_server_.reset();
   }
   void Start(FieldServerOptions options) {
-    options.listen = "127.0.0.1:0";
-    options.store_dir = (root_ / "store").string();
-    options.threads = 2;
-    auto started = FieldServer::Start(options);
-    ASSERT_TRUE(started.ok()) << started.status();
-    server_ = std::move(*started);
-    stub_ = v1::FieldSpace::NewStub(
-        grpc::CreateChannel(server_->address(), grpc::InsecureChannelCredentials()));
+    test_server_ =
+        ::fieldspace::testing::TestServer::StartIn(root_.path(), std::move(options), false);
+    ASSERT_NE(test_server_, nullptr);
+    server_ = test_server_->server.get();
+    stub_ = test_server_->stub.get();
   }
 
   // Uploads `arrays` as raw arrays in chunks of at most 512 KiB; the mesh id, or "" on failure.
@@ -151,9 +142,10 @@ class HostileInputTest : public ::testing::Test {
     return result;
   }
 
-  fs::path root_;
-  std::unique_ptr<FieldServer> server_;
-  std::unique_ptr<v1::FieldSpace::Stub> stub_;
+  ::fieldspace::testing::TempDir root_{"hostile"};
+  std::unique_ptr<::fieldspace::testing::TestServer> test_server_;
+  FieldServer* server_ = nullptr;
+  v1::FieldSpace::Stub* stub_ = nullptr;
 };
 
 // Bytes that are no protobuf message: a field tag whose varint never ends.

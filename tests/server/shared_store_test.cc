@@ -24,6 +24,7 @@
 #include "server/registry.h"
 #include "server/store.h"
 #include "server/store_lock.h"
+#include "tests/testing/server_fixture.h"
 #include "tests/testing/test_meshes.h"
 
 namespace fieldspace::server {
@@ -67,15 +68,7 @@ BuildJob::Progress Wait(const std::shared_ptr<BuildJob>& job) {
 
 class SharedStoreTest : public ::testing::Test {
  protected:
-  void SetUp() override {
-    root_ = fs::temp_directory_path() /
-            absl::StrCat("fs_shared_store_", ::getpid(), "_",
-                         ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(root_);
-    ASSERT_TRUE(fs::create_directories(root_));
-    store_dir_ = (root_ / "store").string();
-  }
-  void TearDown() override { fs::remove_all(root_); }
+  void SetUp() override { store_dir_ = (root_ / "store").string(); }
 
   Daemon Open(const std::string& daemon_id, int32_t save_pause_ms = 0) {
     Daemon d;
@@ -101,7 +94,7 @@ class SharedStoreTest : public ::testing::Test {
     return d;
   }
 
-  fs::path root_;
+  ::fieldspace::testing::TempDir root_{"shared_store"};
   std::string store_dir_;
 };
 

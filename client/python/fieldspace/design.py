@@ -9,7 +9,7 @@ import numpy as np
 
 from . import wire as fld
 from ._stubs import pb
-from .errors import FailedPrecondition, FieldspaceError, from_rpc_error
+from .errors import FailedPrecondition, FieldspaceError, error_for, from_rpc_error
 from .types import DesignUpdate, Weights
 
 _END = object()
@@ -31,6 +31,14 @@ def _replica_lost(error):
     return code == grpc.StatusCode.INTERNAL and "RST_STREAM" in (error.details() or "")
 
 
+def _status_code(number):
+    """The grpc.StatusCode numbered `number` (an EditError's code); UNKNOWN for others."""
+    for code in grpc.StatusCode:
+        if code.value[0] == number:
+            return code
+    return grpc.StatusCode.UNKNOWN
+
+
 class DesignSession:
     """One session on one basis: every edit is answered by a DesignUpdate (the solution's
     coefficients, the watched faces' values, timings), in order.
@@ -46,8 +54,11 @@ class DesignSession:
 
     Values are ambient by default ((3,) vectors or n-field directions, (3, 3) or (6,) tensors) or
     DOFs ((2,), tensors (3,)) by shape, as in Client.solve. Leaving the ``with`` block closes the
-    session (an exception inside it cancels the stream). After a failed edit the session is
-    over (the server ends the stream) and further edits raise FailedPrecondition.
+    session (an exception inside it cancels the stream). An edit the server refuses raises its
+    error (InvalidArgument for a face out of range or a bad value or weight, NotFound for an
+    unknown id, AlreadyExists for a duplicate id) and costs only that edit: the session stays
+    open and as it was. When the stream itself fails, the session is over and further edits raise
+    FailedPrecondition.
 
     Failover: the session sends its basis id as routing key (``x-fieldspace-key``), so that a
     router keeps it on one replica. When the stream fails because its replica died or drained
@@ -238,6 +249,10 @@ class DesignSession:
         except BaseException:
             self.cancel()
             raise
+        if message.HasField("error"):
+            # The server refused this edit: the session is as it was, and stays open.
+            raise error_for(_status_code(message.error.code), "Design %s" % kind,
+                            message.error.message)
         round_trip_ms = 1000.0 * (time.perf_counter() - sent)
         self._remember(kind, request)
         if watch is not None:
