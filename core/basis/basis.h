@@ -198,7 +198,7 @@ enum class BasisQuality : uint8_t {
   // One level: the paper's construction with params.dimension and params.sigma.
   kPaper = 0,
   // Three levels of d - d/10 - d/40, d/10 and d/40 fields, each with overlap sigma * 5/8 (fewer
-  // for small d: QualityLevels): the
+  // on a surface of genus > 0 for small d: BuildMultiLevelBasis): the
   // coarse levels' wide fields represent smooth large-scale fields (the lowest eigenfields), which
   // the fine level's small Dirichlet fields cannot combine into. At d = 2000, sigma 40: the lowest
   // 50 non-zero reduced eigenvalues within 1.8-2.0% mean, 3.1-3.9% max (paper: 20-29%, 128-173%)
@@ -213,9 +213,6 @@ enum class BasisQuality : uint8_t {
 };
 
 // The levels of `quality` for dimension d and overlap sigma: one level {d, sigma} for kPaper.
-// kLowModes and kSmooth leave out a coarse level of fewer than 5 sigma / 8 fields (d < 1000 for the
-// coarsest, d < 250 for the coarse one at sigma 40) and give its fields to the next finer level:
-// its regions would each be nearly the whole mesh (docs/conventions.md, Basis quality).
 // InvalidArgument for kLowModes and kSmooth with d < 40 (the coarsest level needs d / 40 >= 1
 // fields).
 absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int32_t dimension,
@@ -227,6 +224,10 @@ absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int3
 // params.dimension of the result is the total of the levels' dimensions. Progress fractions cover
 // each level in proportion to its dimension. InvalidArgument for no levels or a level's
 // dimension < 1; otherwise errors as BuildBasis and StackBases.
+// On a mesh of genus > 0 a level after the first with fewer fields than its sigma is built as part
+// of the level before it (its dimension added to that level's): its regions would each exceed the
+// mesh's area, nearly whole components whose nearly harmonic lowest fields the local eigensolver
+// cannot separate (docs/conventions.md, Basis quality).
 absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                            const BasisOptions& options,
                                            const std::vector<BasisLevel>& levels);

@@ -135,19 +135,9 @@ absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int3
       const double level_sigma = sigma * 5.0 / 8.0;
       const int32_t coarse = dimension / 10;
       const int32_t coarsest = dimension / 40;
-      std::vector<BasisLevel> levels = {{dimension - coarse - coarsest, level_sigma, clamped},
-                                        {coarse, level_sigma, clamped},
-                                        {coarsest, level_sigma, clamped}};
-      // A level of fewer than sigma fields has regions of more than the mesh's area
-      // (pi r^2 = sigma A / d, eq. 12): each is nearly its whole component, whose lowest
-      // eigenfields on a surface of genus g > 0 are 2 g nearly harmonic fields with eigenvalues
-      // too close to separate (the local eigensolver then fails after minutes). Such a level's
-      // fields go to the next finer level instead.
-      while (levels.size() > 1 && levels.back().dimension < level_sigma) {
-        levels[levels.size() - 2].dimension += levels.back().dimension;
-        levels.pop_back();
-      }
-      return levels;
+      return std::vector<BasisLevel>{{dimension - coarse - coarsest, level_sigma, clamped},
+                                     {coarse, level_sigma, clamped},
+                                     {coarsest, level_sigma, clamped}};
     }
   }
   return absl::InvalidArgumentError(
@@ -156,8 +146,22 @@ absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int3
 
 absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                            const BasisOptions& options,
-                                           const std::vector<BasisLevel>& levels) {
-  if (levels.empty()) return absl::InvalidArgumentError("a basis needs at least one level");
+                                           const std::vector<BasisLevel>& given_levels) {
+  if (given_levels.empty()) return absl::InvalidArgumentError("a basis needs at least one level");
+  // A level of fewer than sigma fields has regions of more than the mesh's area
+  // (pi r^2 = sigma A / d, eq. 12): each is nearly its whole component. On a surface of genus
+  // g > 0 their lowest eigenfields are 2 g nearly harmonic fields whose eigenvalues lie far below
+  // the local solver's shift and too close together to separate (it failed there after
+  // minutes). There such a level's fields go to the level before it.
+  std::vector<BasisLevel> levels = given_levels;
+  if (mesh.genus() > 0) {
+    for (size_t i = levels.size() - 1; i > 0; --i) {
+      if (levels[i].dimension >= 1 && levels[i].dimension < levels[i].sigma) {
+        levels[i - 1].dimension += levels[i].dimension;
+        levels.erase(levels.begin() + static_cast<std::ptrdiff_t>(i));
+      }
+    }
+  }
   int64_t total = 0;
   for (const BasisLevel& level : levels) {
     if (level.dimension < 1) {
