@@ -13,7 +13,6 @@
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "core/mesh/mesh_io.h"
 #include "core/mesh/shapes.h"
 
 namespace fieldspace::testing {
@@ -31,22 +30,10 @@ std::string SharedMeshPath(const std::string& name) {
   return std::filesystem::exists(p, ec) ? p.string() : std::string();
 }
 
-absl::StatusOr<TriangleMesh> LoadMesh(const std::string& path) {
-  absl::StatusOr<MeshReadResult> read = ReadMeshFile(path);
-  if (!read.ok()) return read.status();
-  return TriangleMesh::Create(std::move(read->arrays));
-}
-
 TriangleMesh MustCreate(absl::StatusOr<MeshArrays> arrays) {
   EXPECT_TRUE(arrays.ok()) << arrays.status();
   absl::StatusOr<TriangleMesh> mesh = TriangleMesh::Create(*std::move(arrays));
   EXPECT_TRUE(mesh.ok()) << mesh.status();
-  return *std::move(mesh);
-}
-
-TriangleMesh MustLoadMesh(const std::string& path) {
-  absl::StatusOr<TriangleMesh> mesh = LoadMesh(path);
-  EXPECT_TRUE(mesh.ok()) << path << ": " << mesh.status();
   return *std::move(mesh);
 }
 

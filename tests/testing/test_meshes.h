@@ -29,17 +29,11 @@ std::filesystem::path SharedMeshDir();
 // Full path of a shared mesh, or empty if it is absent.
 std::string SharedMeshPath(const std::string& name);
 
-// Reads a mesh file (any format ReadMeshFile knows) and validates it.
-absl::StatusOr<TriangleMesh> LoadMesh(const std::string& path);
-
 // ---- Meshes from arrays -------------------------------------------------------------------------
 
 // Validates `arrays` into a mesh; a failure (of building or validating) fails the current test
 // and then aborts, so use it only for inputs that must be valid.
 TriangleMesh MustCreate(absl::StatusOr<MeshArrays> arrays);
-
-// LoadMesh that must succeed (same failure behaviour as MustCreate).
-TriangleMesh MustLoadMesh(const std::string& path);
 
 // Arrays from vertex positions and zero-based faces.
 MeshArrays Arrays(const std::vector<Eigen::Vector3d>& vertices,
@@ -107,9 +101,9 @@ struct MeshCase {
 
 // Every checkout's test meshes (1k-6k faces each), in the kinds real meshes come in: regular
 // closed surfaces (sphere, torus, genus 2, torus knot); irregular, obtuse and noisy ones (a noisy
-// sphere, a blob (a sphere of non-uniform density, stretched and bent), a torus of obtuse slivers, a noisy genus-4 surface, a
-// genus-5 surface); surfaces with borders (disk, polar disk, cylinder, chipped torus, disk and
-// plate with holes); two components (a sphere and a torus).
+// sphere, a blob without symmetry from a sphere of non-uniform density, a torus of obtuse slivers,
+// a noisy genus-4 surface, a genus-5 surface); surfaces with borders (disk, polar disk, cylinder,
+// chipped torus, disk and plate with holes); two components (a sphere and a torus).
 std::vector<MeshCase> MeshCatalogue();
 
 // The cases without boundary.
