@@ -7,7 +7,7 @@ FUZZ_DIR ?= $(BUILD_DIR)/fuzz
 BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 
-.PHONY: all deps configure build test fuzz install run format clean
+.PHONY: all deps configure build test test-large-meshes fuzz install run format clean
 
 all: build
 
@@ -22,10 +22,18 @@ configure: deps $(BUILD_DIR)/build.ninja
 build: configure
 	cmake --build $(BUILD_DIR) -j $(JOBS)
 
-# The suite, then a few seconds of every fuzz target (fuzz/run.sh --smoke).
+# The suite, then a few seconds of every fuzz target (fuzz/run.sh --smoke). It needs no mesh
+# files: its meshes are made in code (tests/testing/test_meshes.h).
 test: build fuzz
-	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
+	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900 -LE large-mesh
 	cd $(FUZZ_DIR) && ctest --output-on-failure
+
+# The large-mesh checks: the real meshes of MESH_DIR (up to 1.8M faces), not part of `make test`.
+MESH_DIR ?= $(abspath ../shared/meshes)
+test-large-meshes: configure
+	cmake -S . -B $(BUILD_DIR) -DFIELDSPACE_LARGE_MESH_CHECKS=ON -DFIELDSPACE_MESH_DIR=$(MESH_DIR)
+	cmake --build $(BUILD_DIR) -j $(JOBS)
+	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900 -L large-mesh
 
 # Fuzz targets with clang, ASan and UBSan (fuzz/CMakeLists.txt); ccache when installed.
 $(FUZZ_DIR)/build.ninja:

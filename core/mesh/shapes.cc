@@ -2,7 +2,9 @@
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numeric>
+#include <random>
 #include <unordered_map>
 #include <vector>
 
@@ -43,6 +45,79 @@ MeshArrays Compact(const std::vector<Eigen::Vector3d>& points,
 void AddQuad(std::vector<Eigen::Vector3i>& tris, int a, int b, int c, int d) {
   tris.emplace_back(a, b, c);
   tris.emplace_back(a, c, d);
+}
+
+// The torus grid of MakeTorus (staggered = false) and MakeStaggeredTorus (true: odd rings turned
+// by half a major step, quads of even rings split along the other diagonal). Arguments checked.
+MeshArrays TorusGrid(double major_radius, double minor_radius, int32_t major_segments,
+                     int32_t minor_segments, bool staggered) {
+  std::vector<Eigen::Vector3d> pts;
+  pts.reserve(int64_t{major_segments} * minor_segments);
+  for (int32_t i = 0; i < major_segments; ++i) {
+    for (int32_t j = 0; j < minor_segments; ++j) {
+      const double turn = staggered && j % 2 == 1 ? 0.5 : 0.0;
+      const double u = 2 * kPi * (i + turn) / major_segments;
+      const double v = 2 * kPi * j / minor_segments;
+      const double rho = major_radius + minor_radius * std::cos(v);
+      pts.emplace_back(rho * std::cos(u), rho * std::sin(u), minor_radius * std::sin(v));
+    }
+  }
+  std::vector<Eigen::Vector3i> tris;
+  auto id = [&](int32_t i, int32_t j) {
+    return (i % major_segments) * minor_segments + (j % minor_segments);
+  };
+  for (int32_t i = 0; i < major_segments; ++i) {
+    for (int32_t j = 0; j < minor_segments; ++j) {
+      const int32_t a = id(i, j), b = id(i + 1, j), c = id(i + 1, j + 1), d = id(i, j + 1);
+      if (staggered && j % 2 == 0) {  // ring j + 1 is turned: d between a and b, b between d, c
+        tris.emplace_back(a, b, d);
+        tris.emplace_back(b, c, d);
+      } else {
+        AddQuad(tris, a, b, c, d);
+      }
+    }
+  }
+  return Compact(pts, tris);
+}
+
+// Whether cell (i, j) of the plate of MakeGenusSurface (and MakePerforatedPlate) is solid: the
+// plate is (2 holes + 1) x 3 units of `resolution` cells, and hole k is the unit square
+// [2k + 1, 2k + 2] x [1, 2].
+bool PlateCellIsSolid(int32_t holes, int32_t resolution, int32_t i, int32_t j) {
+  const int32_t nx = (2 * holes + 1) * resolution, ny = 3 * resolution;
+  if (i < 0 || j < 0 || i >= nx || j >= ny) return false;
+  if (j < resolution || j >= 2 * resolution) return true;
+  const int32_t unit = i / resolution;
+  return unit % 2 == 0;  // odd units in the middle row are holes
+}
+
+absl::Status CheckPlate(const char* holes_name, int32_t holes, int32_t resolution) {
+  if (holes < 0 || holes > 64) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%s must be in [0, 64], got %d", holes_name, holes));
+  }
+  if (resolution < 1 || resolution > 256) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("resolution must be in [1, 256], got %d", resolution));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status CheckTorusRadii(double major_radius, double minor_radius) {
+  if (!(minor_radius > 0) || !(major_radius > minor_radius) || !std::isfinite(major_radius)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "torus radii must satisfy 0 < r < R, got R = %g, r = %g", major_radius, minor_radius));
+  }
+  return absl::OkStatus();
+}
+
+// A grid of a x b segments: a >= 3 (around a closed direction), b >= b_min, a * b <= 2^24.
+absl::Status CheckSegments(const char* shape, int32_t a, int32_t b, int32_t b_min) {
+  if (a < 3 || b < b_min || int64_t{a} * b > (int64_t{1} << 24)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%s needs >= 3 x >= %d segments, at most 2^24 in all, got %d x %d", shape, b_min, a, b));
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace
@@ -91,36 +166,14 @@ absl::StatusOr<MeshArrays> MakeIcosphere(int32_t subdivisions, double radius) {
 
 absl::StatusOr<MeshArrays> MakeTorus(double major_radius, double minor_radius,
                                      int32_t major_segments, int32_t minor_segments) {
-  if (!(minor_radius > 0) || !(major_radius > minor_radius) || !std::isfinite(major_radius)) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "torus radii must satisfy 0 < r < R, got R = %g, r = %g", major_radius, minor_radius));
-  }
+  if (absl::Status s = CheckTorusRadii(major_radius, minor_radius); !s.ok()) return s;
   if (major_segments < 3 || minor_segments < 3 ||
       int64_t{major_segments} * minor_segments > (int64_t{1} << 24)) {
     return absl::InvalidArgumentError(
         absl::StrFormat("torus segments must be >= 3 and their product <= 2^24, got %d x %d",
                         major_segments, minor_segments));
   }
-  std::vector<Eigen::Vector3d> pts;
-  pts.reserve(int64_t{major_segments} * minor_segments);
-  for (int32_t i = 0; i < major_segments; ++i) {
-    const double u = 2 * kPi * i / major_segments;
-    for (int32_t j = 0; j < minor_segments; ++j) {
-      const double v = 2 * kPi * j / minor_segments;
-      const double rho = major_radius + minor_radius * std::cos(v);
-      pts.emplace_back(rho * std::cos(u), rho * std::sin(u), minor_radius * std::sin(v));
-    }
-  }
-  std::vector<Eigen::Vector3i> tris;
-  auto id = [&](int32_t i, int32_t j) {
-    return (i % major_segments) * minor_segments + (j % minor_segments);
-  };
-  for (int32_t i = 0; i < major_segments; ++i) {
-    for (int32_t j = 0; j < minor_segments; ++j) {
-      AddQuad(tris, id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
-    }
-  }
-  return Compact(pts, tris);
+  return TorusGrid(major_radius, minor_radius, major_segments, minor_segments, false);
 }
 
 absl::StatusOr<MeshArrays> MakeTorusKnot(const TorusKnotOptions& o) {
@@ -172,23 +225,12 @@ absl::StatusOr<MeshArrays> MakeTorusKnot(const TorusKnotOptions& o) {
 }
 
 absl::StatusOr<MeshArrays> MakeGenusSurface(int32_t genus, int32_t resolution) {
-  if (genus < 0 || genus > 64) {
-    return absl::InvalidArgumentError(absl::StrFormat("genus must be in [0, 64], got %d", genus));
-  }
-  if (resolution < 1 || resolution > 256) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("resolution must be in [1, 256], got %d", resolution));
-  }
+  if (absl::Status s = CheckPlate("genus", genus, resolution); !s.ok()) return s;
   // Plate of (2g + 1) x 3 unit squares; hole i is the unit square [2i + 1, 2i + 2] x [1, 2].
   const int32_t nx = (2 * genus + 1) * resolution, ny = 3 * resolution;
   const int32_t nz = std::max(1, resolution / 2);  // wall layers over thickness 0.5
   const double h = 1.0 / resolution, thickness = 0.5;
-  auto solid = [&](int32_t i, int32_t j) {
-    if (i < 0 || j < 0 || i >= nx || j >= ny) return false;
-    if (j < resolution || j >= 2 * resolution) return true;
-    const int32_t unit = i / resolution;
-    return unit % 2 == 0;  // odd units in the middle row are holes
-  };
+  auto solid = [&](int32_t i, int32_t j) { return PlateCellIsSolid(genus, resolution, i, j); };
   const int32_t columns = (nx + 1) * (ny + 1);
   std::vector<Eigen::Vector3d> pts(int64_t{columns} * (nz + 1));
   for (int32_t l = 0; l <= nz; ++l) {
@@ -219,6 +261,134 @@ absl::StatusOr<MeshArrays> MakeGenusSurface(int32_t genus, int32_t resolution) {
           AddQuad(tris, id(p[0], p[1], l), id(q[0], q[1], l), id(q[0], q[1], l + 1),
                   id(p[0], p[1], l + 1));
         }
+      }
+    }
+  }
+  return Compact(pts, tris);
+}
+
+absl::StatusOr<MeshArrays> MakeNonUniformSphere(int32_t subdivisions, double pull) {
+  if (!(pull >= 0 && pull <= 0.9)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("non-uniform sphere pull must be in [0, 0.9], got %g", pull));
+  }
+  absl::StatusOr<MeshArrays> sphere = MakeIcosphere(subdivisions, 1.0);
+  if (!sphere.ok()) return sphere.status();
+  for (Eigen::Index v = 0; v < sphere->vertices.rows(); ++v) {
+    Eigen::Vector3d p = sphere->vertices.row(v);
+    p.z() += pull;
+    sphere->vertices.row(v) = p.normalized();
+  }
+  return sphere;
+}
+
+absl::StatusOr<MeshArrays> MakeStaggeredTorus(double major_radius, double minor_radius,
+                                              int32_t major_segments, int32_t minor_segments) {
+  if (absl::Status s = CheckTorusRadii(major_radius, minor_radius); !s.ok()) return s;
+  if (absl::Status s = CheckSegments("staggered torus", major_segments, minor_segments, 4);
+      !s.ok()) {
+    return s;
+  }
+  if (minor_segments % 2 != 0) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("staggered torus minor segments must be even, got %d", minor_segments));
+  }
+  return TorusGrid(major_radius, minor_radius, major_segments, minor_segments, true);
+}
+
+absl::StatusOr<MeshArrays> PerturbVertices(const MeshArrays& mesh, double amplitude,
+                                           uint64_t seed) {
+  if (!(amplitude >= 0 && amplitude <= 0.4)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("perturbation amplitude must be in [0, 0.4], got %g", amplitude));
+  }
+  const Eigen::Index nv = mesh.vertices.rows();
+  std::vector<double> shortest(static_cast<size_t>(nv), std::numeric_limits<double>::infinity());
+  for (Eigen::Index f = 0; f < mesh.faces.rows(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = mesh.faces(f, k), b = mesh.faces(f, (k + 1) % 3);
+      if (a < 0 || b < 0 || a >= nv || b >= nv) {
+        return absl::InvalidArgumentError(
+            absl::StrFormat("face %d: vertex index out of range", static_cast<int64_t>(f)));
+      }
+      const double len = (mesh.vertices.row(a) - mesh.vertices.row(b)).norm();
+      shortest[a] = std::min(shortest[a], len);
+      shortest[b] = std::min(shortest[b], len);
+    }
+  }
+  // mt19937_64's sequence is fixed by the standard; the distributions of <random> are not.
+  std::mt19937_64 rng(seed);
+  auto uniform = [&] { return static_cast<double>(rng() >> 11) * 0x1.0p-52 - 1.0; };  // [-1, 1)
+  MeshArrays out = mesh;
+  for (Eigen::Index v = 0; v < nv; ++v) {
+    if (!std::isfinite(shortest[v])) continue;  // unreferenced
+    Eigen::Vector3d d;
+    do {
+      d = Eigen::Vector3d(uniform(), uniform(), uniform());
+    } while (d.squaredNorm() > 1.0);
+    out.vertices.row(v) += amplitude * shortest[v] * d.transpose();
+  }
+  return out;
+}
+
+absl::StatusOr<MeshArrays> MakeCylinder(double radius, double height, int32_t around,
+                                        int32_t along) {
+  if (!(radius > 0) || !(height > 0) || !std::isfinite(radius) || !std::isfinite(height)) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("cylinder radius and height must be > 0, got %g and %g", radius, height));
+  }
+  if (absl::Status s = CheckSegments("cylinder", around, along, 1); !s.ok()) return s;
+  std::vector<Eigen::Vector3d> pts;
+  for (int32_t j = 0; j <= along; ++j) {
+    for (int32_t i = 0; i < around; ++i) {
+      const double u = 2 * kPi * i / around;
+      pts.emplace_back(radius * std::cos(u), radius * std::sin(u), height * j / along);
+    }
+  }
+  std::vector<Eigen::Vector3i> tris;
+  auto id = [&](int32_t i, int32_t j) { return j * around + i % around; };
+  for (int32_t j = 0; j < along; ++j) {
+    for (int32_t i = 0; i < around; ++i) {
+      AddQuad(tris, id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+    }
+  }
+  return Compact(pts, tris);
+}
+
+absl::StatusOr<MeshArrays> MakePolarDisk(int32_t rings, int32_t segments) {
+  if (absl::Status s = CheckSegments("polar disk", segments, rings, 1); !s.ok()) return s;
+  std::vector<Eigen::Vector3d> pts = {Eigen::Vector3d::Zero()};
+  for (int32_t k = 1; k <= rings; ++k) {
+    for (int32_t s = 0; s < segments; ++s) {
+      const double u = 2 * kPi * s / segments, r = static_cast<double>(k) / rings;
+      pts.emplace_back(r * std::cos(u), r * std::sin(u), 0.0);
+    }
+  }
+  auto id = [&](int32_t k, int32_t s) { return 1 + (k - 1) * segments + s % segments; };
+  std::vector<Eigen::Vector3i> tris;
+  for (int32_t s = 0; s < segments; ++s) tris.emplace_back(0, id(1, s), id(1, s + 1));
+  for (int32_t k = 1; k < rings; ++k) {
+    for (int32_t s = 0; s < segments; ++s) {
+      AddQuad(tris, id(k, s), id(k + 1, s), id(k + 1, s + 1), id(k, s + 1));
+    }
+  }
+  return Compact(pts, tris);
+}
+
+absl::StatusOr<MeshArrays> MakePerforatedPlate(int32_t holes, int32_t resolution) {
+  if (absl::Status s = CheckPlate("holes", holes, resolution); !s.ok()) return s;
+  const int32_t nx = (2 * holes + 1) * resolution, ny = 3 * resolution;
+  const double h = 1.0 / resolution;
+  std::vector<Eigen::Vector3d> pts;
+  for (int32_t j = 0; j <= ny; ++j) {
+    for (int32_t i = 0; i <= nx; ++i) pts.emplace_back(i * h, j * h, 0.0);
+  }
+  auto id = [&](int32_t i, int32_t j) { return j * (nx + 1) + i; };
+  std::vector<Eigen::Vector3i> tris;
+  for (int32_t j = 0; j < ny; ++j) {
+    for (int32_t i = 0; i < nx; ++i) {
+      if (PlateCellIsSolid(holes, resolution, i, j)) {
+        AddQuad(tris, id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
       }
     }
   }

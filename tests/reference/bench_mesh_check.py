@@ -1,13 +1,16 @@
 #!/usr/bin/python3
 """Acceptance check of `fieldspace-bench mesh` (issue: foundation).
 
-Runs the real binary on every mesh of the shared catalogue and compares vertices, faces and
-genus with the catalogue's own README table; checks that teapot_6k.obj is rejected as
-non-manifold; and feeds corrupt inputs (truncations, garbage, absurd header counts, NaN,
-out-of-range indices), each of which must give exit status 2 with a one-line message on stderr,
-never a signal or a hang.
+Without MESH_DIR (the default suite): feeds corrupt inputs (truncations, garbage, absurd header
+counts, NaN, out-of-range indices, non-manifold meshes), each of which must give exit status 2
+with a one-line message on stderr, never a signal or a hang, and checks the genus of the
+procedural shapes and of meshes written here (OBJ with CRLF, OFF).
 
-usage: bench_mesh_check.py BENCH_BINARY MESH_DIR     (exit 0 ok, 1 failure, 77 meshes absent)
+With MESH_DIR (a large-mesh check): runs the real binary on every mesh of the shared catalogue
+and compares vertices, faces and genus with the catalogue's own README table, and checks that
+teapot_6k.obj is rejected as non-manifold.
+
+usage: bench_mesh_check.py BENCH_BINARY [MESH_DIR]  (exit 0 ok, 1 failure, 77 meshes absent)
 """
 import json
 import os
@@ -16,6 +19,8 @@ import re
 import subprocess
 import sys
 import tempfile
+
+import made_meshes
 
 EXPECTED_KEYS = ["vertices", "faces", "edges", "boundary_loops", "components",
                  "euler_characteristic", "genus", "area", "manifold",
@@ -41,13 +46,8 @@ def catalogue(mesh_dir):
     return rows
 
 
-def main():
-    bench = sys.argv[1]
-    mesh_dir = os.environ.get("FIELDSPACE_MESH_DIR") or sys.argv[2]
-    if not os.path.exists(os.path.join(mesh_dir, "README.md")):
-        print(f"skipping: no mesh catalogue in {mesh_dir} (set FIELDSPACE_MESH_DIR)")
-        return 77
-    failures = []
+def check_catalogue(bench, mesh_dir, failures):
+    """Every mesh of the shared catalogue against its README row."""
     rows = catalogue(mesh_dir)
     if len(rows) < 20:
         failures.append(f"catalogue table parsed only {len(rows)} rows")
@@ -76,17 +76,48 @@ def main():
             failures.append(f"{name}: inconsistent chi or manifold flag: {out}")
         print(f"ok {name}: {res.stdout.strip()}")
 
-    # Corrupt inputs: each must be a clean exit 2.
+
+def check_inputs(bench, failures):
+    """Corrupt and non-manifold inputs (each a clean exit 2), procedural shapes and written
+    meshes (their genus), all made here."""
     rng = random.Random(7)
     with tempfile.TemporaryDirectory() as tmp:
+        # Written meshes have their topology: OBJ with CRLF, OFF, a hole, obtuse triangles.
+        sphere_v, sphere_f = made_meshes.lat_long_sphere()
+        torus_v, torus_f = made_meshes.torus()
+        torus_v = made_meshes.noisy(torus_v, 0.02, seed=3)
+        obtuse_v, obtuse_f = made_meshes.torus(major=12, minor=48, stagger=True)
+        written = [("sphere.obj", sphere_v, sphere_f, True, 0, 0),
+                   ("chipped_torus.off", torus_v, torus_f[2:], False, 1, 1),
+                   ("obtuse_torus.obj", obtuse_v, obtuse_f, True, 1, 0)]
+        for name, verts, faces, crlf, genus, loops in written:
+            path = os.path.join(tmp, name)
+            made_meshes.write_mesh(path, verts, faces, crlf)
+            res = run(bench, path)
+            out = json.loads(res.stdout) if res.returncode == 0 else {}
+            if (out.get("genus"), out.get("boundary_loops"), out.get("faces")) != (genus, loops,
+                                                                                  len(faces)):
+                failures.append(f"written {name}: {res.stdout}{res.stderr}")
+            else:
+                print(f"ok written {name}: {res.stdout.strip()}")
+
+        # Procedural shapes (the demo mesh among them) have the genus they are built with.
+        for shape, genus in [("torus-knot", 1), ("icosphere", 0), ("torus", 1), ("genus2", 2)]:
+            out = os.path.join(tmp, shape + ".ply")
+            made = subprocess.run([bench, "shape", shape, "--out", out], capture_output=True,
+                                  text=True, timeout=60)
+            res = run(bench, out)
+            if made.returncode != 0 or res.returncode != 0 or json.loads(res.stdout)["genus"] != genus:
+                failures.append(f"shape {shape}: {made.stderr}{res.stdout}{res.stderr}")
+            else:
+                print(f"ok shape {shape}: {res.stdout.strip()}")
+
+        # Corrupt inputs: each must be a clean exit 2.
         cases = {}
-        with open(os.path.join(mesh_dir, "sphere_1k.obj"), "rb") as f:
-            obj = f.read()
-        with open(os.path.join(mesh_dir, "bimba_1k.off"), "rb") as f:
-            off = f.read()
-        ply_path = os.path.join(mesh_dir, "armadillo_loop2_1384k.ply")
-        with open(ply_path, "rb") as f:
-            ply_head = f.read(1 << 16)
+        obj = made_meshes.mesh_text("s.obj", sphere_v, sphere_f, crlf=True).encode()
+        off = made_meshes.mesh_text("t.off", torus_v, torus_f).encode()
+        with open(os.path.join(tmp, "torus-knot.ply"), "rb") as f:
+            ply_head = f.read(1 << 16)  # of about 1 MB of binary data
         cases["truncated.ply"] = ply_head
         cases["absurd_count.ply"] = (b"ply\nformat binary_little_endian 1.0\n"
                                      b"element vertex 999999999999\nproperty float x\n"
@@ -102,6 +133,18 @@ def main():
         cases["zero_area.obj"] = b"v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n"
         cases["empty.obj"] = b""
         cases["two_corner_face.obj"] = b"v 0 0 0\nv 1 0 0\nf 1 2\n"
+        # Two spheres touching at the north pole (vertex 0): the second is the first reflected
+        # through z = 1, with its pole replaced by the first's. A non-manifold vertex.
+        n = len(sphere_v)
+        mirrored = [[x, y, 2.0 - z] for x, y, z in sphere_v]
+        glued = [[0 if i == 0 else i + n for i in (a, c, b)] for a, b, c in sphere_f]
+        cases["non_manifold_vertex.obj"] = made_meshes.mesh_text(
+            "x.obj", sphere_v + mirrored, sphere_f + glued).encode()
+        # A fin: a third face on the edge of face 40's first two corners.
+        a, b = torus_f[40][0], torus_f[40][1]
+        fin_v = torus_v + [[0.0, 0.0, 3.0]]
+        cases["non_manifold_edge.off"] = made_meshes.mesh_text(
+            "x.off", fin_v, torus_f + [[a, b, len(torus_v)]]).encode()
         for i in range(8):
             cut = rng.randrange(1, len(obj))
             cases[f"cut{i}.obj"] = obj[:cut] + bytes(rng.getrandbits(8) for _ in range(16))
@@ -121,21 +164,26 @@ def main():
                 continue
             if res.returncode != 2 or len(lines) != 1 or not lines[0]:
                 failures.append(f"corrupt {name}: exit {res.returncode}, stderr {res.stderr!r}")
+            elif name.startswith("non_manifold") and "non-manifold" not in lines[0]:
+                failures.append(f"corrupt {name}: the message does not say non-manifold: {lines[0]}")
             else:
                 print(f"ok corrupt {name}: {lines[0]}")
-        # Procedural shapes (the demo mesh among them) have the genus they are built with.
-        for shape, genus in [("torus-knot", 1), ("icosphere", 0), ("torus", 1), ("genus2", 2)]:
-            out = os.path.join(tmp, shape + ".ply")
-            made = subprocess.run([bench, "shape", shape, "--out", out], capture_output=True,
-                                  text=True, timeout=60)
-            res = run(bench, out)
-            if made.returncode != 0 or res.returncode != 0 or json.loads(res.stdout)["genus"] != genus:
-                failures.append(f"shape {shape}: {made.stderr}{res.stdout}{res.stderr}")
-            else:
-                print(f"ok shape {shape}: {res.stdout.strip()}")
         res = run(bench, os.path.join(tmp, "does_not_exist.obj"))
         if res.returncode != 2:
             failures.append(f"missing file: exit {res.returncode}")
+
+
+def main():
+    bench = sys.argv[1]
+    failures = []
+    if len(sys.argv) > 2:
+        mesh_dir = os.environ.get("FIELDSPACE_MESH_DIR") or sys.argv[2]
+        if not os.path.exists(os.path.join(mesh_dir, "README.md")):
+            print(f"skipping: no mesh catalogue in {mesh_dir} (set FIELDSPACE_MESH_DIR)")
+            return 77
+        check_catalogue(bench, mesh_dir, failures)
+    else:
+        check_inputs(bench, failures)
     for f in failures:
         print("FAIL", f)
     return 1 if failures else 0

@@ -7,8 +7,12 @@ literal per-edge energy), straight from the written conventions with numpy/scipy
 them entry by entry with what `fieldspace-bench operator` writes. It shares no code with the C++
 implementation: only the mesh file and the convention text.
 
-usage: operators_reference.py BENCH_BINARY MESH_DIR
-Exit 0 on agreement, 1 on a mismatch, 77 when a mesh is absent (ctest SKIP_RETURN_CODE).
+usage: operators_reference.py BENCH_BINARY [MESH_DIR]
+Without MESH_DIR (the default suite) the meshes are made here: a latitude-longitude sphere
+(non-uniform, fans at the poles), a noisy torus with a hole (a boundary loop) and a torus of
+obtuse slivers, written as OBJ (CRLF) and OFF files. With MESH_DIR (the large-mesh check) the real
+meshes of ../shared/meshes are used. Exit 0 on agreement, 1 on a mismatch, 77 when a shared mesh
+is absent (ctest SKIP_RETURN_CODE).
 """
 import math
 import os
@@ -19,6 +23,8 @@ import tempfile
 import numpy as np
 import scipy.io
 import scipy.sparse as sp
+
+import made_meshes
 
 
 def read_mesh(path):
@@ -193,12 +199,43 @@ def compare(name, A, B, tol):
     return ok
 
 
+def generated_meshes(folder):
+    """Writes the generated meshes into `folder`; returns their file names."""
+    V, F = made_meshes.lat_long_sphere()
+    made_meshes.write_mesh(os.path.join(folder, "lat_long_sphere.obj"), V, F, crlf=True)
+    made_meshes.write_mesh(os.path.join(folder, "lat_long_sphere.off"), V, F)
+    V, F = made_meshes.torus()
+    V = made_meshes.noisy(V, 0.02, seed=7)  # a tenth of an edge
+    made_meshes.write_mesh(os.path.join(folder, "chipped_torus.obj"), V, F[2:])  # a quad chipped off
+    V, F = made_meshes.torus(major=12, minor=48, stagger=True)
+    made_meshes.write_mesh(os.path.join(folder, "obtuse_torus.off"), V, F, crlf=True)
+    return ["lat_long_sphere.obj", "lat_long_sphere.off", "chipped_torus.obj", "obtuse_torus.off"]
+
+
 def main():
-    bench, mesh_dir = sys.argv[1], os.environ.get("FIELDSPACE_MESH_DIR") or sys.argv[2]
-    cases = [("sphere_1k.obj", "vector", 1), ("chipped_torus_1k.obj", "vector", 1),
-             ("bimba_1k.off", "nfield", 4), ("chipped_torus_1k.obj", "nfield", 1),
-             ("rocker_arm_1k.off", "nfield", 3), ("chipped_torus_1k.obj", "tensor", 1),
-             ("sphere_1k.obj", "tensor", 1)]
+    bench = sys.argv[1]
+    shared_dir = None
+    if len(sys.argv) > 2:
+        shared_dir = os.environ.get("FIELDSPACE_MESH_DIR") or sys.argv[2]
+    with tempfile.TemporaryDirectory() as made:
+        if shared_dir is None:
+            generated_meshes(made)
+            mesh_dir = made
+            cases = [("lat_long_sphere.obj", "vector", 1), ("chipped_torus.obj", "vector", 1),
+                     ("obtuse_torus.off", "vector", 1), ("lat_long_sphere.off", "nfield", 4),
+                     ("chipped_torus.obj", "nfield", 1), ("obtuse_torus.off", "nfield", 3),
+                     ("chipped_torus.obj", "tensor", 1), ("lat_long_sphere.obj", "tensor", 1),
+                     ("obtuse_torus.off", "tensor", 1)]
+        else:
+            mesh_dir = shared_dir
+            cases = [("sphere_1k.obj", "vector", 1), ("chipped_torus_1k.obj", "vector", 1),
+                     ("bimba_1k.off", "nfield", 4), ("chipped_torus_1k.obj", "nfield", 1),
+                     ("rocker_arm_1k.off", "nfield", 3), ("chipped_torus_1k.obj", "tensor", 1),
+                     ("sphere_1k.obj", "tensor", 1)]
+        return compare_cases(bench, mesh_dir, cases)
+
+
+def compare_cases(bench, mesh_dir, cases):
     ok = True
     for mesh_name, kind, nsym in cases:
         path = os.path.join(mesh_dir, mesh_name)

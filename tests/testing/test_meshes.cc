@@ -1,6 +1,8 @@
 #include "tests/testing/test_meshes.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -10,7 +12,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
-#include "core/mesh/mesh_io.h"
+#include "absl/strings/str_format.h"
 #include "core/mesh/shapes.h"
 
 namespace fieldspace::testing {
@@ -28,22 +30,10 @@ std::string SharedMeshPath(const std::string& name) {
   return std::filesystem::exists(p, ec) ? p.string() : std::string();
 }
 
-absl::StatusOr<TriangleMesh> LoadMesh(const std::string& path) {
-  absl::StatusOr<MeshReadResult> read = ReadMeshFile(path);
-  if (!read.ok()) return read.status();
-  return TriangleMesh::Create(std::move(read->arrays));
-}
-
 TriangleMesh MustCreate(absl::StatusOr<MeshArrays> arrays) {
   EXPECT_TRUE(arrays.ok()) << arrays.status();
   absl::StatusOr<TriangleMesh> mesh = TriangleMesh::Create(*std::move(arrays));
   EXPECT_TRUE(mesh.ok()) << mesh.status();
-  return *std::move(mesh);
-}
-
-TriangleMesh MustLoadMesh(const std::string& path) {
-  absl::StatusOr<TriangleMesh> mesh = LoadMesh(path);
-  EXPECT_TRUE(mesh.ok()) << path << ": " << mesh.status();
   return *std::move(mesh);
 }
 
@@ -110,21 +100,27 @@ MeshArrays PlanarStrip(int nx, int ny) {
   return Arrays(v, f);
 }
 
-MeshArrays PerforatedStrip(int nx, int ny, int holes) {
-  const MeshArrays strip = PlanarStrip(nx, ny);
-  std::vector<bool> removed(strip.faces.rows(), false);
-  for (int k = 0; k < holes; ++k) {
-    const int cell = (ny / 2) * nx + 2 + 3 * k;
-    removed[2 * cell] = removed[2 * cell + 1] = true;
-  }
+MeshArrays WithoutFaces(const MeshArrays& arrays, const std::vector<int32_t>& faces) {
+  std::vector<bool> removed(arrays.faces.rows(), false);
+  for (int32_t f : faces) removed[f] = true;
   MeshArrays m;
-  m.vertices = strip.vertices;  // the removed cells' corners stay on the hole boundaries
-  m.faces.resize(strip.faces.rows() - 2 * holes, 3);
+  m.vertices = arrays.vertices;
+  m.faces.resize(std::count(removed.begin(), removed.end(), false), 3);
   Eigen::Index out = 0;
-  for (Eigen::Index f = 0; f < strip.faces.rows(); ++f) {
-    if (!removed[f]) m.faces.row(out++) = strip.faces.row(f);
+  for (Eigen::Index f = 0; f < arrays.faces.rows(); ++f) {
+    if (!removed[f]) m.faces.row(out++) = arrays.faces.row(f);
   }
   return m;
+}
+
+MeshArrays PerforatedStrip(int nx, int ny, int holes) {
+  std::vector<int32_t> removed;
+  for (int k = 0; k < holes; ++k) {
+    const int cell = (ny / 2) * nx + 2 + 3 * k;
+    removed.push_back(2 * cell);
+    removed.push_back(2 * cell + 1);
+  }
+  return WithoutFaces(PlanarStrip(nx, ny), removed);
 }
 
 TriangleMesh TwoSpheres(int32_t subdivisions, double r2) {
@@ -134,7 +130,72 @@ TriangleMesh TwoSpheres(int32_t subdivisions, double r2) {
   return MustCreate(DisjointUnion(*a, *b, Eigen::Vector3d(5.0, 0.0, 0.0)));
 }
 
-std::vector<MeshCase> BuiltInMeshCases() {
+std::string MeshText(const MeshArrays& arrays, const std::string& format,
+                     const MeshTextOptions& options) {
+  const char* eol = options.crlf ? "\r\n" : "\n";
+  const Eigen::Index nv = arrays.vertices.rows(), nf = arrays.faces.rows();
+  const Eigen::Index extra = options.unreferenced_vertices;
+  auto vertex = [&](Eigen::Index v) {
+    // The unreferenced extras sit beside the mesh, off its bounding box.
+    const Eigen::Vector3d p = v < nv ? Eigen::Vector3d(arrays.vertices.row(v))
+                                     : Eigen::Vector3d(10.0 + static_cast<double>(v - nv), 0.5, -3);
+    return absl::StrFormat("%.17g %.17g %.17g", p.x(), p.y(), p.z());
+  };
+  std::string text;
+  if (format == "off") {
+    absl::StrAppend(&text, "OFF", eol, nv + extra, " ", nf, " 0", eol);
+    for (Eigen::Index v = 0; v < nv + extra; ++v) absl::StrAppend(&text, vertex(v), eol);
+    for (Eigen::Index f = 0; f < nf; ++f) {
+      absl::StrAppend(&text, "3 ", arrays.faces(f, 0), " ", arrays.faces(f, 1), " ",
+                      arrays.faces(f, 2), eol);
+    }
+    return text;
+  }
+  absl::StrAppend(&text, "# written by the fieldspace tests", eol);
+  if (options.material) absl::StrAppend(&text, "mtllib shape.mtl", eol, "o shape", eol);
+  for (Eigen::Index v = 0; v < nv + extra; ++v) {
+    absl::StrAppend(&text, "v ", vertex(v), eol);
+    if (options.texcoords) {
+      absl::StrAppend(&text, "vt ", absl::StrFormat("%.6f %.6f", (v % 97) / 97.0, (v % 89) / 89.0),
+                      eol);
+    }
+    if (options.normals) {
+      Eigen::Vector3d n =
+          v < nv ? Eigen::Vector3d(arrays.vertices.row(v)) : Eigen::Vector3d::UnitZ();
+      n = n.norm() > 0 ? n.normalized() : Eigen::Vector3d::UnitZ();
+      absl::StrAppend(&text, "vn ", absl::StrFormat("%.6f %.6f %.6f", n.x(), n.y(), n.z()), eol);
+    }
+  }
+  auto corner = [&](int32_t v) {
+    const std::string i = absl::StrCat(v + 1);  // one-based; vt and vn share the vertex index
+    if (options.texcoords && options.normals) return absl::StrCat(i, "/", i, "/", i);
+    if (options.texcoords) return absl::StrCat(i, "/", i);
+    if (options.normals) return absl::StrCat(i, "//", i);
+    return i;
+  };
+  for (Eigen::Index f = 0; f < nf; ++f) {
+    if (options.material && (f == 0 || f == nf / 2)) {
+      absl::StrAppend(&text, "g part", f == 0 ? 0 : 1, eol, "usemtl material", f == 0 ? 0 : 1, eol,
+                      "s ", f == 0 ? "1" : "off", eol);
+    }
+    absl::StrAppend(&text, "f ", corner(arrays.faces(f, 0)), " ", corner(arrays.faces(f, 1)), " ",
+                    corner(arrays.faces(f, 2)), eol);
+  }
+  return text;
+}
+
+namespace {
+
+// `arrays` with PerturbVertices(amplitude, seed) applied.
+absl::StatusOr<MeshArrays> Perturbed(absl::StatusOr<MeshArrays> arrays, double amplitude,
+                                     uint64_t seed) {
+  if (!arrays.ok()) return arrays.status();
+  return PerturbVertices(*arrays, amplitude, seed);
+}
+
+}  // namespace
+
+std::vector<MeshCase> MeshCatalogue() {
   std::vector<MeshCase> cases;
   auto add = [&](std::string name, std::function<absl::StatusOr<MeshArrays>()> build, int genus,
                  int chi, int loops, int components) {
@@ -147,6 +208,7 @@ std::vector<MeshCase> BuiltInMeshCases() {
     c.components = components;
     cases.push_back(std::move(c));
   };
+  // chi = sum over components of 2 - 2 g - loops.
   add(
       "Sphere", [] { return MakeIcosphere(3); }, 0, 2, 0, 1);
   add(
@@ -162,10 +224,47 @@ std::vector<MeshCase> BuiltInMeshCases() {
         return MakeTorusKnot(knot);
       },
       1, 0, 0, 1);
+  // Irregular, obtuse and noisy closed surfaces.
+  add(
+      "NoisySphere", [] { return Perturbed(MakeIcosphere(3), 0.3, 1); }, 0, 2, 0, 1);
+  add(
+      "Blob",
+      []() -> absl::StatusOr<MeshArrays> {
+        absl::StatusOr<MeshArrays> m = MakeNonUniformSphere(3, 0.6);
+        if (!m.ok()) return m.status();
+        for (Eigen::Index v = 0; v < m->vertices.rows(); ++v) {  // no symmetry left
+          const double x = m->vertices(v, 0), y = m->vertices(v, 1), z = m->vertices(v, 2);
+          m->vertices.row(v) << 1.3 * x, y + 0.2 * z * z, 0.7 * z + 0.25 * x * y;
+        }
+        return PerturbVertices(*m, 0.15, 2);
+      },
+      0, 2, 0, 1);
+  add(
+      "ObtuseTorus", [] { return MakeStaggeredTorus(1.0, 0.4, 16, 48); }, 1, 0, 0, 1);
+  add(
+      "NoisyGenus4", [] { return Perturbed(MakeGenusSurface(4, 4), 0.25, 4); }, 4, -6, 0, 1);
+  add(
+      "Genus5", [] { return MakeGenusSurface(5, 3); }, 5, -8, 0, 1);
+  // Surfaces with borders.
   add(
       "Disk", [] { return PlanarStrip(12, 8); }, 0, 1, 1, 1);
   add(
+      "PolarDisk", [] { return Perturbed(MakePolarDisk(12, 48), 0.2, 5); }, 0, 1, 1, 1);
+  add(
+      "Cylinder", [] { return Perturbed(MakeCylinder(0.5, 2.0, 32, 16), 0.2, 6); }, 0, 0, 2, 1);
+  add(
+      "ChippedTorus",
+      []() -> absl::StatusOr<MeshArrays> {
+        absl::StatusOr<MeshArrays> torus = MakeTorus(1.0, 0.4, 32, 16);
+        if (!torus.ok()) return torus.status();
+        return PerturbVertices(WithoutFaces(*torus, {0, 1}), 0.25, 7);  // one quad chipped off
+      },
+      1, -1, 1, 1);
+  add(
       "DiskWithThreeHoles", [] { return PerforatedStrip(16, 8, 3); }, 0, -2, 4, 1);
+  add(
+      "PlateWithFiveHoles", [] { return Perturbed(MakePerforatedPlate(5, 3), 0.2, 8); }, 0, -4, 6,
+      1);
   add(
       "SphereAndTorus",
       []() -> absl::StatusOr<MeshArrays> {
@@ -179,36 +278,6 @@ std::vector<MeshCase> BuiltInMeshCases() {
   return cases;
 }
 
-std::vector<MeshCase> SharedMeshCases() {
-  std::vector<MeshCase> cases;
-  auto add = [&](std::string name, std::string file, int genus, int chi, int loops) {
-    MeshCase c;
-    c.name = std::move(name);
-    c.shared_file = std::move(file);
-    c.genus = genus;
-    c.euler_characteristic = chi;
-    c.boundary_loops = loops;
-    cases.push_back(std::move(c));
-  };
-  // chi = 2 - 2 g - loops for one component.
-  add("SharedSphere1k", "sphere_1k.obj", 0, 2, 0);
-  add("SharedBimba1k", "bimba_1k.off", 0, 2, 0);
-  add("SharedRockerArm1k", "rocker_arm_1k.off", 1, 0, 0);
-  add("SharedChippedTorus1k", "chipped_torus_1k.obj", 1, -1, 1);
-  add("SharedTorus5k", "torus_5k.obj", 1, 0, 0);
-  add("SharedFertility9k", "fertility_9k.off", 4, -6, 0);
-  add("SharedEight11k", "eight_11k.off", 2, -2, 0);
-  add("SharedCamelhead23k", "camelhead_23k.off", 0, 1, 1);
-  add("SharedKitten29k", "kitten_29k.obj", 1, 0, 0);
-  return cases;
-}
-
-std::vector<MeshCase> MeshCatalogue() {
-  std::vector<MeshCase> cases = BuiltInMeshCases();
-  for (MeshCase& c : SharedMeshCases()) cases.push_back(std::move(c));
-  return cases;
-}
-
 std::vector<MeshCase> ClosedMeshCases(const std::vector<MeshCase>& cases) {
   std::vector<MeshCase> closed;
   for (const MeshCase& c : cases) {
@@ -218,35 +287,34 @@ std::vector<MeshCase> ClosedMeshCases(const std::vector<MeshCase>& cases) {
 }
 
 absl::StatusOr<TriangleMesh> LoadMeshCase(const MeshCase& c) {
-  if (c.built_in()) {
-    absl::StatusOr<MeshArrays> arrays = c.build();
-    if (!arrays.ok()) return arrays.status();
-    return TriangleMesh::Create(*std::move(arrays));
-  }
-  const std::string path = SharedMeshPath(c.shared_file);
-  if (path.empty()) {
-    return absl::NotFoundError(absl::StrCat("shared mesh ", c.shared_file, " not found in ",
-                                            SharedMeshDir().string(),
-                                            " (set FIELDSPACE_MESH_DIR to the folder of "
-                                            "../shared/meshes)"));
-  }
-  return LoadMesh(path);
+  absl::StatusOr<MeshArrays> arrays = c.build();
+  if (!arrays.ok()) return arrays.status();
+  return TriangleMesh::Create(*std::move(arrays));
 }
+
+MeshArrays CatalogueArrays(const std::string& name) {
+  for (const MeshCase& c : MeshCatalogue()) {
+    if (c.name != name) continue;
+    absl::StatusOr<MeshArrays> arrays = c.build();
+    EXPECT_TRUE(arrays.ok()) << name << ": " << arrays.status();
+    return *std::move(arrays);
+  }
+  ADD_FAILURE() << "no catalogue mesh named " << name;
+  std::abort();
+}
+
+TriangleMesh CatalogueMesh(const std::string& name) { return MustCreate(CatalogueArrays(name)); }
 
 std::string MeshCaseName(const ::testing::TestParamInfo<MeshCase>& info) { return info.param.name; }
 
 void PrintTo(const MeshCase& c, std::ostream* os) {
-  *os << c.name << " (" << (c.built_in() ? "built in code" : c.shared_file) << ", genus " << c.genus
-      << ", chi " << c.euler_characteristic << ", " << c.boundary_loops << " boundary loops, "
-      << c.components << " components)";
+  *os << c.name << " (genus " << c.genus << ", chi " << c.euler_characteristic << ", "
+      << c.boundary_loops << " boundary loops, " << c.components << " components)";
 }
 
 void MeshCaseTest::SetUp() {
   const MeshCase& c = GetParam();
   absl::StatusOr<TriangleMesh> mesh = LoadMeshCase(c);
-  if (!c.built_in() && absl::IsNotFound(mesh.status())) {
-    GTEST_SKIP() << mesh.status().message();
-  }
   ASSERT_TRUE(mesh.ok()) << c.name << ": " << mesh.status();
   mesh_.emplace(*std::move(mesh));
 }

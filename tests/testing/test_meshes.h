@@ -1,8 +1,9 @@
 #ifndef FIELDSPACE_TESTS_TESTING_TEST_MESHES_H_
 #define FIELDSPACE_TESTS_TESTING_TEST_MESHES_H_
 
-// Test meshes: the shared real meshes (../shared/meshes, optional), shapes built in code, and a
-// catalogue of both with their known topology for parameterized tests.
+// Test meshes: shapes built in code and a catalogue of them with their known topology for
+// parameterized tests, mesh files written from them (the variants real files come in), and the
+// path of the shared real meshes (../shared/meshes), which only the large-mesh checks read.
 
 #include <cstdint>
 #include <filesystem>
@@ -21,24 +22,18 @@ namespace fieldspace::testing {
 
 // ---- Shared meshes ------------------------------------------------------------------------------
 
-// The folder of the shared test meshes: $FIELDSPACE_MESH_DIR, else ../shared/meshes next to the
-// source tree.
+// The folder of the shared real meshes: $FIELDSPACE_MESH_DIR, else ../shared/meshes next to the
+// source tree. Only the large-mesh checks (not in the default suite) read them.
 std::filesystem::path SharedMeshDir();
 
 // Full path of a shared mesh, or empty if it is absent.
 std::string SharedMeshPath(const std::string& name);
-
-// Reads a mesh file (any format ReadMeshFile knows) and validates it.
-absl::StatusOr<TriangleMesh> LoadMesh(const std::string& path);
 
 // ---- Meshes from arrays -------------------------------------------------------------------------
 
 // Validates `arrays` into a mesh; a failure (of building or validating) fails the current test
 // and then aborts, so use it only for inputs that must be valid.
 TriangleMesh MustCreate(absl::StatusOr<MeshArrays> arrays);
-
-// LoadMesh that must succeed (same failure behaviour as MustCreate).
-TriangleMesh MustLoadMesh(const std::string& path);
 
 // Arrays from vertex positions and zero-based faces.
 MeshArrays Arrays(const std::vector<Eigen::Vector3d>& vertices,
@@ -62,6 +57,10 @@ TriangleMesh Torus(int32_t major_segments, int32_t minor_segments, double major_
 // 2 (j nx + i) + 1. (nx + 1)(ny + 1) vertices, 2 nx ny faces, chi = 1, one boundary loop.
 MeshArrays PlanarStrip(int nx, int ny);
 
+// `arrays` without the faces listed (vertices kept, so the removed faces' corners stay on the new
+// boundary).
+MeshArrays WithoutFaces(const MeshArrays& arrays, const std::vector<int32_t>& faces);
+
 // PlanarStrip with `holes` single cells removed (cells (2 + 3 k, ny / 2), k < holes, none
 // touching the border or each other): genus 0, chi = 1 - holes, 1 + holes boundary loops.
 // Requires 3 * holes + 1 < nx and ny >= 4.
@@ -70,45 +69,60 @@ MeshArrays PerforatedStrip(int nx, int ny, int holes);
 // Two disjoint icospheres: radius 1 at the origin, radius `r2` at x = 5.
 TriangleMesh TwoSpheres(int32_t subdivisions, double r2);
 
+// ---- Mesh files ---------------------------------------------------------------------------------
+
+// How MeshText writes a mesh: the variants real files come in.
+struct MeshTextOptions {
+  bool crlf = false;                  // "\r\n" line endings
+  bool normals = false;               // OBJ: a `vn` per vertex and corners `v//n` (or `v/t/n`)
+  bool texcoords = false;             // OBJ: a `vt` per vertex and corners `v/t`
+  bool material = false;              // OBJ: `mtllib`, `usemtl`, `o`, `g` and `s` statements
+  int32_t unreferenced_vertices = 0;  // extra vertices no face uses, after the mesh's own
+};
+
+// The text of `arrays` as an OBJ ("obj") or OFF ("off") file, coordinates written with 17
+// significant digits (read back exactly).
+std::string MeshText(const MeshArrays& arrays, const std::string& format,
+                     const MeshTextOptions& options = {});
+
 // ---- The mesh catalogue -------------------------------------------------------------------------
 
-// One mesh with its known topology: a shape built in code, or a shared mesh file (an optional
-// extra: tests skip it with a message when ../shared/meshes does not have it).
+// One mesh built in code with its known topology.
 struct MeshCase {
-  std::string name;         // a valid test-name suffix
-  std::string shared_file;  // file in SharedMeshDir(); empty for shapes built in code
-  std::function<absl::StatusOr<MeshArrays>()> build;  // for shapes built in code
+  std::string name;                                   // a valid test-name suffix
+  std::function<absl::StatusOr<MeshArrays>()> build;  // the mesh
   int32_t genus = 0;                                  // sum over components
   int32_t euler_characteristic = 0;                   // V - E + F
   int32_t boundary_loops = 0;
   int32_t components = 1;
 
-  bool built_in() const { return shared_file.empty(); }
   bool closed() const { return boundary_loops == 0; }
 };
 
-// Shapes built in code, present in every checkout: sphere, torus, genus-2 surface, torus knot
-// tube (closed); disk, disk with holes (open); a sphere and a torus (two components).
-std::vector<MeshCase> BuiltInMeshCases();
-
-// Shared meshes with the topology of ../shared/meshes/README.md (small and medium ones only).
-std::vector<MeshCase> SharedMeshCases();
-
-// BuiltInMeshCases() followed by SharedMeshCases().
+// Every checkout's test meshes (1k-6k faces each), in the kinds real meshes come in: regular
+// closed surfaces (sphere, torus, genus 2, torus knot); irregular, obtuse and noisy ones (a noisy
+// sphere, a blob without symmetry from a sphere of non-uniform density, a torus of obtuse slivers,
+// a noisy genus-4 surface, a genus-5 surface); surfaces with borders (disk, polar disk, cylinder,
+// chipped torus, disk and plate with holes); two components (a sphere and a torus).
 std::vector<MeshCase> MeshCatalogue();
 
 // The cases without boundary.
 std::vector<MeshCase> ClosedMeshCases(const std::vector<MeshCase>& cases);
 
-// Builds or reads the mesh of `c`; NotFound if it is a shared mesh that is absent.
+// Builds the mesh of `c` (validated).
 absl::StatusOr<TriangleMesh> LoadMeshCase(const MeshCase& c);
+
+// The arrays of the catalogue case named `name`; fails the test and aborts if there is none.
+MeshArrays CatalogueArrays(const std::string& name);
+
+// The mesh of the catalogue case named `name` (same failure behaviour as MustCreate).
+TriangleMesh CatalogueMesh(const std::string& name);
 
 // For INSTANTIATE_TEST_SUITE_P(..., MeshCaseName).
 std::string MeshCaseName(const ::testing::TestParamInfo<MeshCase>& info);
 void PrintTo(const MeshCase& c, std::ostream* os);
 
-// A test fixture parameterized over MeshCase: SetUp loads the mesh, skipping (with a message
-// naming the folder) a shared mesh that is absent.
+// A test fixture parameterized over MeshCase: SetUp builds the mesh.
 class MeshCaseTest : public ::testing::TestWithParam<MeshCase> {
  protected:
   void SetUp() override;
@@ -120,7 +134,8 @@ class MeshCaseTest : public ::testing::TestWithParam<MeshCase> {
 
 }  // namespace fieldspace::testing
 
-// Declares `var` as the path of shared mesh `name`, or skips the test with a clear message.
+// Declares `var` as the path of shared mesh `name`, or skips the test with a clear message. For
+// the large-mesh checks only: a test of the default suite uses meshes every checkout has.
 #define FS_REQUIRE_SHARED_MESH(var, name)                                           \
   const std::string var = ::fieldspace::testing::SharedMeshPath(name);              \
   if (var.empty()) {                                                                \

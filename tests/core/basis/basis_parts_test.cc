@@ -31,7 +31,6 @@ using basis_internal::LocalOperator;
 using ::fieldspace::testing::StatusIs;
 using testing::DualDistances;
 using testing::Icosphere;
-using testing::MustLoadMesh;
 using testing::TwoSpheres;
 
 // A flag that is already set: the cancellation paths return at their first check.
@@ -76,8 +75,7 @@ TEST(DualGraphTest, ArcsAndLengths) {
 }
 
 TEST(DualGraphTest, BoundaryFacesHaveFewerArcs) {
-  FS_REQUIRE_SHARED_MESH(path, "camelhead_23k.off");
-  const TriangleMesh mesh = MustLoadMesh(path);
+  const TriangleMesh mesh = testing::CatalogueMesh("PlateWithFiveHoles");
   auto g = BuildDualGraph(mesh, {});
   ASSERT_TRUE(g.ok());
   int64_t interior_edges = 0, arcs = 0;

@@ -4,13 +4,11 @@
 
 #include <algorithm>
 #include <bit>
-#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <iostream>
 #include <limits>
 #include <random>
 #include <string>
@@ -19,6 +17,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "core/mesh/triangle_mesh.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/matchers.h"
@@ -849,15 +848,15 @@ TEST(WritePlyTest, RoundTripIsExactForFloatData) {
   std::filesystem::remove(path);
 }
 
-TEST(WritePlyTest, RoundTripOfARealMeshRoundsCoordinatesToFloat) {
-  FS_REQUIRE_SHARED_MESH(path, "sphere_1k.obj");
-  absl::StatusOr<MeshReadResult> obj = ReadMeshFile(path);
-  ASSERT_TRUE(obj.ok()) << obj.status();
-  const std::string out = TempPath("sphere.ply");
-  ASSERT_TRUE(WritePly(out, obj->arrays.vertices, obj->arrays.faces).ok());
+TEST(WritePlyTest, RoundTripOfANoisyMeshRoundsCoordinatesToFloat) {
+  const MeshArrays noisy = testing::CatalogueArrays("NoisySphere");
+  // Its coordinates are not floats: the round trip must round them.
+  ASSERT_NE(noisy.vertices.cast<float>().cast<double>(), noisy.vertices);
+  const std::string out = TempPath("noisy_sphere.ply");
+  ASSERT_TRUE(WritePly(out, noisy.vertices, noisy.faces).ok());
   absl::StatusOr<MeshReadResult> ply = ReadMeshFile(out);
   ASSERT_TRUE(ply.ok()) << ply.status();
-  ExpectArrays(*ply, obj->arrays.vertices.cast<float>().cast<double>(), obj->arrays.faces);
+  ExpectArrays(*ply, noisy.vertices.cast<float>().cast<double>(), noisy.faces);
   std::filesystem::remove(out);
 }
 
@@ -902,81 +901,92 @@ TEST(WritePlyTest, InvalidInputsAreRejectedWithoutWriting) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Every shared mesh: face count and referenced-vertex count from its README (an independent
-// source), all indices in range, all coordinates finite.
+// Every catalogue mesh in the variants real files come in (OBJ with vn / vt / usemtl and CRLF
+// line endings, OFF with CRLF, binary PLY, unreferenced vertices): read back to the same arrays,
+// and to a mesh of the catalogue's topology. The real meshes of ../shared/meshes are checked the
+// same way by the large-mesh checks (shared_mesh_catalogue_test.cc).
 
-struct SharedMesh {
+struct FileVariant {
   const char* name;
-  int64_t num_vertices;  // vertices referenced by faces
-  int64_t num_faces;
+  const char* extension;
+  testing::MeshTextOptions text;  // unused for "ply"
 };
 
-const SharedMesh kSharedMeshes[] = {
-    {"sphere_1k.obj", 642, 1280},
-    {"chipped_torus_1k.obj", 560, 1102},
-    {"rocker_arm_1k.off", 625, 1250},
-    {"bimba_1k.off", 697, 1390},
-    {"torus_5k.obj", 2304, 4608},
-    {"spot_6k.obj", 2930, 5856},
-    {"teapot_6k.obj", 3644, 6320},
-    {"fertility_9k.off", 4494, 9000},
-    {"eight_11k.off", 5544, 11092},
-    {"blade_16k.off", 8231, 16222},
-    {"bimba_18k.obj", 8857, 17710},
-    {"cheese_18k.off", 8629, 17786},
-    {"chinese_dragon_20k.off", 10000, 19994},
-    {"rocker_arm_20k.obj", 10044, 20088},
-    {"camelhead_23k.off", 11381, 22704},
-    {"fertility_28k.obj", 13971, 27954},
-    {"kitten_29k.obj", 14472, 28944},
-    {"mountain_51k.obj", 25600, 50562},
-    {"fertility_60k.obj", 30000, 60012},
-    {"stanford_bunny_69k.obj", 34834, 69451},
-    {"bunny_70k.obj", 34835, 69666},
-    {"botijo_82k.obj", 41158, 82332},
-    {"armadillo_86k.obj", 43243, 86482},
-    {"nefertiti_100k.obj", 49971, 99938},
-    {"rolling_stage_100k.obj", 49988, 100000},
-    {"skull_100k.obj", 49999, 100002},
-    {"igea_269k.obj", 134345, 268686},
-    {"stanford_bunny_loop2_1111k.ply", 556051, 1111216},
-    {"armadillo_loop2_1384k.ply", 691858, 1383712},
-    {"fertility_loop3_1789k.ply", 894522, 1789056},
+const FileVariant kFileVariants[] = {
+    {"obj", "obj", {}},
+    {"obj_normals_crlf", "obj", {.crlf = true, .normals = true}},
+    {"obj_texcoords_materials", "obj", {.texcoords = true, .material = true}},
+    {"obj_all_crlf_unreferenced",
+     "obj",
+     {.crlf = true,
+      .normals = true,
+      .texcoords = true,
+      .material = true,
+      .unreferenced_vertices = 113}},
+    {"off", "off", {}},
+    {"off_crlf_unreferenced", "off", {.crlf = true, .unreferenced_vertices = 7}},
+    {"binary_ply", "ply", {}},
 };
 
-class SharedMeshTest : public ::testing::TestWithParam<SharedMesh> {};
+class MeshFileVariantsTest : public ::testing::TestWithParam<testing::MeshCase> {};
 
-TEST_P(SharedMeshTest, CountsMatchTheReadme) {
-  const SharedMesh& m = GetParam();
-  FS_REQUIRE_SHARED_MESH(path, m.name);
-  const auto start = std::chrono::steady_clock::now();
-  absl::StatusOr<MeshReadResult> r = ReadMeshFile(path);
-  const double seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  ASSERT_TRUE(r.ok()) << r.status();
-  RecordProperty("read_seconds", absl::StrCat(seconds));
-  std::cout << m.name << ": read in " << seconds << " s\n";
-
-  const VertexMatrix& V = r->arrays.vertices;
-  const FaceMatrix& F = r->arrays.faces;
-  EXPECT_EQ(F.rows(), m.num_faces);
-  EXPECT_EQ(r->polygons_triangulated, 0);
-  EXPECT_GE(V.rows(), m.num_vertices);
-  ASSERT_GT(F.size(), 0);
-  EXPECT_GE(F.minCoeff(), 0);
-  ASSERT_LT(F.maxCoeff(), V.rows());
-  std::vector<char> referenced(static_cast<size_t>(V.rows()), 0);
-  for (Eigen::Index i = 0; i < F.size(); ++i) referenced[static_cast<size_t>(F.data()[i])] = 1;
-  EXPECT_EQ(std::count(referenced.begin(), referenced.end(), 1), m.num_vertices);
-  EXPECT_TRUE(V.allFinite());
+TEST_P(MeshFileVariantsTest, ReadBackToTheSameMesh) {
+  const testing::MeshCase& c = GetParam();
+  absl::StatusOr<MeshArrays> arrays = c.build();
+  ASSERT_TRUE(arrays.ok()) << arrays.status();
+  for (const FileVariant& variant : kFileVariants) {
+    SCOPED_TRACE(variant.name);
+    const std::string path =
+        TempPath(absl::StrCat(c.name, "_", variant.name, ".", variant.extension));
+    const std::string ext = variant.extension;
+    VertexMatrix expected = arrays->vertices;
+    if (ext == "ply") {
+      ASSERT_TRUE(WritePly(path, arrays->vertices, arrays->faces).ok());
+      expected = expected.cast<float>().cast<double>();
+    } else {
+      const std::string text = testing::MeshText(*arrays, ext, variant.text);
+      EXPECT_EQ(text.find("\r\n") != std::string::npos, variant.text.crlf);
+      WriteFile(path, text);
+    }
+    absl::StatusOr<MeshReadResult> r = ReadMeshFile(path);
+    std::filesystem::remove(path);
+    ASSERT_TRUE(r.ok()) << r.status();
+    EXPECT_EQ(r->polygons_triangulated, 0);
+    const int32_t extra = ext == "ply" ? 0 : variant.text.unreferenced_vertices;
+    ASSERT_EQ(r->arrays.vertices.rows(), expected.rows() + extra);
+    EXPECT_EQ(r->arrays.vertices.topRows(expected.rows()), expected);  // %.17g is exact
+    EXPECT_EQ(r->arrays.faces, arrays->faces);
+    absl::StatusOr<TriangleMesh> mesh = TriangleMesh::Create(std::move(r->arrays));
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    EXPECT_EQ(mesh->dropped_unreferenced_vertices(), extra);
+    EXPECT_EQ(mesh->num_faces(), arrays->faces.rows());
+    EXPECT_EQ(mesh->genus(), c.genus);
+    EXPECT_EQ(static_cast<int>(mesh->boundary_loops().size()), c.boundary_loops);
+    EXPECT_EQ(mesh->euler_characteristic(), c.euler_characteristic);
+  }
 }
 
-INSTANTIATE_TEST_SUITE_P(Meshes, SharedMeshTest, ::testing::ValuesIn(kSharedMeshes),
-                         [](const auto& info) {
-                           std::string name = info.param.name;
-                           std::replace(name.begin(), name.end(), '.', '_');
-                           return name;
-                         });
+INSTANTIATE_TEST_SUITE_P(Catalogue, MeshFileVariantsTest,
+                         ::testing::ValuesIn(testing::MeshCatalogue()), testing::MeshCaseName);
+
+// The statements of an OBJ file exported with normals, texture coordinates and materials are
+// where they belong: `vn` and `vt` lines, `v/t/n` corners, `usemtl` and `g` lines.
+TEST(MeshTextTest, ObjVariantsHaveTheirStatements) {
+  const MeshArrays a = testing::CatalogueArrays("Torus");
+  const std::string all = testing::MeshText(
+      a, "obj", {.crlf = true, .normals = true, .texcoords = true, .material = true});
+  EXPECT_THAT(all, HasSubstr("\r\nvn "));
+  EXPECT_THAT(all, HasSubstr("\r\nvt "));
+  EXPECT_THAT(all, HasSubstr("\r\nusemtl material1\r\n"));
+  EXPECT_THAT(all, HasSubstr("\r\nf 1/1/1 "));
+  EXPECT_EQ(all.find("\n\n"), std::string::npos);
+  const std::string normals = testing::MeshText(a, "obj", {.normals = true});
+  EXPECT_THAT(normals, HasSubstr("\nf 1//1 "));
+  EXPECT_EQ(normals.find('\r'), std::string::npos);
+  const std::string off = testing::MeshText(a, "off", {.unreferenced_vertices = 3});
+  EXPECT_THAT(
+      off, StartsWith(absl::StrCat("OFF\n", a.vertices.rows() + 3, " ", a.faces.rows(), " 0\n")));
+}
 
 }  // namespace
 }  // namespace fieldspace

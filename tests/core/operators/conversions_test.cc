@@ -19,7 +19,6 @@
 namespace fieldspace {
 namespace {
 
-using ::fieldspace::testing::LoadMesh;
 using ::fieldspace::testing::MustCreate;
 using ::fieldspace::testing::StatusIs;
 using ::testing::HasSubstr;

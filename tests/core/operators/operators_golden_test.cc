@@ -24,7 +24,7 @@ using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
 using Triplets = std::vector<Eigen::Triplet<double>>;
 using ::fieldspace::testing::Arrays;
-using ::fieldspace::testing::LoadMesh;
+using ::fieldspace::testing::CatalogueMesh;
 using ::fieldspace::testing::MaxAbs;
 using ::fieldspace::testing::MaxAbsDiff;
 using ::fieldspace::testing::MustCreate;
@@ -185,22 +185,21 @@ TEST(VectorHodgeGoldenTest, SingleRightTriangleByHand) {
   EXPECT_LT((Eigen::MatrixXd(*S) - expected).cwiseAbs().maxCoeff(), 1e-14) << Eigen::MatrixXd(*S);
 }
 
-TEST(VectorHodgeGoldenTest, MatchesExplicitGradientMatricesOnRealMeshes) {
-  for (const char* name : {"sphere_1k.obj", "chipped_torus_1k.obj", "bimba_1k.off"}) {
-    FS_REQUIRE_SHARED_MESH(path, name);
-    auto mesh = LoadMesh(path);
-    ASSERT_TRUE(mesh.ok()) << mesh.status();
-    auto S = BuildVectorHodgeStiffness(*mesh);
+// On irregular, obtuse, noisy and bordered meshes of the catalogue, like real meshes.
+TEST(VectorHodgeGoldenTest, MatchesExplicitGradientMatricesOnIrregularMeshes) {
+  for (const char* name : {"NoisySphere", "ChippedTorus", "ObtuseTorus", "PolarDisk"}) {
+    const TriangleMesh mesh = CatalogueMesh(name);
+    auto S = BuildVectorHodgeStiffness(mesh);
     ASSERT_TRUE(S.ok()) << S.status();
-    const SpMat expected = LiteralVectorHodge(*mesh);
+    const SpMat expected = LiteralVectorHodge(mesh);
     EXPECT_LT(MaxAbsDiff(*S, expected), 1e-11 * MaxAbs(expected)) << name;
     // Stored pattern: one 2 x 2 block per pair of faces sharing a vertex (entries may be exact
     // zeros, e.g. where an edge lies along a frame axis), counted from the face-vertex incidence.
     std::vector<Eigen::Triplet<double>> incidence;
-    for (int f = 0; f < mesh->num_faces(); ++f) {
-      for (int k = 0; k < 3; ++k) incidence.emplace_back(f, mesh->faces()(f, k), 1.0);
+    for (int f = 0; f < mesh.num_faces(); ++f) {
+      for (int k = 0; k < 3; ++k) incidence.emplace_back(f, mesh.faces()(f, k), 1.0);
     }
-    SpMat FV(mesh->num_faces(), mesh->num_vertices());
+    SpMat FV(mesh.num_faces(), mesh.num_vertices());
     FV.setFromTriplets(incidence.begin(), incidence.end());
     const SpMat shares_vertex = FV * SpMat(FV.transpose());
     EXPECT_EQ(S->nonZeros(), 4 * shares_vertex.nonZeros()) << name;
@@ -255,41 +254,37 @@ TEST(MandelVoigtTransportTest, MatchesConjugationForGeneralMatrices) {
 }
 
 TEST(ConnectionGoldenTest, MatchesLiteralPerEdgeFormulas) {
-  for (const char* name : {"sphere_1k.obj", "chipped_torus_1k.obj", "rocker_arm_1k.off"}) {
-    FS_REQUIRE_SHARED_MESH(path, name);
-    auto mesh = LoadMesh(path);
-    ASSERT_TRUE(mesh.ok()) << mesh.status();
+  for (const char* name : {"Blob", "ChippedTorus", "ObtuseTorus", "NoisyGenus4"}) {
+    const TriangleMesh mesh = CatalogueMesh(name);
     for (int n : {1, 2, 3, 4, 6}) {
-      auto S = BuildNFieldStiffness(*mesh, n);
+      auto S = BuildNFieldStiffness(mesh, n);
       ASSERT_TRUE(S.ok()) << S.status();
-      const SpMat expected = LiteralNField(*mesh, n);
+      const SpMat expected = LiteralNField(mesh, n);
       EXPECT_LT(MaxAbsDiff(*S, expected), 1e-11 * MaxAbs(expected)) << name << " n = " << n;
     }
-    auto T = BuildTensorStiffness(*mesh);
+    auto T = BuildTensorStiffness(mesh);
     ASSERT_TRUE(T.ok()) << T.status();
-    const SpMat expected = LiteralTensor(*mesh);
+    const SpMat expected = LiteralTensor(mesh);
     EXPECT_LT(MaxAbsDiff(*T, expected), 1e-11 * MaxAbs(expected)) << name;
   }
 }
 
 TEST(FieldOperatorTest, BuildsEveryTypeWithMass) {
-  FS_REQUIRE_SHARED_MESH(path, "chipped_torus_1k.obj");
-  auto mesh = LoadMesh(path);
-  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  const TriangleMesh mesh = CatalogueMesh("ChippedTorus");
   for (FieldType type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
-    auto op = BuildFieldOperator(*mesh, type);
+    auto op = BuildFieldOperator(mesh, type);
     ASSERT_TRUE(op.ok()) << op.status();
     const int p = type.dofs_per_face();
     EXPECT_EQ(op->type, type);
-    EXPECT_EQ(op->dofs(), p * mesh->num_faces());
+    EXPECT_EQ(op->dofs(), p * mesh.num_faces());
     EXPECT_EQ(op->stiffness.rows(), op->dofs());
-    for (int f = 0; f < mesh->num_faces(); ++f) {
-      for (int c = 0; c < p; ++c) EXPECT_EQ(op->mass[p * f + c], mesh->face_areas()[f]);
+    for (int f = 0; f < mesh.num_faces(); ++f) {
+      for (int c = 0; c < p; ++c) EXPECT_EQ(op->mass[p * f + c], mesh.face_areas()[f]);
     }
   }
-  auto bad = BuildFieldOperator(*mesh, FieldType::NField(0));
+  auto bad = BuildFieldOperator(mesh, FieldType::NField(0));
   EXPECT_THAT(bad, StatusIs(absl::StatusCode::kInvalidArgument));
-  auto bad_n = BuildNFieldStiffness(*mesh, 65);
+  auto bad_n = BuildNFieldStiffness(mesh, 65);
   EXPECT_THAT(bad_n, StatusIs(absl::StatusCode::kInvalidArgument));
 }
 

@@ -10,7 +10,6 @@
 #include "Eigen/SparseCore"
 #include "core/linalg/eigensolver.h"
 #include "core/linalg/sparse_checks.h"
-#include "core/mesh/mesh_io.h"
 #include "core/mesh/shapes.h"
 #include "core/operators/conversions.h"
 #include "core/operators/field_operator.h"
@@ -28,7 +27,8 @@ namespace {
 
 using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
-using ::fieldspace::testing::LoadMesh;
+using ::fieldspace::testing::CatalogueArrays;
+using ::fieldspace::testing::CatalogueMesh;
 using ::fieldspace::testing::MaxAbs;
 using ::fieldspace::testing::MaxAbsDiff;
 using ::fieldspace::testing::MustBuildOperator;
@@ -51,15 +51,13 @@ double Scale(const FieldOperator& op) {
   return m;
 }
 
-TEST(OperatorPropertiesTest, SymmetricPsdPositiveMassOnRealMeshes) {
-  for (const char* name :
-       {"sphere_1k.obj", "chipped_torus_1k.obj", "rocker_arm_1k.off", "blade_16k.off"}) {
-    FS_REQUIRE_SHARED_MESH(path, name);
-    auto mesh = LoadMesh(path);
-    ASSERT_TRUE(mesh.ok()) << mesh.status();
+// On the irregular, obtuse, noisy and bordered meshes of the catalogue (what real meshes are like).
+TEST(OperatorPropertiesTest, SymmetricPsdPositiveMassOnIrregularMeshes) {
+  for (const char* name : {"NoisySphere", "ChippedTorus", "ObtuseTorus", "Cylinder"}) {
+    const TriangleMesh mesh = CatalogueMesh(name);
     for (FieldType type : {FieldType::Vector(), FieldType::NField(3), FieldType::Tensor()}) {
       SCOPED_TRACE(std::string(name) + " " + type.ToString());
-      const FieldOperator op = MustBuildOperator(*mesh, type);
+      const FieldOperator op = MustBuildOperator(mesh, type);
       // Bitwise symmetric (the assembly mirrors blocks exactly).
       EXPECT_TRUE(CheckSymmetric(op.stiffness, 0.0, "S").ok());
       EXPECT_TRUE(op.stiffness.isCompressed());
@@ -122,8 +120,8 @@ TEST(OperatorPropertiesTest, DensePsdCheckOnSmallShapes) {
 }
 
 // The vector Hodge Laplacian of a closed surface has a kernel of dimension exactly 2 g (the
-// harmonic fields), on every closed mesh of the catalogue: shapes built in code in every checkout
-// (genus 0, 1, 2 and two components), the shared meshes where present.
+// harmonic fields), on every closed mesh of the catalogue: genus 0 to 5, regular, irregular,
+// obtuse and noisy, and two components.
 class VectorHodgeKernelTest : public testing::MeshCaseTest {};
 
 TEST_P(VectorHodgeKernelTest, DimensionIsTwiceTheGenus) {
@@ -147,11 +145,8 @@ TEST_P(VectorHodgeKernelTest, DimensionIsTwiceTheGenus) {
   std::printf("\n");
 }
 
-INSTANTIATE_TEST_SUITE_P(BuiltIn, VectorHodgeKernelTest,
-                         ::testing::ValuesIn(testing::ClosedMeshCases(testing::BuiltInMeshCases())),
-                         testing::MeshCaseName);
-INSTANTIATE_TEST_SUITE_P(Shared, VectorHodgeKernelTest,
-                         ::testing::ValuesIn(testing::ClosedMeshCases(testing::SharedMeshCases())),
+INSTANTIATE_TEST_SUITE_P(Catalogue, VectorHodgeKernelTest,
+                         ::testing::ValuesIn(testing::ClosedMeshCases(testing::MeshCatalogue())),
                          testing::MeshCaseName);
 
 TEST(VectorHodgeTest, UnitSphereSpectrumConvergesToLTimesLPlusOne) {
@@ -218,31 +213,29 @@ TEST(NFieldTest, FourFieldOnSphereHasNoKernel) {
 }
 
 TEST(TensorTest, SpectrumIsUnionOfScalarAndTwoFieldSpectra) {
-  FS_REQUIRE_SHARED_MESH(path, "bimba_1k.off");
-  auto mesh = LoadMesh(path);
-  ASSERT_TRUE(mesh.ok()) << mesh.status();
-  const FieldOperator tensor = MustBuildOperator(*mesh, FieldType::Tensor());
-  const FieldOperator two = MustBuildOperator(*mesh, FieldType::NField(2));
+  const TriangleMesh mesh = CatalogueMesh("Blob");
+  const FieldOperator tensor = MustBuildOperator(mesh, FieldType::Tensor());
+  const FieldOperator two = MustBuildOperator(mesh, FieldType::NField(2));
   // Scalar face Laplacian with the same weights w_e = 3 |e|^2 / (A_i + A_j), built here.
   std::vector<Eigen::Triplet<double>> t;
-  for (int e = 0; e < mesh->num_edges(); ++e) {
-    const int i = mesh->edge_faces()(e, 0), j = mesh->edge_faces()(e, 1);
+  for (int e = 0; e < mesh.num_edges(); ++e) {
+    const int i = mesh.edge_faces()(e, 0), j = mesh.edge_faces()(e, 1);
     if (j == kNoFace) continue;
     const double len2 =
-        (mesh->vertices().row(mesh->edges()(e, 1)) - mesh->vertices().row(mesh->edges()(e, 0)))
+        (mesh.vertices().row(mesh.edges()(e, 1)) - mesh.vertices().row(mesh.edges()(e, 0)))
             .squaredNorm();
-    const double w = 3 * len2 / (mesh->face_areas()[i] + mesh->face_areas()[j]);
+    const double w = 3 * len2 / (mesh.face_areas()[i] + mesh.face_areas()[j]);
     t.emplace_back(i, i, w);
     t.emplace_back(j, j, w);
     t.emplace_back(i, j, -w);
     t.emplace_back(j, i, -w);
   }
-  SpMat scalar(mesh->num_faces(), mesh->num_faces());
+  SpMat scalar(mesh.num_faces(), mesh.num_faces());
   scalar.setFromTriplets(t.begin(), t.end());
 
   const int count = 24;
   const EigenResult rt = Lowest(tensor.stiffness, tensor.mass, count);
-  const EigenResult rs = Lowest(scalar, mesh->face_areas(), count);
+  const EigenResult rs = Lowest(scalar, mesh.face_areas(), count);
   const EigenResult r2 = Lowest(two.stiffness, two.mass, count);
   std::vector<double> merged(rs.values.data(), rs.values.data() + count);
   merged.insert(merged.end(), r2.values.data(), r2.values.data() + count);
@@ -252,7 +245,7 @@ TEST(TensorTest, SpectrumIsUnionOfScalarAndTwoFieldSpectra) {
 
   // Entrywise: in per-face coordinates (t, d1, d2) = ((a11 + a22)/sqrt2, (a11 - a22)/sqrt2,
   // sqrt2 a12) the tensor stiffness is exactly blockdiag(scalar, 2-field).
-  const int nf = mesh->num_faces();
+  const int nf = mesh.num_faces();
   std::vector<Eigen::Triplet<double>> q;
   const double h = std::sqrt(0.5);
   for (int f = 0; f < nf; ++f) {
@@ -321,16 +314,14 @@ SpMat FrameChange(const TriangleMesh& a, const TriangleMesh& b, FieldType type) 
 }
 
 TEST(FrameIndependenceTest, CyclicVertexOrderOnlyRotatesTheDofs) {
-  FS_REQUIRE_SHARED_MESH(path, "bimba_1k.off");
-  auto read = ReadMeshFile(path);
-  ASSERT_TRUE(read.ok()) << read.status();
-  MeshArrays permuted = read->arrays;
+  const MeshArrays arrays = CatalogueArrays("NoisySphere");
+  MeshArrays permuted = arrays;
   for (int f = 0; f < permuted.faces.rows(); ++f) {
     const Eigen::RowVector3i c = permuted.faces.row(f);
     const int r = f % 3;
     permuted.faces.row(f) << c[r], c[(r + 1) % 3], c[(r + 2) % 3];
   }
-  const TriangleMesh a = MustCreate(read->arrays);
+  const TriangleMesh a = MustCreate(arrays);
   const TriangleMesh b = MustCreate(permuted);
   for (FieldType type :
        {FieldType::Vector(), FieldType::NField(1), FieldType::NField(4), FieldType::Tensor()}) {

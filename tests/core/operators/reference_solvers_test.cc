@@ -29,7 +29,6 @@ FieldConstraint Hard(int32_t face, Eigen::VectorXd value) {
 
 using ::fieldspace::testing::StatusIs;
 using SpMat = Eigen::SparseMatrix<double>;
-using ::fieldspace::testing::LoadMesh;
 using ::fieldspace::testing::MaxAbs;
 using ::fieldspace::testing::MaxAbsDiff;
 using ::fieldspace::testing::MustCreate;
