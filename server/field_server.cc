@@ -1,6 +1,8 @@
 #include "server/field_server.h"
 
+#include <arpa/inet.h>
 #include <netdb.h>
+#include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -14,7 +16,6 @@
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_split.h"
 #include "core/common/status_macros.h"
 #include "grpc/grpc.h"
 #include "grpc/health/v1/health.pb.h"
@@ -82,10 +83,18 @@ bool IsLoopbackListenAddress(const std::string& listen) {
   std::string host;
   int port;
   if (!SplitHostPort(listen, &host, &port)) return false;
-  if (host == "localhost" || host == "::1") return true;
-  std::vector<std::string> parts = absl::StrSplit(host, '.');
-  int first;
-  return parts.size() == 4 && absl::SimpleAtoi(parts[0], &first) && first == 127;
+  if (host == "localhost") return true;
+  // Literal addresses only, parsed in full: a host name such as "127.example.com" is not one
+  // (inet_pton takes exactly the dotted-quad form, so "127.1" or "127.0.0.1.nip.io" fail too).
+  in_addr v4;
+  if (::inet_pton(AF_INET, host.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+  in6_addr v6;
+  if (::inet_pton(AF_INET6, host.c_str(), &v6) == 1) {
+    if (IN6_IS_ADDR_LOOPBACK(&v6)) return true;
+    // ::ffff:127.x.y.z, an IPv4 loopback address in IPv6 form.
+    return IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127;
+  }
+  return false;
 }
 
 absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServerOptions& options) {

@@ -14,6 +14,7 @@ class FieldService;
 // UploadMesh (raw: UploadMeshRequest in, MeshInfo out): accumulates in-order chunks, then parses
 // and registers the mesh on the pool.
 grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
+                                                            grpc::CallbackServerContext* context,
                                                             grpc::ByteBuffer* response);
 
 // GetMeshGeometry and Lift: chunks produced on the pool.

@@ -13,16 +13,28 @@
 #include "server/reactors.h"
 #include "server/rpc_util.h"
 
+// gRPC (1.51) hands a message whose compressed flag is set, on a call that declared no message
+// encoding, to the application as if it were not compressed, where the gRPC protocol calls it an
+// error; only this accessor of the call's last message flags tells. It is exported by libgrpc but
+// declared in a header gRPC does not install (src/core/lib/surface/call_test_only.h).
+uint32_t grpc_call_test_only_get_message_flags(grpc_call* call);
+
 namespace fieldspace::server {
 namespace {
 
+// The flag bit gRPC sets on a received message whose compressed flag was set
+// (GRPC_WRITE_INTERNAL_COMPRESS of src/core/lib/transport/transport.h).
+constexpr uint32_t kMessageCompressedFlag = 0x80000000u;
+
 // UploadMesh: accumulates in-order chunks, then parses and registers on the pool. Raw: a message
 // that does not parse ends the upload with INVALID_ARGUMENT (a typed stream would see it as the
-// end of the upload and store what came before).
+// end of the upload and store what came before). Only a clean half-close after well-formed
+// messages commits: a cancelled call, a reset stream or a closed connection stores nothing (End).
 class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
  public:
-  UploadReactor(FieldService* service, grpc::ByteBuffer* response)
-      : service_(service), response_(response) {
+  UploadReactor(FieldService* service, grpc::CallbackServerContext* context,
+                grpc::ByteBuffer* response)
+      : service_(service), context_(context), response_(response) {
     if (absl::Status admit = service->Admit(); !admit.ok()) {
       FinishWith(this, admit);
       return;
@@ -38,7 +50,16 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     // Guarded: a header whose announced size cannot be reserved (bad_alloc, length_error) used
     // to throw out of this callback, which left the call unfinished and blocked shutdown.
     if (absl::Status st = Guarded([this]() -> absl::Status {
-          RETURN_IF_ERROR(ParseStreamMessage(&message_, "UploadMesh", ++messages_, &request_));
+          ++messages_;
+          if ((grpc_call_test_only_get_message_flags(context_->c_call()) &
+               kMessageCompressedFlag) != 0 &&
+              context_->client_metadata().count("grpc-encoding") == 0) {
+            return absl::InvalidArgumentError(absl::StrCat(
+                "message ", messages_,
+                " of the UploadMesh stream is flagged compressed, but the call declared no "
+                "grpc-encoding"));
+          }
+          RETURN_IF_ERROR(ParseStreamMessage(&message_, "UploadMesh", messages_, &request_));
           return Accept();
         });
         !st.ok()) {
@@ -144,12 +165,29 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
                                                                 header_.total_bytes()))));
       return;
     }
+    // A failed read is also what a reset stream, a closed connection or a message gRPC refused
+    // (say, a compressed one on a call without compression) look like: only a stream that is
+    // still open towards the client was half-closed cleanly. Sending the response headers tells:
+    // the transport fails them on a stream it has closed (it closes the stream in the same step
+    // that fails the read, so this answer is not racy).
+    StartSendInitialMetadata();
+  }
+
+  void OnSendInitialMetadataDone(bool ok) override {
+    if (!ok || cancelled_.load()) {
+      FinishWith(this, Aborted());
+      return;
+    }
     const bool submitted = service_->pool()->Submit(ComputePool::Lane::kInteractive, [this] {
-      absl::Status status = cancelled_.load() ? absl::CancelledError("upload cancelled")
-                                              : Guarded([this] { return Register(); });
-      FinishWith(this, (status));
+      FinishWith(this, Guarded([this] { return Register(); }));
     });
     if (!submitted) FinishWith(this, (ShuttingDown()));
+  }
+
+  static absl::Status Aborted() {
+    return absl::CancelledError(
+        "the upload was cancelled or its stream reset before the client finished it; nothing was "
+        "stored");
   }
 
   absl::Status Register() {
@@ -172,6 +210,8 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
       ASSIGN_OR_RETURN(parsed, ReadMesh(data_, format));
     }
     std::string().swap(data_);  // the parsed arrays replace the bytes
+    // The last point where a cancelled upload can be dropped.
+    if (cancelled_.load()) return Aborted();
     ASSIGN_OR_RETURN(MeshRecord record, service_->registry()->AddMesh(
                                             std::move(parsed.arrays), header_.name(),
                                             static_cast<int32_t>(parsed.polygons_triangulated)));
@@ -181,6 +221,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   }
 
   FieldService* const service_;
+  grpc::CallbackServerContext* const context_;
   grpc::ByteBuffer* const response_;
   grpc::ByteBuffer message_;
   int64_t messages_ = 0;  // read so far
@@ -195,8 +236,9 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
 }  // namespace
 
 grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
+                                                            grpc::CallbackServerContext* context,
                                                             grpc::ByteBuffer* response) {
-  return new UploadReactor(service, response);
+  return new UploadReactor(service, context, response);
 }
 
 }  // namespace fieldspace::server

@@ -528,6 +528,16 @@ TEST(FieldServerTest, LoopbackDetection) {
   EXPECT_FALSE(IsLoopbackListenAddress("[::]:50051"));
   EXPECT_FALSE(IsLoopbackListenAddress("10.0.0.1:50051"));
   EXPECT_FALSE(IsLoopbackListenAddress("127.0.0.1"));
+  // Host names that merely begin like a loopback address are not one (they resolve anywhere).
+  EXPECT_FALSE(IsLoopbackListenAddress("127.example.com:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("127.0.0.1.nip.io:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("127.a.b.c:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("127.1:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("localhost.example.com:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("128.0.0.1:50051"));
+  EXPECT_TRUE(IsLoopbackListenAddress("[::ffff:127.0.0.1]:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("[::ffff:10.0.0.1]:50051"));
+  EXPECT_FALSE(IsLoopbackListenAddress("[::2]:50051"));
 }
 
 TEST(FieldServerTest, RefusesNonLoopbackWithoutTokenAndBadOptions) {
