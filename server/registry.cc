@@ -12,6 +12,7 @@
 #include "core/basis/basis_io.h"
 #include "core/common/status_macros.h"
 #include "server/hash.h"
+#include "server/status_util.h"
 
 namespace fieldspace::server {
 namespace {
@@ -345,7 +346,8 @@ absl::StatusOr<MeshRecord> Registry::GetMeshRecord(const std::string& id) const 
   SyncMesh(id);
   std::lock_guard<std::mutex> lock(mu_);
   auto it = meshes_.find(id);
-  if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+  if (it == meshes_.end())
+    return absl::NotFoundError(absl::StrCat("no mesh with id ", ShownId(id)));
   if (!it->second.damaged.ok()) return it->second.damaged;
   return it->second.record;
 }
@@ -373,7 +375,8 @@ absl::StatusOr<std::vector<std::string>> Registry::DeleteMesh(const std::string&
   {
     std::lock_guard<std::mutex> lock(mu_);
     auto it = meshes_.find(id);
-    if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+    if (it == meshes_.end())
+      return absl::NotFoundError(absl::StrCat("no mesh with id ", ShownId(id)));
     for (const auto& [bid, e] : bases_) {
       if (e.record.key.mesh_id == id) basis_ids.push_back(bid);
     }
@@ -453,7 +456,8 @@ absl::StatusOr<std::shared_ptr<const typename E::ValueType>> Registry::GetOrLoad
 absl::StatusOr<std::shared_ptr<const TriangleMesh>> Registry::GetMesh(const std::string& id) {
   SyncMesh(id);
   return GetOrLoad<MeshEntry>(
-      meshes_, id, [&] { return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'")); },
+      meshes_, id,
+      [&] { return absl::NotFoundError(absl::StrCat("no mesh with id ", ShownId(id))); },
       [&]() -> absl::StatusOr<std::shared_ptr<const TriangleMesh>> {
         absl::StatusOr<MeshArrays> arrays = store_->LoadMesh(id);
         absl::StatusOr<TriangleMesh> mesh =
@@ -490,7 +494,7 @@ absl::StatusOr<BasisStatus> Registry::GetBasisStatus(const std::string& id) cons
     s.progress = it->second->progress();
     return s;
   }
-  return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+  return absl::NotFoundError(absl::StrCat("no basis with id ", ShownId(id)));
 }
 
 std::vector<BasisStatus> Registry::ListBases(const std::string& mesh_id_filter) const {
@@ -527,7 +531,8 @@ absl::Status Registry::DeleteBasis(const std::string& id) {
           absl::StrCat("basis ", id, " is being built; cancel the build first (CancelBuild)"));
     }
     auto it = bases_.find(id);
-    if (it == bases_.end()) return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+    if (it == bases_.end())
+      return absl::NotFoundError(absl::StrCat("no basis with id ", ShownId(id)));
     if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
     bases_.erase(it);
   }
@@ -542,7 +547,7 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std:
         if (builds_.count(id) > 0) {
           return absl::FailedPreconditionError(absl::StrCat("basis ", id, " is still being built"));
         }
-        return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+        return absl::NotFoundError(absl::StrCat("no basis with id ", ShownId(id)));
       },
       [&] { return LoadBasis(id); }, [](const ServedBasis& basis) { return basis.memory_bytes; });
 }

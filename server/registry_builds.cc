@@ -11,6 +11,7 @@
 #include "core/common/status_macros.h"
 #include "server/hash.h"
 #include "server/registry.h"
+#include "server/status_util.h"
 
 namespace fieldspace::server {
 
@@ -250,7 +251,7 @@ absl::Status Registry::CancelBuild(const std::string& basis_id) {
       return absl::FailedPreconditionError(
           absl::StrCat("basis ", basis_id, " is already built; nothing to cancel"));
     }
-    return absl::NotFoundError(absl::StrCat("no running build for basis '", basis_id, "'"));
+    return absl::NotFoundError(absl::StrCat("no running build for basis ", ShownId(basis_id)));
   }
   it->second->Cancel();
   return absl::OkStatus();

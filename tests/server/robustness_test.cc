@@ -1,6 +1,6 @@
 // Issue 22's smaller holes, unit by unit: LoadMesh's open of a FIFO or a device node under the
-// data root refuses at once instead of blocking, and the TLS certificate's validity dates are
-// checked at startup.
+// data root refuses at once instead of blocking, the TLS certificate's validity dates are checked
+// at startup, and error messages never echo a client's id (or anything) of unbounded length.
 
 #include <fcntl.h>
 #include <openssl/evp.h>
@@ -20,6 +20,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/data_root.h"
+#include "server/status_util.h"
 #include "server/tls.h"
 #include "tests/testing/matchers.h"
 
@@ -134,6 +135,30 @@ TEST(TlsValidityTest, SaysWhenTheCertificateIsOutsideItsDates) {
   EXPECT_THAT(CertificateValidityProblem(pem, now + 3 * 86400), HasSubstr("expired"));
   EXPECT_THAT(CertificateValidityProblem(pem, now - 3 * 86400), HasSubstr("not valid before"));
   EXPECT_EQ(CertificateValidityProblem("not a certificate", now), "no PEM certificate");
+}
+
+TEST(ShownIdTest, ShortIdsWholeLongOnesCut) {
+  EXPECT_EQ(ShownId("m-0123456789abcdef"), "'m-0123456789abcdef'");
+  EXPECT_EQ(ShownId(""), "''");
+  const std::string sixty_four(64, 'x');
+  EXPECT_EQ(ShownId(sixty_four), "'" + sixty_four + "'");
+  const std::string huge(60 << 20, 'y');
+  const std::string shown = ShownId(huge);
+  EXPECT_EQ(shown, "'" + std::string(64, 'y') + "\u2026' (62914560 bytes)");
+  // Never cut inside a UTF-8 sequence: 63 ASCII bytes, then 2-byte characters.
+  std::string utf8(63, 'a');
+  for (int i = 0; i < 10; ++i) utf8 += "\u00e9";
+  EXPECT_EQ(ShownId(utf8), "'" + std::string(63, 'a') + "\u2026' (83 bytes)");
+}
+
+TEST(ShownIdTest, StatusMessagesOnTheWireAreBounded) {
+  const std::string huge(10 << 20, 'z');
+  const grpc::Status status = ToGrpcStatus(absl::NotFoundError("no mesh with id '" + huge + "'"));
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_LE(status.error_message().size(), 4096u + 64u);
+  EXPECT_THAT(status.error_message(), HasSubstr("no mesh with id 'zzz"));
+  EXPECT_THAT(status.error_message(), HasSubstr("(10485778 bytes)"));
+  EXPECT_EQ(ToGrpcStatus(absl::NotFoundError("short")).error_message(), "short");
 }
 
 }  // namespace
