@@ -164,7 +164,7 @@ class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
   }
 
  private:
-  absl::Status Prepare(const std::atomic<bool>*) override {
+  absl::Status Prepare(const std::atomic<bool>* cancel) override {
     const auto start = Clock::now();
     ASSIGN_OR_RETURN(encoding_, EncodingFromProto(request_.encoding()));
     if (request_.chunk_faces() < 0) {
@@ -175,6 +175,7 @@ class CurvatureWriter final : public ChunkWriter<v1::CurvatureChunk> {
         request_.chunk_faces(),
         4 * (ValuesPerFace(FieldType::Tensor(), encoding_) + (request_.principal() ? 8 : 0)));
     ShapeOperatorOptions options;
+    options.cancel = cancel;
     ASSIGN_OR_RETURN(options.estimator, EstimatorFromProto(request_.estimator()));
     ASSIGN_OR_RETURN(mesh_, service()->registry()->GetMesh(request_.mesh_id()));
     ASSIGN_OR_RETURN(grant_, service()->registry()->AdmitWork(

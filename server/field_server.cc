@@ -113,11 +113,12 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   if (options.store_dir.empty()) return absl::InvalidArgumentError("--store DIR is required");
   if (options.threads < 0 || options.memory_budget_mb < 0 || options.max_message_mb < 1 ||
       options.max_message_mb > 2047 || options.max_upload_mb < 1 || options.max_dimension < 1 ||
-      options.design_verify_interval < 1 || options.max_design_sessions < 1) {
+      options.design_verify_interval < 1 || options.max_design_sessions < 1 ||
+      options.max_queued_builds < 1 || options.upload_idle_seconds < 0) {
     return absl::InvalidArgumentError(
         "bad limits: --threads >= 0, --memory-budget-mb >= 0, 1 <= --max-message-mb <= 2047, "
         "--max-upload-mb >= 1, --max-dimension >= 1, --design-verify-every >= 1, "
-        "--max-design-sessions >= 1");
+        "--max-design-sessions >= 1, --max-queued-builds >= 1, --upload-idle-seconds >= 0");
   }
   // Before the store and the port: a bad certificate must not leave a half-started daemon.
   ASSIGN_OR_RETURN(const std::shared_ptr<grpc::ServerCredentials> credentials,
@@ -158,6 +159,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   registry_options.memory_budget_bytes = options.memory_budget_mb << 20;
   registry_options.build_threads = threads;
   registry_options.max_dimension = options.max_dimension;
+  registry_options.max_queued_builds = options.max_queued_builds;
   registry_options.shared_store = options.store_lock == StoreLockMode::kShared;
   registry_options.daemon_id = options.daemon_id;
   registry_options.lease = options.lease;
@@ -170,6 +172,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   service_options.max_message_bytes = options.max_message_mb << 20;
   service_options.design_verify_interval = options.design_verify_interval;
   service_options.max_design_sessions = options.max_design_sessions;
+  service_options.upload_idle_timeout = std::chrono::seconds(options.upload_idle_seconds);
   s->service_ = std::make_unique<FieldService>(s->registry_.get(), s->pool_.get(), service_options);
 
   // Link the health proto's descriptors into the generated pool so that reflection can describe

@@ -83,7 +83,7 @@ template <typename E>
 void Registry::DropLocked(std::map<std::string, E>& entries,
                           typename std::map<std::string, E>::iterator it) const {
   // Sessions and requests that hold the loaded copy keep it until they let go.
-  if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+  if (it->second.loaded != nullptr) ReleaseLocked(it->second.loaded, it->second.bytes);
   entries.erase(it);
 }
 
@@ -216,10 +216,30 @@ absl::StatusOr<std::unique_ptr<Lease>> Registry::AwaitBuildLease(BuildJob& job,
 
 int64_t Registry::memory_in_use() const {
   std::lock_guard<std::mutex> lock(mu_);
+  SweepReleasedLocked();
   return memory_in_use_;
 }
 
+void Registry::ReleaseLocked(std::shared_ptr<const void> loaded, int64_t bytes) const {
+  if (loaded.use_count() > 1) {
+    released_in_use_.emplace_back(loaded, bytes);
+  } else {
+    memory_in_use_ -= bytes;
+  }
+}
+
+void Registry::SweepReleasedLocked() const {
+  auto gone =
+      std::remove_if(released_in_use_.begin(), released_in_use_.end(), [this](const auto& held) {
+        if (!held.first.expired()) return false;
+        memory_in_use_ -= held.second;
+        return true;
+      });
+  released_in_use_.erase(gone, released_in_use_.end());
+}
+
 void Registry::EvictLocked() {
+  SweepReleasedLocked();
   while (memory_in_use_ + work_in_use_ > options_.memory_budget_bytes) {
     // Least recently used idle artifact: bases first among equals, as a loaded basis pins its
     // mesh (so the mesh becomes idle only after its bases went).
@@ -390,10 +410,10 @@ absl::StatusOr<std::vector<std::string>> Registry::DeleteMesh(const std::string&
     }
     for (const std::string& bid : basis_ids) {
       BasisEntry& e = bases_[bid];
-      if (e.loaded != nullptr) memory_in_use_ -= e.bytes;
+      if (e.loaded != nullptr) ReleaseLocked(e.loaded, e.bytes);
       bases_.erase(bid);
     }
-    if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+    if (it->second.loaded != nullptr) ReleaseLocked(it->second.loaded, it->second.bytes);
     meshes_.erase(it);
   }
   for (auto& job : jobs) job->Cancel();
@@ -533,7 +553,7 @@ absl::Status Registry::DeleteBasis(const std::string& id) {
     auto it = bases_.find(id);
     if (it == bases_.end())
       return absl::NotFoundError(absl::StrCat("no basis with id ", ShownId(id)));
-    if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+    if (it->second.loaded != nullptr) ReleaseLocked(it->second.loaded, it->second.bytes);
     bases_.erase(it);
   }
   return store_->DeleteBasis(id);

@@ -124,6 +124,12 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
     out.joined = true;
     return out;
   }
+  if (static_cast<int64_t>(builds_.size()) >= options_.max_queued_builds) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("the server has ", builds_.size(),
+                     " basis builds running or queued, its maximum (--max-queued-builds); retry "
+                     "when one has finished"));
+  }
   ASSIGN_OR_RETURN(
       WorkGrant grant,
       AdmitWorkLocked(EstimateBuildPeakBytes(

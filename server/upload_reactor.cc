@@ -4,11 +4,15 @@
 #include <atomic>
 #include <cstdint>
 #include <cstring>
+#include <memory>
+#include <mutex>
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "absl/time/time.h"
 #include "core/common/status_macros.h"
 #include "core/mesh/mesh_io.h"
+#include "grpcpp/alarm.h"
 #include "server/proto_convert.h"
 #include "server/reactors.h"
 #include "server/rpc_util.h"
@@ -30,19 +34,39 @@ constexpr uint32_t kMessageCompressedFlag = 0x80000000u;
 // that does not parse ends the upload with INVALID_ARGUMENT (a typed stream would see it as the
 // end of the upload and store what came before). Only a clean half-close after well-formed
 // messages commits: a cancelled call, a reset stream or a closed connection stores nothing (End).
-class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
+//
+// An upload idle for options().upload_idle_timeout (no message, before the client has closed its
+// side) is ended with DEADLINE_EXCEEDED: its memory reservation is released and nothing is stored.
+// The idle alarm holds a reference (RefCounted): OnDone cancels it, and the reactor is deleted
+// once both gRPC and the alarm are done with it. Every end of the call goes through FinishOnce,
+// since the alarm may end it while a read is in flight.
+class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, public RefCounted {
  public:
   UploadReactor(FieldService* service, grpc::CallbackServerContext* context,
                 grpc::ByteBuffer* response)
-      : service_(service), context_(context), response_(response) {
+      : service_(service),
+        context_(context),
+        response_(response),
+        idle_timeout_(service->options().upload_idle_timeout) {
     if (absl::Status admit = service->Admit(); !admit.ok()) {
-      FinishWith(this, admit);
+      FinishOnce(admit);
       return;
+    }
+    if (idle_timeout_ > Clock::duration::zero()) {
+      std::lock_guard<std::mutex> lock(mu_);
+      last_message_ = Clock::now();
+      ArmIdleAlarmLocked(last_message_ + idle_timeout_);
     }
     StartRead(&message_);
   }
 
   void OnReadDone(bool ok) override {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (finished_) return;  // the idle alarm ended the call while this read was in flight
+      last_message_ = Clock::now();
+      if (!ok) input_done_ = true;
+    }
     if (!ok) {
       End();
       return;
@@ -63,13 +87,63 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
           return Accept();
         });
         !st.ok()) {
-      FinishWith(this, st);
+      FinishOnce(st);
       return;
     }
     StartRead(&message_);
   }
   void OnCancel() override { cancelled_.store(true); }
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      done_ = true;
+      if (idle_alarm_ != nullptr) idle_alarm_->Cancel();  // its callback drops its reference
+    }
+    DropRef();
+  }
+
+ private:
+  // Ends the call with `status` unless it has been ended already.
+  void FinishOnce(const absl::Status& status) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (finished_) return;
+      finished_ = true;
+    }
+    FinishWith(this, status);
+  }
+
+  void ArmIdleAlarmLocked(Clock::time_point due) {
+    AddRef();
+    // A new alarm each time: one cannot be set again from its own callback. Replacing the one
+    // whose callback runs is safe (gRPC holds the running alarm until its callback returns).
+    idle_alarm_ = std::make_unique<grpc::Alarm>();
+    idle_alarm_->Set(
+        std::chrono::system_clock::now() +
+            std::chrono::duration_cast<std::chrono::system_clock::duration>(due - Clock::now()),
+        [this](bool fired) { OnIdleAlarm(fired); });
+  }
+
+  void OnIdleAlarm(bool fired) {
+    bool expired = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (fired && !done_ && !finished_ && !input_done_) {
+        const Clock::time_point due = last_message_ + idle_timeout_;
+        if (Clock::now() >= due) {
+          expired = true;
+        } else {
+          ArmIdleAlarmLocked(due);
+        }
+      }
+    }
+    if (expired) {
+      FinishOnce(absl::DeadlineExceededError(absl::StrCat(
+          "no UploadMesh message for ", absl::FormatDuration(absl::FromChrono(idle_timeout_)),
+          " (the server's --upload-idle-seconds): the upload was abandoned and nothing stored")));
+    }
+    DropRef();
+  }
 
  private:
   absl::Status Accept() {
@@ -156,13 +230,13 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
 
   void End() {
     if (!have_header_) {
-      FinishWith(this, (absl::InvalidArgumentError("empty upload: no header was sent")));
+      FinishOnce(absl::InvalidArgumentError("empty upload: no header was sent"));
       return;
     }
     if (header_.total_bytes() > 0 && header_.total_bytes() != data_.size()) {
-      FinishWith(this, (absl::InvalidArgumentError(absl::StrCat("upload ended after ", data_.size(),
-                                                                " bytes; the header announced ",
-                                                                header_.total_bytes()))));
+      FinishOnce(absl::InvalidArgumentError(absl::StrCat("upload ended after ", data_.size(),
+                                                         " bytes; the header announced ",
+                                                         header_.total_bytes())));
       return;
     }
     // A failed read is also what a reset stream, a closed connection or a message gRPC refused
@@ -175,13 +249,13 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
 
   void OnSendInitialMetadataDone(bool ok) override {
     if (!ok || cancelled_.load()) {
-      FinishWith(this, Aborted());
+      FinishOnce(Aborted());
       return;
     }
     const bool submitted = service_->pool()->Submit(ComputePool::Lane::kInteractive, [this] {
-      FinishWith(this, Guarded([this] { return Register(); }));
+      FinishOnce(Guarded([this] { return Register(); }));
     });
-    if (!submitted) FinishWith(this, (ShuttingDown()));
+    if (!submitted) FinishOnce(ShuttingDown());
   }
 
   static absl::Status Aborted() {
@@ -231,6 +305,13 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   std::string data_;
   WorkGrant grant_;  // the upload's admitted memory (Admit)
   std::atomic<bool> cancelled_{false};
+  const Clock::duration idle_timeout_;  // zero: none
+  std::mutex mu_;                       // guards the members below
+  Clock::time_point last_message_;      // when the last message (or the end of input) came
+  bool input_done_ = false;             // the last read has completed (the client's side ended)
+  bool finished_ = false;               // FinishOnce has been called
+  bool done_ = false;                   // OnDone has run
+  std::unique_ptr<grpc::Alarm> idle_alarm_;
 };
 
 }  // namespace
