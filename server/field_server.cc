@@ -114,16 +114,19 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   if (options.threads < 0 || options.memory_budget_mb < 0 || options.max_message_mb < 1 ||
       options.max_message_mb > 2047 || options.max_upload_mb < 1 || options.max_dimension < 1 ||
       options.design_verify_interval < 1 || options.max_design_sessions < 1 ||
-      options.max_queued_builds < 1 || options.upload_idle_seconds < 0) {
+      options.max_queued_builds < 1 || options.upload_idle_seconds < 0 ||
+      options.max_open_watches < 1) {
     return absl::InvalidArgumentError(
         "bad limits: --threads >= 0, --memory-budget-mb >= 0, 1 <= --max-message-mb <= 2047, "
         "--max-upload-mb >= 1, --max-dimension >= 1, --design-verify-every >= 1, "
-        "--max-design-sessions >= 1, --max-queued-builds >= 1, --upload-idle-seconds >= 0");
+        "--max-design-sessions >= 1, --max-queued-builds >= 1, --upload-idle-seconds >= 0, "
+        "--max-open-watches >= 1");
   }
   // Before the store and the port: a bad certificate must not leave a half-started daemon.
   ASSIGN_OR_RETURN(const std::shared_ptr<grpc::ServerCredentials> credentials,
                    MakeServerCredentials(options.tls));
-  if (!options.auth_token.empty()) RequireBearerToken(*credentials, options.auth_token);
+  auto watches = std::make_shared<OpenWatches>(options.max_open_watches);
+  if (!options.auth_token.empty()) RequireBearerToken(*credentials, options.auth_token, watches);
 
   std::unique_ptr<FieldServer> s(new FieldServer());
   s->options_ = options;
@@ -192,6 +195,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
     std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
         interceptors;
     interceptors.push_back(NewParseFailureInterceptorFactory());
+    interceptors.push_back(NewWatchCounterFactory(watches));
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
   }
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_mb << 20));
