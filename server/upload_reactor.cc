@@ -94,6 +94,10 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, pu
   }
   void OnCancel() override { cancelled_.store(true); }
   void OnDone() override {
+    // Released now, not at deletion (which may wait for the alarm's callback, after the server
+    // and its registry are gone).
+    grant_ = WorkGrant();
+    std::string().swap(data_);
     {
       std::lock_guard<std::mutex> lock(mu_);
       done_ = true;
