@@ -149,6 +149,7 @@ class CurvatureStream final : public ChunkStream<v1::CurvatureChunk> {
         request.chunk_faces(),
         4 * (ValuesPerFace(FieldType::Tensor(), encoding_) + (principal_wanted_ ? 8 : 0)));
     ShapeOperatorOptions options;
+    options.cancel = ctx.cancel;
     ASSIGN_OR_RETURN(options.estimator, EstimatorFromProto(request.estimator()));
     ASSIGN_OR_RETURN(mesh_, ctx.GetMesh(request.mesh_id()));
     ASSIGN_OR_RETURN(

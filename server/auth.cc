@@ -3,6 +3,7 @@
 #include <utility>
 
 #include "absl/strings/match.h"  // EqualsIgnoreCase
+#include "absl/strings/str_cat.h"
 #include "grpc/grpc_security.h"
 #include "grpcpp/security/auth_metadata_processor.h"
 #include "grpcpp/security/server_credentials.h"
@@ -12,19 +13,29 @@ namespace {
 
 // Checks the token of every call but the open methods; runs inline on gRPC's thread (it neither
 // blocks nor allocates much).
+constexpr char kWatchMethod[] = "/grpc.health.v1.Health/Watch";
+
 class BearerTokenProcessor final : public grpc::AuthMetadataProcessor {
  public:
-  explicit BearerTokenProcessor(std::string token) : token_(std::move(token)) {}
+  BearerTokenProcessor(std::string token, std::shared_ptr<OpenWatches> watches)
+      : token_(std::move(token)), watches_(std::move(watches)) {}
 
   bool IsBlocking() const override { return false; }
 
   grpc::Status Process(const InputMetadata& metadata, grpc::AuthContext*, OutputMetadata*,
                        OutputMetadata*) override {
     const auto path = metadata.find(":path");
-    if (path != metadata.end() &&
-        IsOpenMethod(std::string_view(path->second.data(), path->second.size()))) {
-      return grpc::Status::OK;
+    const std::string_view method =
+        path == metadata.end() ? std::string_view()
+                               : std::string_view(path->second.data(), path->second.size());
+    if (method == kWatchMethod && watches_ != nullptr &&
+        watches_->open.load() >= watches_->max_open) {
+      return grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                          absl::StrCat("the server has its maximum of ", watches_->max_open,
+                                       " open health watches (--max-open-watches); use Check, or "
+                                       "retry later"));
     }
+    if (IsOpenMethod(method)) return grpc::Status::OK;
     const auto header = metadata.find("authorization");
     std::string_view value;
     if (header != metadata.end())
@@ -37,6 +48,36 @@ class BearerTokenProcessor final : public grpc::AuthMetadataProcessor {
 
  private:
   const std::string token_;
+  const std::shared_ptr<OpenWatches> watches_;
+};
+
+// Counts a Health/Watch stream from its dispatch until gRPC destroys the call's interceptors.
+class WatchCounter final : public grpc::experimental::Interceptor {
+ public:
+  explicit WatchCounter(std::shared_ptr<OpenWatches> watches) : watches_(std::move(watches)) {
+    watches_->open.fetch_add(1);
+  }
+  ~WatchCounter() override { watches_->open.fetch_sub(1); }
+  void Intercept(grpc::experimental::InterceptorBatchMethods* methods) override {
+    methods->Proceed();
+  }
+
+ private:
+  const std::shared_ptr<OpenWatches> watches_;
+};
+
+class WatchCounterFactory final : public grpc::experimental::ServerInterceptorFactoryInterface {
+ public:
+  explicit WatchCounterFactory(std::shared_ptr<OpenWatches> watches)
+      : watches_(std::move(watches)) {}
+  grpc::experimental::Interceptor* CreateServerInterceptor(
+      grpc::experimental::ServerRpcInfo* info) override {
+    if (std::string_view(info->method()) != kWatchMethod) return nullptr;
+    return new WatchCounter(watches_);
+  }
+
+ private:
+  const std::shared_ptr<OpenWatches> watches_;
 };
 
 // grpc::InsecureServerCredentials() refuses a processor (it asserts), but the C core's insecure
@@ -121,8 +162,15 @@ std::shared_ptr<grpc::ServerCredentials> PlaintextServerCredentials() {
   return std::make_shared<PlaintextCredentials>();
 }
 
-void RequireBearerToken(grpc::ServerCredentials& credentials, std::string token) {
-  credentials.SetAuthMetadataProcessor(std::make_shared<BearerTokenProcessor>(std::move(token)));
+void RequireBearerToken(grpc::ServerCredentials& credentials, std::string token,
+                        std::shared_ptr<OpenWatches> watches) {
+  credentials.SetAuthMetadataProcessor(
+      std::make_shared<BearerTokenProcessor>(std::move(token), std::move(watches)));
+}
+
+std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface> NewWatchCounterFactory(
+    std::shared_ptr<OpenWatches> watches) {
+  return std::make_unique<WatchCounterFactory>(std::move(watches));
 }
 
 }  // namespace fieldspace::server

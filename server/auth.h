@@ -7,11 +7,14 @@
 // (the stream is reset after the flow-control window) or parsed. Before, the check ran in the
 // handlers, after gRPC had read and parsed up to --max-message-mb of request.
 
+#include <atomic>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <string_view>
 
 #include "absl/status/status.h"
+#include "grpcpp/support/server_interceptor.h"
 
 namespace grpc {
 class ServerCredentials;
@@ -33,10 +36,27 @@ absl::Status CheckBearerToken(std::string_view expected, const std::string_view*
 // auth metadata processor (which RequireBearerToken installs).
 std::shared_ptr<grpc::ServerCredentials> PlaintextServerCredentials();
 
+// The number of open grpc.health.v1.Health/Watch streams, which need no token: each holds memory
+// for as long as its client likes (5,000 of them took 90 MB), so RequireBearerToken refuses new
+// ones beyond `max_open` with RESOURCE_EXHAUSTED. Counted by the interceptor of
+// NewWatchCounterFactory (a stream counts from its dispatch to its end).
+struct OpenWatches {
+  explicit OpenWatches(int32_t max) : max_open(max) {}
+  const int32_t max_open;
+  std::atomic<int32_t> open{0};
+};
+
 // Makes every call on ports with `credentials` (PlaintextServerCredentials() or TLS credentials)
-// pass CheckBearerToken(token, ...) on its metadata, except the open methods. Before the server is
-// built; `token` must not be empty.
-void RequireBearerToken(grpc::ServerCredentials& credentials, std::string token);
+// pass CheckBearerToken(token, ...) on its metadata, except the open methods, and refuses
+// Health/Watch streams beyond `watches`' maximum. Before the server is built; `token` must not be
+// empty.
+void RequireBearerToken(grpc::ServerCredentials& credentials, std::string token,
+                        std::shared_ptr<OpenWatches> watches);
+
+// For ServerBuilder::experimental().SetInterceptorCreators: counts the open Health/Watch streams
+// in `watches`.
+std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface> NewWatchCounterFactory(
+    std::shared_ptr<OpenWatches> watches);
 
 }  // namespace fieldspace::server
 

@@ -16,6 +16,11 @@
 namespace fieldspace::server {
 namespace {
 
+// Non-blocking: opening a FIFO for reading would wait for a writer, on a compute thread, and a
+// device node may block too; neither is a mesh file, and the fstat after the open refuses them.
+// On a regular file O_NONBLOCK changes nothing.
+constexpr int kOpenFlags = O_RDONLY | O_CLOEXEC | O_NONBLOCK;
+
 // openat2(2) (glibc 2.36 has no wrapper); -1 with errno.
 int OpenAt2(int dir, const char* path, uint64_t flags, uint64_t resolve) {
   struct open_how how = {};
@@ -35,7 +40,7 @@ int OpenWithoutSymlinks(int root, const std::vector<std::string>& parts) {
     if (!next.is_open()) return -1;
     dir = std::move(next);
   }
-  return ::openat(dir.get(), parts.back().c_str(), O_RDONLY | O_NOFOLLOW | O_CLOEXEC);
+  return ::openat(dir.get(), parts.back().c_str(), kOpenFlags | O_NOFOLLOW);
 }
 
 }  // namespace
@@ -69,8 +74,7 @@ absl::StatusOr<ReadableFile> OpenDataFile(const std::string& root, const std::st
     return absl::FailedPreconditionError(
         absl::StrCat("the data root cannot be opened: ", std::strerror(errno)));
   }
-  int fd = OpenAt2(dir.get(), path.c_str(), O_RDONLY | O_CLOEXEC,
-                   RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS);
+  int fd = OpenAt2(dir.get(), path.c_str(), kOpenFlags, RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS);
   int err = fd < 0 ? errno : 0;
   bool strict_walk = false;
   if (fd < 0 && (err == ENOSYS || err == EPERM)) {  // no openat2 (old kernel, seccomp filter)

@@ -1,6 +1,8 @@
 #include "server/field_server.h"
 
+#include <arpa/inet.h>
 #include <netdb.h>
+#include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -82,10 +84,18 @@ bool IsLoopbackListenAddress(const std::string& listen) {
   std::string host;
   int port;
   if (!SplitHostPort(listen, &host, &port)) return false;
-  if (host == "localhost" || host == "::1") return true;
-  std::vector<std::string> parts = absl::StrSplit(host, '.');
-  int first;
-  return parts.size() == 4 && absl::SimpleAtoi(parts[0], &first) && first == 127;
+  if (host == "localhost") return true;
+  // Literal addresses only, parsed in full: a host name such as "127.example.com" is not one
+  // (inet_pton takes exactly the dotted-quad form, so "127.1" or "127.0.0.1.nip.io" fail too).
+  in_addr v4;
+  if (::inet_pton(AF_INET, host.c_str(), &v4) == 1) return (ntohl(v4.s_addr) >> 24) == 127;
+  in6_addr v6;
+  if (::inet_pton(AF_INET6, host.c_str(), &v6) == 1) {
+    if (IN6_IS_ADDR_LOOPBACK(&v6)) return true;
+    // ::ffff:127.x.y.z, an IPv4 loopback address in IPv6 form.
+    return IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127;
+  }
+  return false;
 }
 
 absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServerOptions& options) {
@@ -104,16 +114,20 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   if (options.store_dir.empty()) return absl::InvalidArgumentError("--store DIR is required");
   if (options.threads < 0 || options.memory_budget_mb < 0 || options.max_message_mb < 1 ||
       options.max_message_mb > 2047 || options.max_upload_mb < 1 || options.max_dimension < 1 ||
-      options.design_verify_interval < 1 || options.max_design_sessions < 1) {
+      options.design_verify_interval < 1 || options.max_design_sessions < 1 ||
+      options.max_queued_builds < 1 || options.upload_idle_seconds < 0 ||
+      options.max_open_watches < 1) {
     return absl::InvalidArgumentError(
         "bad limits: --threads >= 0, --memory-budget-mb >= 0, 1 <= --max-message-mb <= 2047, "
         "--max-upload-mb >= 1, --max-dimension >= 1, --design-verify-every >= 1, "
-        "--max-design-sessions >= 1");
+        "--max-design-sessions >= 1, --max-queued-builds >= 1, --upload-idle-seconds >= 0, "
+        "--max-open-watches >= 1");
   }
   // Before the store and the port: a bad certificate must not leave a half-started daemon.
   ASSIGN_OR_RETURN(const std::shared_ptr<grpc::ServerCredentials> credentials,
                    MakeServerCredentials(options.tls));
-  if (!options.auth_token.empty()) RequireBearerToken(*credentials, options.auth_token);
+  auto watches = std::make_shared<OpenWatches>(options.max_open_watches);
+  if (!options.auth_token.empty()) RequireBearerToken(*credentials, options.auth_token, watches);
 
   std::unique_ptr<FieldServer> s(new FieldServer());
   s->options_ = options;
@@ -149,6 +163,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   registry_options.memory_budget_bytes = options.memory_budget_mb << 20;
   registry_options.build_threads = threads;
   registry_options.max_dimension = options.max_dimension;
+  registry_options.max_queued_builds = options.max_queued_builds;
   registry_options.shared_store = options.store_lock == StoreLockMode::kShared;
   registry_options.daemon_id = options.daemon_id;
   registry_options.lease = options.lease;
@@ -161,6 +176,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
   service_options.max_message_bytes = options.max_message_mb << 20;
   service_options.design_verify_interval = options.design_verify_interval;
   service_options.max_design_sessions = options.max_design_sessions;
+  service_options.upload_idle_timeout = std::chrono::seconds(options.upload_idle_seconds);
   s->service_ = std::make_unique<FieldService>(s->registry_.get(), s->pool_.get(), service_options);
 
   // Link the health proto's descriptors into the generated pool so that reflection can describe
@@ -180,6 +196,7 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
     std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>
         interceptors;
     interceptors.push_back(NewParseFailureInterceptorFactory());
+    interceptors.push_back(NewWatchCounterFactory(watches));
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
   }
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_mb << 20));

@@ -35,8 +35,13 @@ struct FieldServerOptions {
   int32_t max_dimension = 8192;
   int32_t design_verify_interval = 16;  // see DesignSessionOptions::verify_interval
   int32_t max_design_sessions = 256;    // open Design streams at once; more: RESOURCE_EXHAUSTED
-  std::string auth_token;               // required from clients when not empty
-  TlsFiles tls;                         // --tls-cert, --tls-key, --tls-client-ca; none: plaintext
+  int32_t max_queued_builds = 32;       // builds running or queued; more: RESOURCE_EXHAUSTED
+  int32_t upload_idle_seconds = 60;     // an upload silent this long is ended; 0: never
+  // Open Health/Watch streams at once when a token is required (they need none); more:
+  // RESOURCE_EXHAUSTED.
+  int32_t max_open_watches = 64;
+  std::string auth_token;  // required from clients when not empty
+  TlsFiles tls;            // --tls-cert, --tls-key, --tls-client-ca; none: plaintext
   // Listening on a non-loopback address needs an auth token or client certificates
   // (tls.client_ca_file), or this explicit opt-out.
   bool insecure = false;

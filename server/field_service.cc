@@ -63,8 +63,8 @@ void FieldService::UnregisterStream(DrainableStream* stream) {
 // --- meshes ------------------------------------------------------------------------------------
 
 grpc::ServerReadReactor<grpc::ByteBuffer>* FieldService::UploadMesh(
-    grpc::CallbackServerContext* /*context*/, grpc::ByteBuffer* response) {
-  return NewUploadReactor(this, response);
+    grpc::CallbackServerContext* context, grpc::ByteBuffer* response) {
+  return NewUploadReactor(this, context, response);
 }
 
 grpc::ServerUnaryReactor* FieldService::LoadMesh(grpc::CallbackServerContext* /*context*/,

@@ -5,6 +5,7 @@
 // and tests include it).
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <mutex>
 #include <set>

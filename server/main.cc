@@ -2,7 +2,8 @@
 //
 //   fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]
 //               [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]
-//               [--max-dimension N] [--design-verify-every K] [--auth-token-file FILE]
+//               [--max-dimension N] [--design-verify-every K] [--max-queued-builds N]
+//               [--upload-idle-seconds S] [--max-open-watches N] [--auth-token-file FILE]
 //               [--tls-cert PEM --tls-key PEM [--tls-client-ca PEM]] [--insecure]
 //               [--drain-seconds S] [--shared-store [--daemon-id ID]] [--demo]
 //
@@ -33,6 +34,7 @@ constexpr char kUsage[] =
     "usage: fieldspaced --listen HOST:PORT --store DIR [--data-root DIR] [--threads N]\n"
     "                   [--memory-budget-mb N] [--max-message-mb N] [--max-upload-mb N]\n"
     "                   [--max-dimension N] [--design-verify-every K] [--max-design-sessions N]\n"
+    "                   [--max-queued-builds N] [--upload-idle-seconds S] [--max-open-watches N]\n"
     "                   [--auth-token-file FILE] [--tls-cert PEM --tls-key PEM\n"
     "                   [--tls-client-ca PEM]] [--insecure]\n"
     "                   [--drain-seconds S] [--shared-store [--daemon-id ID]] [--demo]\n"
@@ -50,6 +52,10 @@ constexpr char kUsage[] =
     "  --design-verify-every K check every K-th design edit's solution against the true\n"
     "                          system, and risky ones always (16; 1: every edit)\n"
     "  --max-design-sessions N open Design streams at once (256)\n"
+    "  --max-queued-builds N   basis builds running or queued at once (32)\n"
+    "  --upload-idle-seconds S end an upload that sends nothing for S seconds, releasing its\n"
+    "                          memory (60; 0: never)\n"
+    "  --max-open-watches N    open health Watch streams at once with --auth-token-file (64)\n"
     "  --auth-token-file FILE  clients must send 'authorization: Bearer <token>'\n"
     "  --tls-cert PEM          serve TLS with this certificate (chain: leaf first) ...\n"
     "  --tls-key PEM           ... and its private key (unencrypted)\n"
@@ -90,6 +96,9 @@ int main(int argc, char** argv) {
       {"max-dimension", &options.max_dimension},
       {"design-verify-every", &options.design_verify_interval},
       {"max-design-sessions", &options.max_design_sessions},
+      {"max-queued-builds", &options.max_queued_builds},
+      {"upload-idle-seconds", &options.upload_idle_seconds},
+      {"max-open-watches", &options.max_open_watches},
       {"debug-save-pause-ms", &options.debug_save_pause_ms}};
   fieldspace::FlagSpec spec;
   spec.switches = {"help", "demo", "insecure", "shared-store"};

@@ -15,6 +15,7 @@ class FieldService;
 // UploadMesh (raw: UploadMeshRequest in, MeshInfo out): accumulates in-order chunks, then parses
 // and registers the mesh on the pool.
 grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
+                                                            grpc::CallbackServerContext* context,
                                                             grpc::ByteBuffer* response);
 
 // BuildBasis: watches a (possibly shared) build job; the job outlives the stream.

@@ -12,6 +12,7 @@
 #include "core/basis/basis_io.h"
 #include "core/common/status_macros.h"
 #include "server/hash.h"
+#include "server/status_util.h"
 
 namespace fieldspace::server {
 namespace {
@@ -82,7 +83,7 @@ template <typename E>
 void Registry::DropLocked(std::map<std::string, E>& entries,
                           typename std::map<std::string, E>::iterator it) const {
   // Sessions and requests that hold the loaded copy keep it until they let go.
-  if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+  if (it->second.loaded != nullptr) ReleaseLocked(it->second.loaded, it->second.bytes);
   entries.erase(it);
 }
 
@@ -215,10 +216,30 @@ absl::StatusOr<std::unique_ptr<Lease>> Registry::AwaitBuildLease(BuildJob& job,
 
 int64_t Registry::memory_in_use() const {
   std::lock_guard<std::mutex> lock(mu_);
+  SweepReleasedLocked();
   return memory_in_use_;
 }
 
+void Registry::ReleaseLocked(std::shared_ptr<const void> loaded, int64_t bytes) const {
+  if (loaded.use_count() > 1) {
+    released_in_use_.emplace_back(loaded, bytes);
+  } else {
+    memory_in_use_ -= bytes;
+  }
+}
+
+void Registry::SweepReleasedLocked() const {
+  auto gone =
+      std::remove_if(released_in_use_.begin(), released_in_use_.end(), [this](const auto& held) {
+        if (!held.first.expired()) return false;
+        memory_in_use_ -= held.second;
+        return true;
+      });
+  released_in_use_.erase(gone, released_in_use_.end());
+}
+
 void Registry::EvictLocked() {
+  SweepReleasedLocked();
   while (memory_in_use_ + work_in_use_ > options_.memory_budget_bytes) {
     // Least recently used idle artifact: bases first among equals, as a loaded basis pins its
     // mesh (so the mesh becomes idle only after its bases went).
@@ -345,7 +366,8 @@ absl::StatusOr<MeshRecord> Registry::GetMeshRecord(const std::string& id) const 
   SyncMesh(id);
   std::lock_guard<std::mutex> lock(mu_);
   auto it = meshes_.find(id);
-  if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+  if (it == meshes_.end())
+    return absl::NotFoundError(absl::StrCat("no mesh with id ", ShownId(id)));
   if (!it->second.damaged.ok()) return it->second.damaged;
   return it->second.record;
 }
@@ -373,7 +395,8 @@ absl::StatusOr<std::vector<std::string>> Registry::DeleteMesh(const std::string&
   {
     std::lock_guard<std::mutex> lock(mu_);
     auto it = meshes_.find(id);
-    if (it == meshes_.end()) return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'"));
+    if (it == meshes_.end())
+      return absl::NotFoundError(absl::StrCat("no mesh with id ", ShownId(id)));
     for (const auto& [bid, e] : bases_) {
       if (e.record.key.mesh_id == id) basis_ids.push_back(bid);
     }
@@ -387,10 +410,10 @@ absl::StatusOr<std::vector<std::string>> Registry::DeleteMesh(const std::string&
     }
     for (const std::string& bid : basis_ids) {
       BasisEntry& e = bases_[bid];
-      if (e.loaded != nullptr) memory_in_use_ -= e.bytes;
+      if (e.loaded != nullptr) ReleaseLocked(e.loaded, e.bytes);
       bases_.erase(bid);
     }
-    if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+    if (it->second.loaded != nullptr) ReleaseLocked(it->second.loaded, it->second.bytes);
     meshes_.erase(it);
   }
   for (auto& job : jobs) job->Cancel();
@@ -453,7 +476,8 @@ absl::StatusOr<std::shared_ptr<const typename E::ValueType>> Registry::GetOrLoad
 absl::StatusOr<std::shared_ptr<const TriangleMesh>> Registry::GetMesh(const std::string& id) {
   SyncMesh(id);
   return GetOrLoad<MeshEntry>(
-      meshes_, id, [&] { return absl::NotFoundError(absl::StrCat("no mesh with id '", id, "'")); },
+      meshes_, id,
+      [&] { return absl::NotFoundError(absl::StrCat("no mesh with id ", ShownId(id))); },
       [&]() -> absl::StatusOr<std::shared_ptr<const TriangleMesh>> {
         absl::StatusOr<MeshArrays> arrays = store_->LoadMesh(id);
         absl::StatusOr<TriangleMesh> mesh =
@@ -490,7 +514,7 @@ absl::StatusOr<BasisStatus> Registry::GetBasisStatus(const std::string& id) cons
     s.progress = it->second->progress();
     return s;
   }
-  return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+  return absl::NotFoundError(absl::StrCat("no basis with id ", ShownId(id)));
 }
 
 std::vector<BasisStatus> Registry::ListBases(const std::string& mesh_id_filter) const {
@@ -527,8 +551,9 @@ absl::Status Registry::DeleteBasis(const std::string& id) {
           absl::StrCat("basis ", id, " is being built; cancel the build first (CancelBuild)"));
     }
     auto it = bases_.find(id);
-    if (it == bases_.end()) return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
-    if (it->second.loaded != nullptr) memory_in_use_ -= it->second.bytes;
+    if (it == bases_.end())
+      return absl::NotFoundError(absl::StrCat("no basis with id ", ShownId(id)));
+    if (it->second.loaded != nullptr) ReleaseLocked(it->second.loaded, it->second.bytes);
     bases_.erase(it);
   }
   return store_->DeleteBasis(id);
@@ -542,7 +567,7 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std:
         if (builds_.count(id) > 0) {
           return absl::FailedPreconditionError(absl::StrCat("basis ", id, " is still being built"));
         }
-        return absl::NotFoundError(absl::StrCat("no basis with id '", id, "'"));
+        return absl::NotFoundError(absl::StrCat("no basis with id ", ShownId(id)));
       },
       [&] { return LoadBasis(id); }, [](const ServedBasis& basis) { return basis.memory_bytes; });
 }

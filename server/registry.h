@@ -34,6 +34,9 @@ struct RegistryOptions {
   int64_t memory_budget_bytes = int64_t{4} << 30;
   int32_t build_threads = 0;     // passed to the basis construction; 0: all
   int32_t max_dimension = 8192;  // larger d is ResourceExhausted (dense reduced matrices are d x d)
+  // Builds running or queued at once (each holds its admitted memory while queued): a new build
+  // beyond them is ResourceExhausted (joining an identical running build is not).
+  int32_t max_queued_builds = 32;
   // Several daemons share the store (--shared-store; docs/scale-out.md): ids missing from memory
   // are looked up in the store, requests naming an id check that its file still exists (deletes
   // by other daemons), listings read the store, and a basis is built once across the daemons
@@ -168,6 +171,11 @@ class Registry final : public WorkAccount {
   // `grant`: the build's admitted working memory, released when the basis is published.
   void RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request, WorkGrant grant);
   absl::StatusOr<std::shared_ptr<const ServedBasis>> LoadBasis(const std::string& id);
+  // Stops counting a loaded artifact of `bytes` leaving the index, once nothing holds it any
+  // more (at once if nothing does now). Requires mu_.
+  void ReleaseLocked(std::shared_ptr<const void> loaded, int64_t bytes) const;
+  // Uncounts the released artifacts that nothing holds any more. Requires mu_.
+  void SweepReleasedLocked() const;
   // Drops idle loaded artifacts until memory_in_use_ + work_in_use_ <= budget. Requires mu_.
   void EvictLocked();
   absl::StatusOr<WorkGrant> AdmitWorkLocked(int64_t bytes, absl::string_view what);
@@ -185,6 +193,10 @@ class Registry final : public WorkAccount {
   std::atomic<bool> shutting_down_{false};
   std::atomic<int64_t> builds_run_{0};
   mutable int64_t memory_in_use_ = 0;
+  // Loaded meshes and bases dropped from the index (deleted) while requests or design sessions
+  // still held them: counted in memory_in_use_ until the last holder lets go (ReleaseLocked,
+  // SweepReleasedLocked).
+  mutable std::vector<std::pair<std::weak_ptr<const void>, int64_t>> released_in_use_;
   int64_t work_in_use_ = 0;  // admitted working memory of requests
   uint64_t clock_ = 0;       // LRU clock
 };

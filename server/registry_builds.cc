@@ -11,6 +11,7 @@
 #include "core/common/status_macros.h"
 #include "server/hash.h"
 #include "server/registry.h"
+#include "server/status_util.h"
 
 namespace fieldspace::server {
 
@@ -105,6 +106,12 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
     out.job = it->second;
     out.joined = true;
     return out;
+  }
+  if (static_cast<int64_t>(builds_.size()) >= options_.max_queued_builds) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("the server has ", builds_.size(),
+                     " basis builds running or queued, its maximum (--max-queued-builds); retry "
+                     "when one has finished"));
   }
   ASSIGN_OR_RETURN(
       WorkGrant grant,
@@ -233,7 +240,7 @@ absl::Status Registry::CancelBuild(const std::string& basis_id) {
       return absl::FailedPreconditionError(
           absl::StrCat("basis ", basis_id, " is already built; nothing to cancel"));
     }
-    return absl::NotFoundError(absl::StrCat("no running build for basis '", basis_id, "'"));
+    return absl::NotFoundError(absl::StrCat("no running build for basis ", ShownId(basis_id)));
   }
   it->second->Cancel();
   return absl::OkStatus();

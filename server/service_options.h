@@ -4,6 +4,7 @@
 // The limits of the FieldSpace service that requests are checked against (fieldspaced's flags).
 
 #include <algorithm>
+#include <chrono>
 #include <cstdint>
 #include <string>
 
@@ -17,6 +18,9 @@ struct ServiceOptions {
   // ones always): DesignSessionOptions::verify_interval.
   int32_t design_verify_interval = 16;
   int32_t max_design_sessions = 256;
+  // An upload with no message for this long is ended (DEADLINE_EXCEEDED) and its memory
+  // reservation released; zero: never.
+  std::chrono::steady_clock::duration upload_idle_timeout = std::chrono::seconds(60);
 
   // Bytes of payload (numbers) one response message may carry: the message limit less room for
   // the rest of the message (ids, timings, framing): 1/8 of the limit, at most 1 MiB.

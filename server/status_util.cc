@@ -6,6 +6,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_replace.h"
 
 namespace fieldspace::server {
@@ -29,7 +30,23 @@ std::string Redacted(std::string message) {
   return message;
 }
 
+constexpr size_t kMaxIdShown = 64;
+constexpr size_t kMaxMessageBytes = 4096;
+
+// Cuts `text` to at most `max` bytes (never inside a UTF-8 sequence), marking the cut with "…".
+std::string Cut(std::string_view text, size_t max) {
+  if (text.size() <= max) return std::string(text);
+  size_t end = max;
+  while (end > 0 && (static_cast<unsigned char>(text[end]) & 0xC0) == 0x80) --end;
+  return std::string(text.substr(0, end)) + "\u2026";
+}
+
 }  // namespace
+
+std::string ShownId(std::string_view id) {
+  if (id.size() <= kMaxIdShown) return "'" + std::string(id) + "'";
+  return absl::StrCat("'", Cut(id, kMaxIdShown), "' (", id.size(), " bytes)");
+}
 
 void RedactPathOnTheWire(const std::string& path, const std::string& shown) {
   if (path.empty()) return;
@@ -51,7 +68,11 @@ grpc::Status ToGrpcStatus(const absl::Status& status) {
     message = "internal error (unclassified): " + message;
   }
   if (message.empty()) message = absl::StatusCodeToString(status.code());
-  return grpc::Status(code, Redacted(std::move(message)));
+  message = Redacted(std::move(message));
+  if (message.size() > kMaxMessageBytes) {
+    message = absl::StrCat(Cut(message, kMaxMessageBytes), " (", message.size(), " bytes)");
+  }
+  return grpc::Status(code, std::move(message));
 }
 
 absl::Status FromGrpcStatus(const grpc::Status& status) {

@@ -2,6 +2,7 @@
 #define FIELDSPACE_SERVER_STATUS_UTIL_H_
 
 #include <string>
+#include <string_view>
 
 #include "absl/status/status.h"
 #include "grpcpp/support/status.h"
@@ -12,8 +13,14 @@ namespace fieldspace::server {
 // numbering), except that UNKNOWN never leaves the server: an absl::UnknownError is a bug in our
 // error handling and becomes INTERNAL, so clients can rely on every failure being classified.
 // Messages are also redacted: every occurrence of a path registered with RedactPathOnTheWire is
-// replaced by its shown name, so that clients never see where the server keeps its files.
+// replaced by its shown name, so that clients never see where the server keeps its files. Messages
+// longer than 4 KiB are cut there (a header that large is refused or stalls on the way).
 grpc::Status ToGrpcStatus(const absl::Status& status);
+
+// A client-given id as error messages show it: quoted, and cut after 64 bytes ("'m-0123…' (70000
+// bytes)"), so that a message never echoes a huge id (a 60 MB id made a 60 MB grpc-message header:
+// a 20 s stall, then UNKNOWN on the client's side).
+std::string ShownId(std::string_view id);
 
 // Registers `path` (e.g. the store directory, as given and absolute) to be shown as `shown`
 // (e.g. "<store>") in every status sent to clients. Process-wide and additive (each server in a

@@ -14,6 +14,7 @@
 #include "core/common/file_util.h"
 #include "core/common/status_macros.h"
 #include "server/hash.h"
+#include "server/status_util.h"
 
 namespace fieldspace::server {
 namespace {
@@ -311,7 +312,7 @@ absl::StatusOr<OpenedFile> OpenRecordFile(const std::string& id, char prefix,
                                           bool (*decode)(std::string_view, Record*),
                                           Record* record) {
   if (!ValidId(id, prefix)) {
-    return absl::NotFoundError(absl::StrCat(prefix == 'm' ? "no mesh " : "no basis ", id));
+    return absl::NotFoundError(absl::StrCat(prefix == 'm' ? "no mesh " : "no basis ", ShownId(id)));
   }
   ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, magic));
   if (!decode(f.meta, record) || record->id != id) {

@@ -4,6 +4,8 @@
 #include <openssl/pem.h>
 #include <openssl/x509.h>
 
+#include <ctime>
+#include <iostream>
 #include <string>
 
 #include "absl/strings/str_cat.h"
@@ -62,7 +64,36 @@ absl::StatusOr<Certificate> FirstCertificate(const std::string& flag, const std:
   return cert;
 }
 
+// An ASN1 time as OpenSSL prints it ("Jan  1 00:00:00 2020 GMT").
+std::string TimeText(const ASN1_TIME* time) {
+  Bio bio(BIO_new(BIO_s_mem()));
+  if (bio == nullptr || ASN1_TIME_print(bio.get(), time) != 1) return "?";
+  char* data = nullptr;
+  const long size = BIO_get_mem_data(bio.get(), &data);
+  return std::string(data, static_cast<size_t>(size));
+}
+
 }  // namespace
+
+std::string CertificateValidityProblem(const std::string& cert_pem, int64_t now) {
+  Bio bio = MemoryBio(cert_pem);
+  const Certificate cert(PEM_read_bio_X509(bio.get(), nullptr, NoPassphrase, nullptr));
+  ERR_clear_error();
+  if (cert == nullptr) return "no PEM certificate";
+  time_t at = static_cast<time_t>(now);
+  const ASN1_TIME* not_before = X509_get0_notBefore(cert.get());
+  const ASN1_TIME* not_after = X509_get0_notAfter(cert.get());
+  const std::string dates =
+      absl::StrCat("(valid from ", TimeText(not_before), " until ", TimeText(not_after), ")");
+  // X509_cmp_time: -1 if the time is before `at`, 1 if after, 0 on error.
+  if (X509_cmp_time(not_after, &at) < 0) {
+    return absl::StrCat("the certificate expired on ", TimeText(not_after), " ", dates);
+  }
+  if (X509_cmp_time(not_before, &at) > 0) {
+    return absl::StrCat("the certificate is not valid before ", TimeText(not_before), " ", dates);
+  }
+  return "";
+}
 
 absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(
     const TlsFiles& files) {
@@ -96,6 +127,13 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(
   if (!match) {
     return absl::InvalidArgumentError(absl::StrCat(
         "--tls-key ", files.key_file, " is not the key of --tls-cert ", files.cert_file));
+  }
+
+  // Clients refuse such a certificate: say so at startup rather than leave them to find out.
+  if (const std::string problem = CertificateValidityProblem(cert_pem, std::time(nullptr));
+      !problem.empty()) {
+    std::cerr << "fieldspaced: warning: --tls-cert " << files.cert_file << ": " << problem
+              << "; TLS clients will refuse it\n";
   }
 
   grpc::SslServerCredentialsOptions options;

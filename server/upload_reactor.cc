@@ -4,34 +4,70 @@
 #include <atomic>
 #include <cstdint>
 #include <cstring>
+#include <memory>
+#include <mutex>
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "absl/time/time.h"
 #include "core/common/status_macros.h"
 #include "core/mesh/mesh_io.h"
+#include "grpcpp/alarm.h"
 #include "server/proto_convert.h"
 #include "server/reactors.h"
 #include "server/record_convert.h"
 #include "server/rpc_util.h"
 
+// gRPC (1.51) hands a message whose compressed flag is set, on a call that declared no message
+// encoding, to the application as if it were not compressed, where the gRPC protocol calls it an
+// error; only this accessor of the call's last message flags tells. It is exported by libgrpc but
+// declared in a header gRPC does not install (src/core/lib/surface/call_test_only.h).
+uint32_t grpc_call_test_only_get_message_flags(grpc_call* call);
+
 namespace fieldspace::server {
 namespace {
 
+// The flag bit gRPC sets on a received message whose compressed flag was set
+// (GRPC_WRITE_INTERNAL_COMPRESS of src/core/lib/transport/transport.h).
+constexpr uint32_t kMessageCompressedFlag = 0x80000000u;
+
 // UploadMesh: accumulates in-order chunks, then parses and registers on the pool. Raw: a message
 // that does not parse ends the upload with INVALID_ARGUMENT (a typed stream would see it as the
-// end of the upload and store what came before).
-class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
+// end of the upload and store what came before). Only a clean half-close after well-formed
+// messages commits: a cancelled call, a reset stream or a closed connection stores nothing (End).
+//
+// An upload idle for options().upload_idle_timeout (no message, before the client has closed its
+// side) is ended with DEADLINE_EXCEEDED: its memory reservation is released and nothing is stored.
+// The idle alarm holds a reference (RefCounted): OnDone cancels it, and the reactor is deleted
+// once both gRPC and the alarm are done with it. Every end of the call goes through FinishOnce,
+// since the alarm may end it while a read is in flight.
+class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, public RefCounted {
  public:
-  UploadReactor(FieldService* service, grpc::ByteBuffer* response)
-      : service_(service), response_(response) {
+  UploadReactor(FieldService* service, grpc::CallbackServerContext* context,
+                grpc::ByteBuffer* response)
+      : service_(service),
+        context_(context),
+        response_(response),
+        idle_timeout_(service->options().upload_idle_timeout) {
     if (absl::Status admit = service->Admit(); !admit.ok()) {
-      FinishWith(this, admit);
+      FinishOnce(admit);
       return;
+    }
+    if (idle_timeout_ > Clock::duration::zero()) {
+      std::lock_guard<std::mutex> lock(mu_);
+      last_message_ = Clock::now();
+      ArmIdleAlarmLocked(last_message_ + idle_timeout_);
     }
     StartRead(&message_);
   }
 
   void OnReadDone(bool ok) override {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (finished_) return;  // the idle alarm ended the call while this read was in flight
+      last_message_ = Clock::now();
+      if (!ok) input_done_ = true;
+    }
     if (!ok) {
       End();
       return;
@@ -39,17 +75,80 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     // Guarded: a header whose announced size cannot be reserved (bad_alloc, length_error) used
     // to throw out of this callback, which left the call unfinished and blocked shutdown.
     if (absl::Status st = Guarded([this]() -> absl::Status {
-          RETURN_IF_ERROR(ParseStreamMessage(&message_, "UploadMesh", ++messages_, &request_));
+          ++messages_;
+          if ((grpc_call_test_only_get_message_flags(context_->c_call()) &
+               kMessageCompressedFlag) != 0 &&
+              context_->client_metadata().count("grpc-encoding") == 0) {
+            return absl::InvalidArgumentError(absl::StrCat(
+                "message ", messages_,
+                " of the UploadMesh stream is flagged compressed, but the call declared no "
+                "grpc-encoding"));
+          }
+          RETURN_IF_ERROR(ParseStreamMessage(&message_, "UploadMesh", messages_, &request_));
           return Accept();
         });
         !st.ok()) {
-      FinishWith(this, st);
+      FinishOnce(st);
       return;
     }
     StartRead(&message_);
   }
   void OnCancel() override { cancelled_.store(true); }
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    // Released now, not at deletion (which may wait for the alarm's callback, after the server
+    // and its registry are gone).
+    grant_ = WorkGrant();
+    std::string().swap(data_);
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      done_ = true;
+      if (idle_alarm_ != nullptr) idle_alarm_->Cancel();  // its callback drops its reference
+    }
+    DropRef();
+  }
+
+ private:
+  // Ends the call with `status` unless it has been ended already.
+  void FinishOnce(const absl::Status& status) {
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (finished_) return;
+      finished_ = true;
+    }
+    FinishWith(this, status);
+  }
+
+  void ArmIdleAlarmLocked(Clock::time_point due) {
+    AddRef();
+    // A new alarm each time: one cannot be set again from its own callback. Replacing the one
+    // whose callback runs is safe (gRPC holds the running alarm until its callback returns).
+    idle_alarm_ = std::make_unique<grpc::Alarm>();
+    idle_alarm_->Set(
+        std::chrono::system_clock::now() +
+            std::chrono::duration_cast<std::chrono::system_clock::duration>(due - Clock::now()),
+        [this](bool fired) { OnIdleAlarm(fired); });
+  }
+
+  void OnIdleAlarm(bool fired) {
+    bool expired = false;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      if (fired && !done_ && !finished_ && !input_done_) {
+        const Clock::time_point due = last_message_ + idle_timeout_;
+        if (Clock::now() >= due) {
+          expired = true;
+        } else {
+          ArmIdleAlarmLocked(due);
+        }
+      }
+    }
+    if (expired) {
+      FinishOnce(absl::DeadlineExceededError(absl::StrCat(
+          "no UploadMesh message for ", absl::FormatDuration(absl::FromChrono(idle_timeout_)),
+          " (the server's --upload-idle-seconds): the upload was abandoned and nothing stored")));
+    }
+    DropRef();
+  }
 
  private:
   absl::Status Accept() {
@@ -136,21 +235,38 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
 
   void End() {
     if (!have_header_) {
-      FinishWith(this, (absl::InvalidArgumentError("empty upload: no header was sent")));
+      FinishOnce(absl::InvalidArgumentError("empty upload: no header was sent"));
       return;
     }
     if (header_.total_bytes() > 0 && header_.total_bytes() != data_.size()) {
-      FinishWith(this, (absl::InvalidArgumentError(absl::StrCat("upload ended after ", data_.size(),
-                                                                " bytes; the header announced ",
-                                                                header_.total_bytes()))));
+      FinishOnce(absl::InvalidArgumentError(absl::StrCat("upload ended after ", data_.size(),
+                                                         " bytes; the header announced ",
+                                                         header_.total_bytes())));
+      return;
+    }
+    // A failed read is also what a reset stream, a closed connection or a message gRPC refused
+    // (say, a compressed one on a call without compression) look like: only a stream that is
+    // still open towards the client was half-closed cleanly. Sending the response headers tells:
+    // the transport fails them on a stream it has closed (it closes the stream in the same step
+    // that fails the read, so this answer is not racy).
+    StartSendInitialMetadata();
+  }
+
+  void OnSendInitialMetadataDone(bool ok) override {
+    if (!ok || cancelled_.load()) {
+      FinishOnce(Aborted());
       return;
     }
     const bool submitted = service_->pool()->Submit(ComputePool::Lane::kInteractive, [this] {
-      absl::Status status = cancelled_.load() ? absl::CancelledError("upload cancelled")
-                                              : Guarded([this] { return Register(); });
-      FinishWith(this, (status));
+      FinishOnce(Guarded([this] { return Register(); }));
     });
-    if (!submitted) FinishWith(this, (ShuttingDown()));
+    if (!submitted) FinishOnce(ShuttingDown());
+  }
+
+  static absl::Status Aborted() {
+    return absl::CancelledError(
+        "the upload was cancelled or its stream reset before the client finished it; nothing was "
+        "stored");
   }
 
   absl::Status Register() {
@@ -173,6 +289,8 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
       ASSIGN_OR_RETURN(parsed, ReadMesh(data_, format));
     }
     std::string().swap(data_);  // the parsed arrays replace the bytes
+    // The last point where a cancelled upload can be dropped.
+    if (cancelled_.load()) return Aborted();
     ASSIGN_OR_RETURN(MeshRecord record, service_->registry()->AddMesh(
                                             std::move(parsed.arrays), header_.name(),
                                             static_cast<int32_t>(parsed.polygons_triangulated)));
@@ -182,6 +300,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   }
 
   FieldService* const service_;
+  grpc::CallbackServerContext* const context_;
   grpc::ByteBuffer* const response_;
   grpc::ByteBuffer message_;
   int64_t messages_ = 0;  // read so far
@@ -191,13 +310,21 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   std::string data_;
   WorkGrant grant_;  // the upload's admitted memory (Admit)
   std::atomic<bool> cancelled_{false};
+  const Clock::duration idle_timeout_;  // zero: none
+  std::mutex mu_;                       // guards the members below
+  Clock::time_point last_message_;      // when the last message (or the end of input) came
+  bool input_done_ = false;             // the last read has completed (the client's side ended)
+  bool finished_ = false;               // FinishOnce has been called
+  bool done_ = false;                   // OnDone has run
+  std::unique_ptr<grpc::Alarm> idle_alarm_;
 };
 
 }  // namespace
 
 grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(FieldService* service,
+                                                            grpc::CallbackServerContext* context,
                                                             grpc::ByteBuffer* response) {
-  return new UploadReactor(service, response);
+  return new UploadReactor(service, context, response);
 }
 
 }  // namespace fieldspace::server

@@ -268,6 +268,7 @@ absl::StatusOr<Eigen::VectorXd> ComputeShapeOperator(const TriangleMesh& mesh,
     const VertexFaces vertex_faces = BuildVertexFaces(mesh);
     std::vector<uint8_t> failed(nf, 0);
     tbb::parallel_for(tbb::blocked_range<int64_t>(0, nf, kGrain), [&](const auto& range) {
+      if (IsCancelled(options.cancel)) return;
       std::vector<int32_t> ring;
       for (int64_t f = range.begin(); f < range.end(); ++f) {
         const std::optional<Eigen::Matrix2d> B = JetFitFace(mesh, vertex_faces, f, ring);
@@ -278,6 +279,7 @@ absl::StatusOr<Eigen::VectorXd> ComputeShapeOperator(const TriangleMesh& mesh,
         }
       }
     });
+    if (IsCancelled(options.cancel)) return absl::CancelledError("shape operator: cancelled");
     for (int64_t f = 0; f < nf; ++f) {
       if (failed[f]) fallback.push_back(f);
     }
@@ -289,10 +291,12 @@ absl::StatusOr<Eigen::VectorXd> ComputeShapeOperator(const TriangleMesh& mesh,
   const VertexMatrix normals = ComputeVertexNormals(mesh, options.normal_weighting);
   const int64_t count = static_cast<int64_t>(fallback.size());
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, count, kGrain), [&](const auto& range) {
+    if (IsCancelled(options.cancel)) return;
     for (int64_t i = range.begin(); i < range.end(); ++i) {
       store(fallback[i], NormalDifferencesFace(mesh, normals, fallback[i]));
     }
   });
+  if (IsCancelled(options.cancel)) return absl::CancelledError("shape operator: cancelled");
   return dofs;
 }
 

@@ -5,6 +5,7 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
+#include "core/common/cancel.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/conversions.h"
 
@@ -56,6 +57,8 @@ struct ShapeOperatorOptions {
   CurvatureEstimator estimator = CurvatureEstimator::kJetFit;
   // For kNormalDifferences, and for the jet fit's fallback faces.
   VertexNormalWeighting normal_weighting = VertexNormalWeighting::kMax1999;
+  // Checked per block of faces: Cancelled once set (a million faces take seconds).
+  const CancelFlag* cancel = nullptr;
 };
 
 // The unit vertex normals (#V x 3, row v is vertex v) with `weighting`, oriented like the faces.
@@ -73,7 +76,7 @@ VertexMatrix ComputeVertexNormals(const TriangleMesh& mesh, VertexNormalWeightin
 // back to normal differences. There, the components of B that a thin face's edges do not
 // determine (least squares eigenvalues below 1e-12 of the largest, edges scaled to unit length)
 // are set to zero (minimum-norm solution). Parallel over faces (oneTBB). InvalidArgument only for
-// an out-of-range enum value in `options`.
+// an out-of-range enum value in `options`; Cancelled when options.cancel is set meanwhile.
 absl::StatusOr<Eigen::VectorXd> ComputeShapeOperator(const TriangleMesh& mesh,
                                                      const ShapeOperatorOptions& options = {});
 

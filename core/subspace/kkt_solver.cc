@@ -144,14 +144,25 @@ void KktSolver::ComputeGroup(int32_t g) {
   }
 }
 
-void KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor) {
+absl::Status KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor) {
   A_ = A;
   factor_ = factor;
   schur_valid_ = false;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  if (r == 0) return;
-  for (int32_t g = 0; g < num_groups_; ++g) ComputeGroupColumns(g);
-  K_.topLeftCorner(r, r).noalias() = W_.leftCols(r).transpose() * W_.leftCols(r);
+  const absl::Status cancelled = absl::CancelledError("hard constraint system: cancelled");
+  // Thousands of constraints take seconds here (r forward substitutions, then O(r^2 d) for K):
+  // cancellation is checked per group and per block of K's columns.
+  for (int32_t g = 0; g < num_groups_; ++g) {
+    if (IsCancelled(options_.cancel)) return cancelled;
+    ComputeGroupColumns(g);
+  }
+  constexpr int64_t kColumns = 64;
+  for (int64_t j = 0; j < r; j += kColumns) {
+    if (IsCancelled(options_.cancel)) return cancelled;
+    const int64_t width = std::min(kColumns, r - j);
+    K_.block(0, j, r, width).noalias() = W_.leftCols(r).transpose() * W_.middleCols(j, width);
+  }
+  return absl::OkStatus();
 }
 
 void KktSolver::SetMixedBiharmonic(const ReducedSystem* system, double mu_b) {
@@ -246,6 +257,8 @@ absl::Status KktSolver::FactorizeSchur() {
     }
     H(j, j) += e_[order[j]] * scale[j] * scale[j];
   }
+  if (IsCancelled(options_.cancel))
+    return absl::CancelledError("hard constraint system: cancelled");
   Eigen::LLT<Eigen::MatrixXd> llt(H);
   const auto dependent = [&](int64_t i) {
     return absl::FailedPreconditionError(absl::StrCat(

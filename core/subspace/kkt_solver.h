@@ -84,8 +84,9 @@ class KktSolver {
   KktSolver(int64_t dim, int32_t rows_per_group, const ReducedSolveOptions& options);
 
   // The true matrix (for residuals) and the factorization used for solves; both must stay alive
-  // and unchanged until the next call. Recomputes W and K for all constraints.
-  void SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor);
+  // and unchanged until the next call. Recomputes W and K for all constraints. Cancelled (W and K
+  // then incomplete: call again before solving) when the options' cancel flag is set meanwhile.
+  absl::Status SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor);
 
   // The mixed biharmonic (BiharmonicForm::kMixed) with weight mu_b (> 0; 0 turns it off): the
   // true matrix becomes A - mu_b U^T B U + mu_b K Mr^-1 K (K = U^T S U, Mr = U^T M U of

@@ -152,7 +152,7 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
     kkt.Append(BasisRowsOfFace(system, c.face), c.value, 0.0, /*hard=*/true);
   }
   if (IsCancelled(options.cancel)) return cancelled_error;
-  kkt.SetMatrix(&A_panels, &factor);
+  RETURN_IF_ERROR(kkt.SetMatrix(&A_panels, &factor));
   if (problem.biharmonic == BiharmonicForm::kMixed) kkt.SetMixedBiharmonic(&system, w.mu_b);
   if (IsCancelled(options.cancel)) return cancelled_error;
   RETURN_IF_ERROR(kkt.FactorizeSchur());

@@ -622,6 +622,19 @@ TEST(CurvatureErrorsTest, InvalidInputs) {
                 .status()
                 .code(),
             absl::StatusCode::kInvalidArgument);
+  // A set cancel flag: Cancelled, with either estimator; unset: the same result as without one.
+  const CancelFlag cancelled{true}, running{false};
+  for (CurvatureEstimator estimator :
+       {CurvatureEstimator::kJetFit, CurvatureEstimator::kNormalDifferences}) {
+    EXPECT_EQ(
+        ComputeShapeOperator(mesh, {.estimator = estimator, .cancel = &cancelled}).status().code(),
+        absl::StatusCode::kCancelled);
+    absl::StatusOr<Eigen::VectorXd> with =
+        ComputeShapeOperator(mesh, {.estimator = estimator, .cancel = &running});
+    absl::StatusOr<Eigen::VectorXd> without = ComputeShapeOperator(mesh, {.estimator = estimator});
+    ASSERT_TRUE(with.ok() && without.ok());
+    EXPECT_EQ(*with, *without);
+  }
 }
 
 }  // namespace
