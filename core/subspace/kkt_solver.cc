@@ -191,6 +191,11 @@ void KktSolver::SetE(int32_t g, double e) {
   schur_valid_ = false;
 }
 
+void KktSolver::SetHard(int32_t g, bool hard) {
+  hard_[g] = hard ? 1 : 0;
+  schur_valid_ = false;
+}
+
 void KktSolver::RemoveSwapLast(int32_t g) {
   const int32_t last = num_groups_ - 1;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;

@@ -103,6 +103,7 @@ class KktSolver {
   void Replace(int32_t g, std::vector<SparseRow> rows, const Eigen::VectorXd& target, double e);
   void SetTarget(int32_t g, const Eigen::VectorXd& target);
   void SetE(int32_t g, double e);
+  void SetHard(int32_t g, bool hard);
   // Removes group g; the last group moves into slot g (callers track ids by slot).
   void RemoveSwapLast(int32_t g);
   const std::vector<SparseRow>& GroupRows(int32_t g) const { return rows_[g]; }
