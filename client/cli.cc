@@ -27,6 +27,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "absl/types/span.h"
+#include "client/design_tools_json.h"
 #include "client/field_client.h"
 #include "client/field_files.h"
 #include "client/json.h"
@@ -975,7 +976,8 @@ int Cli::Solve(const CommandLine& a) {
   const std::string constraints_path = GetString(a, "constraints");
   absl::StatusOr<std::string> text = ReadFile(constraints_path);
   if (!text.ok()) return Fail(text.status());
-  absl::StatusOr<std::vector<v1::Constraint>> constraints = ParseConstraints(*text);
+  std::vector<v1::ConstraintGroup> groups;  // the designer's tools
+  absl::StatusOr<std::vector<v1::Constraint>> constraints = ParseConstraints(*text, &groups);
   if (!constraints.ok()) {
     return Fail(absl::InvalidArgumentError(
         absl::StrCat(constraints_path, ": ", constraints.status().message())));
@@ -987,6 +989,7 @@ int Cli::Solve(const CommandLine& a) {
   request.set_biharmonic(BiharmonicFormFlag(a));
   request.set_singularities(a.Has("singularities"));
   for (v1::Constraint& c : *constraints) *request.add_constraints() = std::move(c);
+  for (v1::ConstraintGroup& g : groups) *request.add_constraint_groups() = std::move(g);
   absl::StatusOr<v1::SolveResponse> response = client_->Solve(request);
   if (!response.ok()) return Fail(response.status(), "Solve");
   std::vector<double> coefficients(response->coefficients().begin(),
@@ -1281,11 +1284,7 @@ int Cli::Design(const CommandLine& a) {
         ParseEdit(line, absl::StrCat(script, ":", line_number));
     if (!edit.ok()) return Fail(edit.status());
     edit->set_seq(static_cast<uint64_t>(line_number));
-    kinds.push_back(edit->has_add()      ? "add"
-                    : edit->has_move()   ? "move"
-                    : edit->has_remove() ? "remove"
-                    : edit->has_watch()  ? "watch"
-                                         : "weights");
+    kinds.push_back(DesignEditKind(*edit));
     edits.push_back(*std::move(edit));
   }
   v1::DesignRequest open;
