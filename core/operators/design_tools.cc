@@ -1,6 +1,7 @@
 #include "core/operators/design_tools.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <complex>
 #include <limits>
@@ -201,17 +202,6 @@ absl::StatusOr<std::vector<int32_t>> DualPath(const TriangleMesh& mesh, int32_t 
   return path;
 }
 
-// The point of segment [a, b] minimizing |p - x| + |x - q| (p and q unfolded about its line).
-Eigen::Vector3d BestCrossing(const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                             const Eigen::Vector3d& p, const Eigen::Vector3d& q) {
-  const Eigen::Vector3d u = b - a;
-  const double len2 = u.squaredNorm();
-  const double tp = (p - a).dot(u) / len2, tq = (q - a).dot(u) / len2;
-  const double hp = (p - a - tp * u).norm(), hq = (q - a - tq * u).norm();
-  const double t = hp + hq > 0 ? tp + (tq - tp) * hp / (hp + hq) : 0.5 * (tp + tq);
-  return a + std::clamp(t, 0.0, 1.0) * u;
-}
-
 // A strip of faces (consecutive ones sharing an edge) and the shortest polyline through it from
 // x.front() (in faces.front()) to x.back() (in faces.back()): x[i] (0 < i < faces.size()) on
 // the edge between faces[i - 1] and faces[i], `at_vertex[i]` the vertex it sits on, or -1.
@@ -222,43 +212,155 @@ struct Strip {
   double length = 0;
 };
 
+double Cross2(const Eigen::Vector2d& u, const Eigen::Vector2d& v) {
+  return u[0] * v[1] - u[1] * v[0];
+}
+
+// The shortest polyline through the strip, exactly: the strip unfolded into the plane face by
+// face (each face's third vertex placed across the shared edge from the previous face's), then
+// the funnel algorithm (Lee and Preparata 1984) on its portals, O(#faces) amortized.
 Strip Straighten(const TriangleMesh& mesh, std::vector<int32_t> faces, const Eigen::Vector3d& p,
                  const Eigen::Vector3d& q) {
   Strip s;
-  const int32_t m = static_cast<int32_t>(faces.size()) - 1;  // edges crossed
+  const int32_t m = static_cast<int32_t>(faces.size()) - 1;  // portals (edges crossed)
   s.faces = std::move(faces);
-  s.x.resize(m + 2);
-  s.at_vertex.assign(m + 2, -1);
-  std::vector<std::pair<int32_t, int32_t>> edge(m + 1);
-  s.x[0] = p;
-  s.x[m + 1] = q;
+  // Unfolding: corner positions of the current face, by vertex id.
+  std::array<std::pair<int32_t, Eigen::Vector2d>, 3> face2d;
+  const auto corner = [&](int32_t v) -> const Eigen::Vector2d& {
+    for (const auto& [id, x] : face2d) {
+      if (id == v) return x;
+    }
+    return face2d[0].second;  // unreachable: v is a corner of the face
+  };
+  {
+    const int32_t f = s.faces[0];
+    const Eigen::Vector3d a = Vertex(mesh, mesh.faces()(f, 0)),
+                          b = Vertex(mesh, mesh.faces()(f, 1));
+    const Eigen::Vector3d c = Vertex(mesh, mesh.faces()(f, 2));
+    const Eigen::Vector3d ex = (b - a).normalized();
+    const Eigen::Vector3d ey = mesh.face_normals().row(f).transpose().cross(ex);
+    face2d = {{{mesh.faces()(f, 0), Eigen::Vector2d::Zero()},
+               {mesh.faces()(f, 1), Eigen::Vector2d((b - a).norm(), 0)},
+               {mesh.faces()(f, 2), Eigen::Vector2d((c - a).dot(ex), (c - a).dot(ey))}}};
+  }
+  const auto in_face = [&](int32_t f, const Eigen::Vector3d& x) {
+    const Eigen::Vector3d w =
+        ClosestBarycentric(x, Vertex(mesh, mesh.faces()(f, 0)), Vertex(mesh, mesh.faces()(f, 1)),
+                           Vertex(mesh, mesh.faces()(f, 2)));
+    return Eigen::Vector2d(w[0] * corner(mesh.faces()(f, 0)) + w[1] * corner(mesh.faces()(f, 1)) +
+                           w[2] * corner(mesh.faces()(f, 2)));
+  };
+  // Portals 0..m + 1: the start point, the shared edges (left and right as seen walking from
+  // face i - 1 into face i), the end point.
+  struct Portal {
+    Eigen::Vector2d left, right;
+    int32_t left_vertex = -1, right_vertex = -1;
+  };
+  std::vector<Portal> portal(m + 2);
+  portal[0].left = portal[0].right = in_face(s.faces[0], p);
   for (int32_t i = 1; i <= m; ++i) {
     const int32_t e = SharedEdge(mesh, s.faces[i - 1], s.faces[i]);
-    edge[i] = {mesh.edges()(e, 0), mesh.edges()(e, 1)};
-    s.x[i] = 0.5 * (Vertex(mesh, edge[i].first) + Vertex(mesh, edge[i].second));
-  }
-  // Gauss-Seidel sweeps of the local optimum; the length is convex in the crossing points, so this
-  // converges to the shortest polyline through the strip.
-  const auto length = [&] {
-    double l = 0;
-    for (int32_t i = 0; i <= m; ++i) l += (s.x[i + 1] - s.x[i]).norm();
-    return l;
-  };
-  const double initial = length();
-  constexpr int kMaxSweeps = 500;
-  for (int sweep = 0; sweep < kMaxSweeps && m > 0; ++sweep) {
-    double moved = 0;
-    for (int32_t i = 1; i <= m; ++i) {
-      const Eigen::Vector3d y = BestCrossing(Vertex(mesh, edge[i].first),
-                                             Vertex(mesh, edge[i].second), s.x[i - 1], s.x[i + 1]);
-      moved = std::max(moved, (y - s.x[i]).norm());
-      s.x[i] = y;
+    const int32_t a = mesh.edges()(e, 0), b = mesh.edges()(e, 1);
+    int32_t behind = -1;  // the previous face's third vertex
+    for (int k = 0; k < 3; ++k) {
+      const int32_t v = mesh.faces()(s.faces[i - 1], k);
+      if (v != a && v != b) behind = v;
     }
-    if (moved <= 1e-12 * initial) break;
+    const Eigen::Vector2d pa = corner(a), pb = corner(b), pbehind = corner(behind);
+    // Walking away from `behind`: b is on the left when `behind` is left of a -> b.
+    const bool b_left = Cross2(pb - pa, pbehind - pa) > 0;
+    portal[i] = b_left ? Portal{pb, pa, b, a} : Portal{pa, pb, a, b};
+    // The next face's third vertex, across a -> b from `behind`.
+    const int32_t f = s.faces[i];
+    int32_t c = -1;
+    for (int k = 0; k < 3; ++k) {
+      const int32_t v = mesh.faces()(f, k);
+      if (v != a && v != b) c = v;
+    }
+    const Eigen::Vector3d a3 = Vertex(mesh, a), b3 = Vertex(mesh, b), c3 = Vertex(mesh, c);
+    const Eigen::Vector3d u3 = (b3 - a3).normalized();
+    const double along = (c3 - a3).dot(u3), height = (c3 - a3 - along * u3).norm();
+    const Eigen::Vector2d u = (pb - pa).normalized();
+    Eigen::Vector2d perp(-u[1], u[0]);
+    if (Cross2(pb - pa, pbehind - pa) > 0) perp = -perp;
+    face2d = {{{a, pa}, {b, pb}, {c, pa + along * u + height * perp}}};
   }
-  s.length = length();
+  portal[m + 1].left = portal[m + 1].right = in_face(s.faces[m], q);
+
+  // Funnel: apex, and the cone of directions through every portal since the apex, bounded by
+  // the left and right endpoints that last narrowed it.
+  std::vector<std::pair<Eigen::Vector2d, int32_t>> corners = {
+      {portal[0].left, 0}};  // (point, portal)
+  std::vector<int32_t> corner_vertex = {-1};
+  Eigen::Vector2d apex = portal[0].left, left = apex, right = apex;
+  int32_t apex_index = 0, left_index = 0, right_index = 0;
+  for (int32_t i = 1; i <= m + 1; ++i) {
+    const Portal& g = portal[i];
+    // Right side: narrow, or the portal passes left of the cone (bend around its left corner).
+    // (A cone side still at the apex bounds nothing; bends move the apex forward only.)
+    if (Cross2(right - apex, g.right - apex) >= 0) {
+      if (apex == right || left_index == apex_index || Cross2(left - apex, g.right - apex) < 0) {
+        right = g.right;
+        right_index = i;
+      } else {
+        apex = left;
+        apex_index = left_index;
+        if (apex_index == m + 1) break;  // the end point itself: done
+        corners.push_back({apex, apex_index});
+        corner_vertex.push_back(portal[apex_index].left_vertex);
+        left = right = apex;
+        left_index = right_index = apex_index;
+        i = apex_index;
+        continue;
+      }
+    }
+    if (Cross2(left - apex, g.left - apex) <= 0) {
+      if (apex == left || right_index == apex_index || Cross2(right - apex, g.left - apex) > 0) {
+        left = g.left;
+        left_index = i;
+      } else {
+        apex = right;
+        apex_index = right_index;
+        if (apex_index == m + 1) break;  // the end point itself: done
+        corners.push_back({apex, apex_index});
+        corner_vertex.push_back(portal[apex_index].right_vertex);
+        left = right = apex;
+        left_index = right_index = apex_index;
+        i = apex_index;
+        continue;
+      }
+    }
+  }
+  corners.push_back({portal[m + 1].left, m + 1});
+  corner_vertex.push_back(-1);
+
+  // Crossing points: where the polyline between consecutive corners meets each portal.
+  s.x.resize(m + 2);
+  s.at_vertex.assign(m + 2, -1);
+  s.x[0] = p;
+  s.x[m + 1] = q;
+  for (size_t c = 0; c + 1 < corners.size(); ++c) {
+    const auto& [from, from_index] = corners[c];
+    const auto& [to, to_index] = corners[c + 1];
+    if (c > 0) {
+      s.x[from_index] = Vertex(mesh, corner_vertex[c]);
+      s.at_vertex[from_index] = corner_vertex[c];
+    }
+    for (int32_t i = from_index + 1; i < to_index; ++i) {
+      const Portal& g = portal[i];
+      // from + t (to - from) on the line through the portal: its parameter along the portal.
+      const Eigen::Vector2d d = to - from, e = g.left - g.right;
+      const double denom = Cross2(d, e);
+      double t = std::abs(denom) > 0 ? Cross2(d, from - g.right) / denom : 0.5;
+      t = std::clamp(t, 0.0, 1.0);
+      s.x[i] = Vertex(mesh, g.right_vertex) +
+               t * (Vertex(mesh, g.left_vertex) - Vertex(mesh, g.right_vertex));
+    }
+  }
+  for (int32_t i = 0; i <= m; ++i) s.length += (s.x[i + 1] - s.x[i]).norm();
+  // Crossings on a vertex (the corners, and the portals around them, to rounding).
   for (int32_t i = 1; i <= m; ++i) {
-    for (int32_t v : {edge[i].first, edge[i].second}) {
+    for (int32_t v : {portal[i].left_vertex, portal[i].right_vertex}) {
       if ((s.x[i] - Vertex(mesh, v)).norm() <= 1e-9 * (1 + s.length)) s.at_vertex[i] = v;
     }
   }
@@ -281,12 +383,13 @@ std::vector<int32_t> VertexFan(const TriangleMesh& mesh, int32_t v, int32_t star
   }
 }
 
-// The strip with its first run of crossings at one (interior) vertex v replaced by the other way
-// around v's fan; nullopt when no crossing sits on a vertex that can be passed the other way.
+// The strip with its first run of crossings at one (interior) vertex v, from crossing `*first`
+// on, replaced by the other way around v's fan (and *first moved past that run); nullopt when no
+// crossing from there on sits on a vertex that can be passed the other way.
 std::optional<std::vector<int32_t>> RerouteAroundVertex(const TriangleMesh& mesh,
-                                                        const Strip& strip) {
+                                                        const Strip& strip, int32_t* first) {
   const int32_t m = static_cast<int32_t>(strip.faces.size()) - 1;
-  for (int32_t i = 1; i <= m; ++i) {
+  for (int32_t i = std::max(*first, 1); i <= m; ++i) {
     const int32_t v = strip.at_vertex[i];
     if (v < 0) continue;
     int32_t j = i;
@@ -309,6 +412,7 @@ std::optional<std::vector<int32_t>> RerouteAroundVertex(const TriangleMesh& mesh
     std::vector<int32_t> faces(strip.faces.begin(), strip.faces.begin() + i);
     faces.insert(faces.end(), around.begin(), around.end());
     faces.insert(faces.end(), strip.faces.begin() + j, strip.faces.end());
+    *first = j + 1;
     return faces;
   }
   return std::nullopt;
@@ -397,12 +501,15 @@ absl::StatusOr<std::vector<PathSegment>> ShortestSurfacePath(const TriangleMesh&
   // Where the taut path touches a vertex, the strip passes it on the wrong side: try the other
   // way around (a shorter path is kept; a convex vertex never lies on a geodesic).
   constexpr int kMaxReroutes = 200;
+  int32_t first = 1;  // the first crossing not yet tried
   for (int reroute = 0; reroute < kMaxReroutes; ++reroute) {
-    std::optional<std::vector<int32_t>> other = RerouteAroundVertex(mesh, strip);
+    std::optional<std::vector<int32_t>> other = RerouteAroundVertex(mesh, strip, &first);
     if (!other.has_value()) break;
     Strip candidate = Straighten(mesh, *other, strip.x.front(), strip.x.back());
-    if (!(candidate.length < strip.length * (1 - 1e-12))) break;
-    strip = std::move(candidate);
+    if (candidate.length < strip.length * (1 - 1e-12)) {
+      strip = std::move(candidate);
+      first = 1;  // the strip changed: every vertex again
+    }
   }
   const int32_t m = static_cast<int32_t>(strip.faces.size()) - 1;
   std::vector<PathSegment> out(m + 1);
