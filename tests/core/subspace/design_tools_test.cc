@@ -152,8 +152,9 @@ TEST(SurfacePathTest, SnapFindsTheClosestPointAndPathsAreConnectedAndNearlyGeode
   }
   EXPECT_EQ(path->front().face, ends[0].face);
   EXPECT_EQ(path->back().face, ends[1].face);
-  // The sphere's geodesic (arc 2.0, radius 1; the polyhedron is inside the sphere) bounds it.
-  EXPECT_LT(length, 2.0 * 1.01);
+  // The sphere's arc of 2.0 bounds it: the nearest-point projection onto the (convex) polyhedron
+  // shortens curves, and it maps the arc to a path on the surface between the snapped ends.
+  EXPECT_LE(length, 2.0 + 1e-12);
   EXPECT_GT(length, (SurfacePosition(mesh, ends[0]) - SurfacePosition(mesh, ends[1])).norm());
 }
 
@@ -211,7 +212,7 @@ TEST_P(StrokeTest, HardStrokeAcrossASphereIsFollowedAndEqualsASolveWithItsConstr
       sum += DirectionAngle(u, Representation(mesh, c.face, expected, n), n);
     }
   }
-  EXPECT_LE(sum / stroke->size(), 5 * kDegree);
+  EXPECT_LE(sum / stroke->size(), 1 * kDegree);  // the issue asks <= 5 degrees
 }
 
 TEST_P(StrokeTest, SoftStrokeWeightsFollowTheLengthInsideEachFace) {
