@@ -258,6 +258,8 @@ bool DesignSession::SetSlots(int64_t id, absl::Span<const FieldConstraint> const
   std::vector<int32_t>& slots = entries_.at(id).slots;
   bool changed = false;
   const size_t kept = std::min(slots.size(), constraints.size());
+  std::vector<int32_t> replaced_slots;
+  std::vector<KktSolver::NewGroup> replaced;
   for (size_t i = 0; i < kept; ++i) {
     const int32_t slot = slots[i];
     const FieldConstraint& c = constraints[i];
@@ -270,14 +272,16 @@ bool DesignSession::SetSlots(int64_t id, absl::Span<const FieldConstraint> const
         changed = true;
       }
     } else {
-      kkt_->Replace(slot, BasisRowsOfFace(*system_, c.face), c.value, e);
-      kkt_->SetHard(slot, c.hard());
+      replaced_slots.push_back(slot);
+      replaced.push_back({BasisRowsOfFace(*system_, c.face), c.value, e, c.hard()});
       num_hard_ += (c.hard() ? 1 : 0) - (record.hard() ? 1 : 0);
       changed = true;
     }
     record = c;
     stiffness_[slot] = stiffness[i];
   }
+  // Before any slot moves (RemoveSlot below).
+  kkt_->ReplaceGroups(replaced_slots, std::move(replaced));
   if (slots.size() > kept) {
     // Highest slot first: the last slot, which moves into the removed one's place, is then never
     // one still to be removed.
@@ -287,10 +291,11 @@ bool DesignSession::SetSlots(int64_t id, absl::Span<const FieldConstraint> const
     for (int32_t slot : surplus) RemoveSlot(slot);
     changed = true;
   }
+  std::vector<KktSolver::NewGroup> appended;
   for (size_t i = kept; i < constraints.size(); ++i) {
     const FieldConstraint& c = constraints[i];
-    kkt_->Append(BasisRowsOfFace(*system_, c.face), c.value,
-                 c.hard() ? 0.0 : SoftE(c.weight, stiffness[i]), c.hard());
+    appended.push_back({BasisRowsOfFace(*system_, c.face), c.value,
+                        c.hard() ? 0.0 : SoftE(c.weight, stiffness[i]), c.hard()});
     slots.push_back(static_cast<int32_t>(ids_by_slot_.size()));
     ids_by_slot_.push_back(id);
     position_by_slot_.push_back(static_cast<int32_t>(i));
@@ -299,6 +304,7 @@ bool DesignSession::SetSlots(int64_t id, absl::Span<const FieldConstraint> const
     num_hard_ += c.hard() ? 1 : 0;
     changed = true;
   }
+  kkt_->AppendGroups(std::move(appended));
   return changed;
 }
 
