@@ -12,6 +12,11 @@
 // factorize_ms: median numeric factorization of U^T (mu_S S + mu_B B) U (shared analysis).
 // --biharmonic mixed: the session's BiharmonicForm (every edit with mu_B > 0 then runs conjugate
 // gradients; mean_refinement_steps counts their iterations).
+// --strokes K [--stroke-faces F]: afterwards, K soft strokes of about F faces (default 50; from a
+// random face to one F dual-graph steps away, core/subspace/design_tools.h) each added, moved
+// (to the strip one step over) and removed as one group edit, on top of the session's
+// constraints: "strokes": {"faces", "geometry_ms", "add_ms", "move_ms", "remove_ms"} (p50, p99;
+// geometry: the path and constraint values, not part of the edit).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -20,6 +25,7 @@
 #include <numbers>
 #include <random>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -30,6 +36,7 @@
 #include "bench/commands.h"
 #include "core/linalg/sparse_cholesky.h"
 #include "core/linalg/supernodal_cholesky.h"
+#include "core/subspace/design_tools.h"
 #include "core/operators/field_operator.h"
 #include "core/subspace/design_session.h"
 #include "core/subspace/full_space_solver.h"
@@ -44,6 +51,26 @@ double Percentile(std::vector<double> v, double q) {
   std::sort(v.begin(), v.end());
   const size_t rank = static_cast<size_t>(std::ceil(q * static_cast<double>(v.size())));
   return v[std::clamp<size_t>(rank, 1, v.size()) - 1];
+}
+
+// A face about `steps` dual-graph steps from `start` (the last face a breadth-first search
+// reaches within that depth).
+int32_t FaceStepsAway(const TriangleMesh& mesh, int32_t start, int32_t steps) {
+  std::vector<int32_t> frontier = {start}, next;
+  std::unordered_set<int32_t> seen = {start};
+  int32_t last = start;
+  for (int32_t d = 0; d < steps && !frontier.empty(); ++d) {
+    next.clear();
+    for (int32_t f : frontier) {
+      for (int k = 0; k < 3; ++k) {
+        const int32_t g = mesh.face_neighbors()(f, k);
+        if (g != kNoFace && seen.insert(g).second) next.push_back(g);
+      }
+    }
+    if (!next.empty()) last = next.back();
+    frontier.swap(next);
+  }
+  return last;
 }
 
 double Uniform(std::mt19937_64& rng) { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
@@ -67,11 +94,17 @@ int RunDesign(const Args& args) {
   auto edits = args.GetInt("edits", 0);
   auto seed = args.GetInt("seed", 0);
   auto max_constraints = args.GetInt("max-constraints", 40);
-  for (const auto* v : {&edits, &seed, &max_constraints}) {
+  auto strokes = args.GetInt("strokes", 0);
+  auto stroke_faces = args.GetInt("stroke-faces", 50);
+  for (const auto* v : {&edits, &seed, &max_constraints, &strokes, &stroke_faces}) {
     if (!v->ok()) return ReportError(v->status());
   }
   if (*edits < 1 || *edits > 10000000 || *max_constraints < 1 || *max_constraints > 100000) {
     return ReportError(absl::InvalidArgumentError("--edits and --max-constraints must be >= 1"));
+  }
+  if (*strokes < 0 || *strokes > 100000 || *stroke_faces < 1 || *stroke_faces > 100000) {
+    return ReportError(
+        absl::InvalidArgumentError("--strokes must be >= 0 and --stroke-faces >= 1"));
   }
 
   auto form = BiharmonicFormFromArgs(args);
@@ -174,6 +207,38 @@ int RunDesign(const Args& args) {
     }
   }
 
+  // Strokes as group edits (add, move, remove), with their geometry timed apart.
+  std::vector<double> stroke_geometry_ms, stroke_add_ms, stroke_move_ms, stroke_remove_ms;
+  int64_t stroke_faces_total = 0;
+  const Eigen::Vector3d center = Eigen::Vector3d::Constant(1.0 / 3.0);
+  const auto stroke = [&](int32_t from, int32_t to) {
+    Stopwatch w;
+    auto c = StrokeConstraints(sub->mesh, *type, {SurfacePoint{from, center}, {to, center}});
+    stroke_geometry_ms.push_back(w.Seconds() * 1e3);
+    return c;
+  };
+  for (int64_t k = 0; k < *strokes; ++k) {
+    const int32_t from = static_cast<int32_t>(rng() % num_faces);
+    const int32_t to = FaceStepsAway(sub->mesh, from, static_cast<int32_t>(*stroke_faces));
+    const int32_t from2 = FaceStepsAway(sub->mesh, from, 1);
+    const int32_t to2 = FaceStepsAway(sub->mesh, to, 1);
+    auto first = stroke(from, to);
+    auto second = stroke(from2, to2);
+    if (!first.ok()) return ReportError(first.status());
+    if (!second.ok()) return ReportError(second.status());
+    stroke_faces_total += static_cast<int64_t>(first->size());
+    const int64_t id = next_id++;
+    Stopwatch add;
+    if (auto st = s.AddConstraintGroup(id, *first); !st.ok()) return ReportError(st);
+    stroke_add_ms.push_back(add.Seconds() * 1e3);
+    Stopwatch move;
+    if (auto st = s.MoveConstraintGroup(id, *second); !st.ok()) return ReportError(st);
+    stroke_move_ms.push_back(move.Seconds() * 1e3);
+    Stopwatch remove;
+    if (auto st = s.RemoveConstraint(id); !st.ok()) return ReportError(st);
+    stroke_remove_ms.push_back(remove.Seconds() * 1e3);
+  }
+
   double full_factorize_ms = 0, full_solve_ms = 0;
   const bool full_biharmonic = args.Has("full-biharmonic");
   if (!args.Has("no-full")) {
@@ -232,6 +297,22 @@ int RunDesign(const Args& args) {
       .Double("p99", Percentile(backward_errors, 0.99))
       .Double("max", Percentile(backward_errors, 1.0))
       .EndObject()
+      .BeginObject("strokes")
+      .Int("count", static_cast<int64_t>(stroke_add_ms.size()))
+      .Double("faces", stroke_add_ms.empty() ? 0.0
+                                             : static_cast<double>(stroke_faces_total) /
+                                                   static_cast<double>(stroke_add_ms.size()));
+  for (const auto& [name, times] :
+       {std::pair<const char*, const std::vector<double>*>{"geometry_ms", &stroke_geometry_ms},
+        {"add_ms", &stroke_add_ms},
+        {"move_ms", &stroke_move_ms},
+        {"remove_ms", &stroke_remove_ms}}) {
+    json.BeginObject(name)
+        .Double("p50", Percentile(*times, 0.5))
+        .Double("p99", Percentile(*times, 0.99))
+        .EndObject();
+  }
+  json.EndObject()
       .Int("dim", sys.dimension())
       .Int("faces", num_faces)
       .Int("nnz_u", sys.basis().U.nonZeros())

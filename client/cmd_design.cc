@@ -31,11 +31,7 @@ int Design(Cli& cli, const CommandLine& a) {
         ParseEdit(line, absl::StrCat(script, ":", line_number));
     if (!edit.ok()) return cli.FailLocal(edit.status());
     edit->set_seq(static_cast<uint64_t>(line_number));
-    kinds.push_back(edit->has_add()      ? "add"
-                    : edit->has_move()   ? "move"
-                    : edit->has_remove() ? "remove"
-                    : edit->has_watch()  ? "watch"
-                                         : "weights");
+    kinds.push_back(DesignEditKind(*edit));
     edits.push_back(*std::move(edit));
   }
   v1::DesignRequest open;

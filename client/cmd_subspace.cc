@@ -36,7 +36,8 @@ int Solve(Cli& cli, const CommandLine& a) {
   const std::string constraints_path = GetString(a, "constraints");
   absl::StatusOr<std::string> text = ReadFile(constraints_path);
   if (!text.ok()) return cli.FailLocal(text.status());
-  absl::StatusOr<std::vector<v1::Constraint>> constraints = ParseConstraints(*text);
+  std::vector<v1::ConstraintGroup> groups;  // the designer's tools
+  absl::StatusOr<std::vector<v1::Constraint>> constraints = ParseConstraints(*text, &groups);
   if (!constraints.ok()) {
     return cli.FailLocal(absl::InvalidArgumentError(
         absl::StrCat(constraints_path, ": ", constraints.status().message())));
@@ -48,6 +49,7 @@ int Solve(Cli& cli, const CommandLine& a) {
   request.set_biharmonic(ParseBiharmonic(a));
   request.set_singularities(a.Has("singularities"));
   for (v1::Constraint& c : *constraints) *request.add_constraints() = std::move(c);
+  for (v1::ConstraintGroup& g : groups) *request.add_constraint_groups() = std::move(g);
   absl::StatusOr<v1::SolveResponse> response = cli.client().Solve(request);
   if (!response.ok()) return cli.Fail(response.status(), "Solve");
   std::vector<double> coefficients(response->coefficients().begin(),

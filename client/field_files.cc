@@ -12,6 +12,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
+#include "client/design_tools_json.h"
 #include "client/json.h"
 #include "core/common/status_macros.h"
 #include "core/mesh/mesh_io.h"
@@ -22,23 +23,6 @@ namespace {
 namespace v1 = ::fieldspace::v1;
 using google::protobuf::Struct;
 using google::protobuf::Value;
-
-absl::StatusOr<std::vector<double>> NumberArray(const Struct& object, const std::string& key,
-                                                absl::string_view where) {
-  auto it = object.fields().find(key);
-  if (it == object.fields().end() || it->second.kind_case() != Value::kListValue) {
-    return absl::InvalidArgumentError(absl::StrCat(where, ": '", key, "' must be an array"));
-  }
-  std::vector<double> out;
-  for (const Value& v : it->second.list_value().values()) {
-    if (v.kind_case() != Value::kNumberValue) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(where, ": '", key, "' must hold numbers only"));
-    }
-    out.push_back(v.number_value());
-  }
-  return out;
-}
 
 // The value of a constraint or move: exactly one of "vector", "tensor", "dofs".
 absl::Status ParseValue(const Struct& object, absl::string_view where,
@@ -64,32 +48,6 @@ absl::Status ParseValue(const Struct& object, absl::string_view where,
         absl::StrCat(where, ": give exactly one of 'vector', 'tensor' or 'dofs'"));
   }
   return absl::OkStatus();
-}
-
-absl::Status CheckKeys(const Struct& object, std::initializer_list<const char*> allowed,
-                       absl::string_view where) {
-  for (const auto& [key, value] : object.fields()) {
-    bool ok = false;
-    for (const char* a : allowed) ok = ok || key == a;
-    if (!ok) return absl::InvalidArgumentError(absl::StrCat(where, ": unknown key '", key, "'"));
-  }
-  return absl::OkStatus();
-}
-
-absl::StatusOr<int32_t> GetInt32(const Struct& object, const std::string& key,
-                                 absl::string_view where) {
-  ASSIGN_OR_RETURN(int64_t v, GetInteger(object, key, where));
-  if (v < INT32_MIN || v > INT32_MAX) {
-    return absl::InvalidArgumentError(absl::StrCat(where, ": '", key, "' is out of range"));
-  }
-  return static_cast<int32_t>(v);
-}
-
-absl::StatusOr<const Struct*> ObjectOf(const Value& v, absl::string_view where) {
-  if (v.kind_case() != Value::kStructValue) {
-    return absl::InvalidArgumentError(absl::StrCat(where, ": expected a JSON object"));
-  }
-  return &v.struct_value();
 }
 
 }  // namespace
@@ -301,8 +259,24 @@ absl::StatusOr<v1::Constraint> ParseConstraint(const Struct& object, absl::strin
   return c;
 }
 
-absl::StatusOr<std::vector<v1::Constraint>> ParseConstraints(absl::string_view text) {
+absl::StatusOr<std::vector<v1::Constraint>> ParseConstraints(
+    absl::string_view text, std::vector<v1::ConstraintGroup>* groups) {
   std::vector<v1::Constraint> out;
+  // One item: a constraint, or a tool ({"stroke": {...}}) when `groups` takes them.
+  const auto parse = [&](const Struct& object, const std::string& where) -> absl::Status {
+    if (groups != nullptr && object.fields().size() == 1 &&
+        IsToolKey(object.fields().begin()->first)) {
+      const auto& [key, body] = *object.fields().begin();
+      ASSIGN_OR_RETURN(const Struct* tool, ObjectOf(body, where));
+      ASSIGN_OR_RETURN(v1::ConstraintGroup group,
+                       ParseToolGroup(key, *tool, absl::StrCat(where, " (", key, ")")));
+      groups->push_back(std::move(group));
+      return absl::OkStatus();
+    }
+    ASSIGN_OR_RETURN(v1::Constraint c, ParseConstraint(object, where));
+    out.push_back(std::move(c));
+    return absl::OkStatus();
+  };
   absl::string_view stripped = absl::StripAsciiWhitespace(text);
   if (!stripped.empty() && stripped[0] == '[') {
     ASSIGN_OR_RETURN(Value value, ParseJson(stripped));
@@ -310,8 +284,7 @@ absl::StatusOr<std::vector<v1::Constraint>> ParseConstraints(absl::string_view t
     for (const Value& item : value.list_value().values()) {
       const std::string where = absl::StrCat("constraint ", i++);
       ASSIGN_OR_RETURN(const Struct* object, ObjectOf(item, where));
-      ASSIGN_OR_RETURN(v1::Constraint c, ParseConstraint(*object, where));
-      out.push_back(std::move(c));
+      RETURN_IF_ERROR(parse(*object, where));
     }
     return out;
   }
@@ -325,8 +298,7 @@ absl::StatusOr<std::vector<v1::Constraint>> ParseConstraints(absl::string_view t
     if (!value.ok())
       return absl::InvalidArgumentError(absl::StrCat(where, ": ", value.status().message()));
     ASSIGN_OR_RETURN(const Struct* object, ObjectOf(*value, where));
-    ASSIGN_OR_RETURN(v1::Constraint c, ParseConstraint(*object, where));
-    out.push_back(std::move(c));
+    RETURN_IF_ERROR(parse(*object, where));
   }
   return out;
 }
@@ -338,7 +310,9 @@ absl::StatusOr<v1::DesignRequest> ParseEdit(absl::string_view line, absl::string
   ASSIGN_OR_RETURN(const Struct* outer, ObjectOf(*value, where));
   if (outer->fields().size() != 1) {
     return absl::InvalidArgumentError(absl::StrCat(
-        where, ": an edit is an object with exactly one key: add, move, remove, weights or watch"));
+        where,
+        ": an edit is an object with exactly one key: add, move, remove, weights, watch or a "
+        "tool"));
   }
   const auto& [kind, body] = *outer->fields().begin();
   const std::string inner_where = absl::StrCat(where, " (", kind, ")");
@@ -349,6 +323,8 @@ absl::StatusOr<v1::DesignRequest> ParseEdit(absl::string_view line, absl::string
     ASSIGN_OR_RETURN(v1::Constraint c, ParseConstraint(*object, inner_where));
     request.mutable_add()->set_id(id);
     *request.mutable_add()->mutable_constraint() = std::move(c);
+  } else if (kind == "move" && IsToolMove(*object)) {
+    return ParseToolMove(*object, inner_where);
   } else if (kind == "move") {
     RETURN_IF_ERROR(CheckKeys(*object, {"id", "face", "vector", "tensor", "dofs"}, inner_where));
     v1::MoveConstraint* move = request.mutable_move();
@@ -399,9 +375,13 @@ absl::StatusOr<v1::DesignRequest> ParseEdit(absl::string_view line, absl::string
             absl::StrCat(inner_where, ": 'encoding' must be \"ambient\" or \"dof\""));
       }
     }
+  } else if (IsToolKey(kind)) {
+    return ParseToolEdit(kind, *object, inner_where);
   } else {
     return absl::InvalidArgumentError(
-        absl::StrCat(where, ": unknown edit '", kind, "' (add, move, remove, weights or watch)"));
+        absl::StrCat(where, ": unknown edit '", kind,
+                     "' (add, move, remove, weights, watch, stroke, singularity, align_boundary "
+                     "or align_features)"));
   }
   return request;
 }

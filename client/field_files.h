@@ -54,13 +54,15 @@ absl::StatusOr<std::vector<double>> ParseCoefficients(absl::string_view text, in
 absl::StatusOr<fieldspace::v1::Constraint> ParseConstraint(const google::protobuf::Struct& object,
                                                            absl::string_view where);
 // Constraint file: JSON lines (one object each; blank lines and lines starting with '#' skipped),
-// or one JSON array of objects.
-absl::StatusOr<std::vector<fieldspace::v1::Constraint>> ParseConstraints(absl::string_view text);
+// or one JSON array of objects. With `groups`, items that are a designer's tool ({"stroke":
+// {...}}, see client/design_tools_json.h) go there as constraint groups.
+absl::StatusOr<std::vector<fieldspace::v1::Constraint>> ParseConstraints(
+    absl::string_view text, std::vector<fieldspace::v1::ConstraintGroup>* groups = nullptr);
 
 // Edit script line -> DesignRequest (seq not set). Formats: {"add": {"id", "face", "vector" |
 // "tensor" | "dofs", "weight"?, "hard"?}}, {"move": {"id", "face", "vector" | ...}},
 // {"remove": {"id"}}, {"weights": {"mu_s", "mu_b", "mu_c"}}, {"watch": {"faces": [...],
-// "encoding"?: "ambient" | "dof"}}.
+// "encoding"?: "ambient" | "dof"}}, and the designer's tools of client/design_tools_json.h.
 absl::StatusOr<fieldspace::v1::DesignRequest> ParseEdit(absl::string_view line,
                                                         absl::string_view where);
 

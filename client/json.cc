@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/common/status_macros.h"
 #include "google/protobuf/util/json_util.h"
 
 namespace fieldspace::client {
@@ -137,6 +138,51 @@ absl::StatusOr<int64_t> GetInteger(const google::protobuf::Struct& object, const
     return absl::InvalidArgumentError(absl::StrCat(where, ": '", key, "' must be an integer"));
   }
   return static_cast<int64_t>(it->second.number_value());
+}
+
+absl::StatusOr<std::vector<double>> NumberArray(const google::protobuf::Struct& object,
+                                                const std::string& key, absl::string_view where) {
+  auto it = object.fields().find(key);
+  if (it == object.fields().end() ||
+      it->second.kind_case() != google::protobuf::Value::kListValue) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": '", key, "' must be an array"));
+  }
+  std::vector<double> out;
+  for (const google::protobuf::Value& v : it->second.list_value().values()) {
+    if (v.kind_case() != google::protobuf::Value::kNumberValue) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(where, ": '", key, "' must hold numbers only"));
+    }
+    out.push_back(v.number_value());
+  }
+  return out;
+}
+
+absl::Status CheckKeys(const google::protobuf::Struct& object,
+                       std::initializer_list<const char*> allowed, absl::string_view where) {
+  for (const auto& [key, value] : object.fields()) {
+    bool ok = false;
+    for (const char* a : allowed) ok = ok || key == a;
+    if (!ok) return absl::InvalidArgumentError(absl::StrCat(where, ": unknown key '", key, "'"));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<int32_t> GetInt32(const google::protobuf::Struct& object, const std::string& key,
+                                 absl::string_view where) {
+  ASSIGN_OR_RETURN(int64_t v, GetInteger(object, key, where));
+  if (v < INT32_MIN || v > INT32_MAX) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": '", key, "' is out of range"));
+  }
+  return static_cast<int32_t>(v);
+}
+
+absl::StatusOr<const google::protobuf::Struct*> ObjectOf(const google::protobuf::Value& v,
+                                                         absl::string_view where) {
+  if (v.kind_case() != google::protobuf::Value::kStructValue) {
+    return absl::InvalidArgumentError(absl::StrCat(where, ": expected a JSON object"));
+  }
+  return &v.struct_value();
 }
 
 }  // namespace fieldspace::client

@@ -2,8 +2,10 @@
 #define FIELDSPACE_CLIENT_JSON_H_
 
 #include <cstdint>
+#include <initializer_list>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
@@ -44,6 +46,19 @@ absl::StatusOr<double> GetNumber(const google::protobuf::Struct& object, const s
                                  absl::string_view where);
 absl::StatusOr<int64_t> GetInteger(const google::protobuf::Struct& object, const std::string& key,
                                    absl::string_view where);
+
+// An array of numbers ("<where>: 'key' must be an array").
+absl::StatusOr<std::vector<double>> NumberArray(const google::protobuf::Struct& object,
+                                                const std::string& key, absl::string_view where);
+// InvalidArgument naming the first key of `object` not in `allowed`.
+absl::Status CheckKeys(const google::protobuf::Struct& object,
+                       std::initializer_list<const char*> allowed, absl::string_view where);
+// GetInteger within int32.
+absl::StatusOr<int32_t> GetInt32(const google::protobuf::Struct& object, const std::string& key,
+                                 absl::string_view where);
+// `v` as an object ("<where>: expected a JSON object").
+absl::StatusOr<const google::protobuf::Struct*> ObjectOf(const google::protobuf::Value& v,
+                                                         absl::string_view where);
 
 }  // namespace fieldspace::client
 

@@ -233,6 +233,39 @@ void DesignSeeds(const fs::path& root) {
     remove.mutable_remove()->set_id(8);
     script(absl::StrCat("session", b), static_cast<uint8_t>(b),
            {open, add, hard, move, weights, watch, remove});
+    // The designer's tools (the torus is closed: boundary alignment fails, features find no
+    // sharp edge at 60 degrees but do at 10), moved and removed as groups.
+    v1::DesignRequest stroke;
+    stroke.mutable_add_stroke()->set_id(20);
+    for (int f : {3, 60, 120}) {
+      v1::SurfacePoint::FacePoint* p =
+          stroke.mutable_add_stroke()->add_points()->mutable_face_point();
+      p->set_face(f);
+      for (double w : {0.2, 0.3, 0.5}) p->add_barycentric(w);
+    }
+    v1::Point3* q = stroke.mutable_add_stroke()->add_points()->mutable_position();
+    q->set_x(0.1);
+    q->set_y(-1.2);
+    q->set_z(0.3);
+    v1::DesignRequest singularity;
+    singularity.mutable_place_singularity()->set_id(21);
+    singularity.mutable_place_singularity()->set_vertex(17);
+    singularity.mutable_place_singularity()->set_index(b == 1 ? 0.5 : 1.0);
+    singularity.mutable_place_singularity()->set_hard(true);
+    v1::DesignRequest boundary;
+    boundary.mutable_align_boundary()->set_id(22);
+    v1::DesignRequest features;
+    features.mutable_align_features()->set_id(23);
+    features.mutable_align_features()->set_angle_degrees(10);
+    v1::DesignRequest move_group;
+    move_group.mutable_move()->set_id(20);
+    *move_group.mutable_move()->mutable_group()->mutable_stroke() = stroke.add_stroke();
+    move_group.mutable_move()->mutable_group()->mutable_stroke()->mutable_points()->SwapElements(0,
+                                                                                                 1);
+    v1::DesignRequest remove_group;
+    remove_group.mutable_remove()->set_id(21);
+    script(absl::StrCat("tools", b), static_cast<uint8_t>(0x80 | b),
+           {stroke, singularity, boundary, features, move_group, remove_group, hard});
     script(absl::StrCat("edits", b), static_cast<uint8_t>(0x80 | b), {add, move, weights, remove});
     if (b == 1) {
       v1::DesignRequest aligned = open;

@@ -9,6 +9,7 @@
 #include "server/clock.h"
 #include "server/curvature_alignment.h"
 #include "server/field_answers.h"
+#include "server/design_tools_convert.h"
 #include "server/proto_convert.h"
 
 namespace fieldspace::server {
@@ -28,9 +29,12 @@ absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* u
   const FieldEncoding watch_encoding = watch_encoding_;
   // The answer before the edit: the inverse edit re-solves, which agrees with it only to rounding.
   const Eigen::VectorXd coefficients = is_open() ? session_->coefficients() : Eigen::VectorXd();
-  absl::StatusOr<FieldConstraint> previous = absl::NotFoundError("no such constraint");
+  // A moved or removed constraint (or group) as it was.
+  absl::StatusOr<std::vector<FieldConstraint>> previous = absl::NotFoundError("no such id");
+  const int64_t edited = r.has_move() ? r.move().id() : r.remove().id();
+  const bool group = is_open() && session_->IsConstraintGroup(edited);
   if (is_open() && (r.has_move() || r.has_remove())) {
-    previous = session_->GetConstraint(r.has_move() ? r.move().id() : r.remove().id());
+    previous = session_->GetConstraintGroup(edited);
   }
   RETURN_IF_ERROR(r.has_open() ? Open(r.open()) : Edit(r));
   absl::Status status = Answer(update);
@@ -46,10 +50,18 @@ absl::Status DesignEditor::Apply(const v1::DesignRequest& r, v1::DesignUpdate* u
       undone = session_->RemoveConstraint(r.add().id());
       break;
     case v1::DesignRequest::kMove:
-      undone = session_->MoveConstraint(r.move().id(), *previous);
+      undone = group ? session_->MoveConstraintGroup(edited, *previous)
+                     : session_->MoveConstraint(edited, previous->front());
       break;
     case v1::DesignRequest::kRemove:
-      undone = session_->AddConstraint(r.remove().id(), *previous);
+      undone = group ? session_->AddConstraintGroup(edited, *previous)
+                     : session_->AddConstraint(edited, previous->front());
+      break;
+    case v1::DesignRequest::kAddStroke:
+    case v1::DesignRequest::kPlaceSingularity:
+    case v1::DesignRequest::kAlignBoundary:
+    case v1::DesignRequest::kAlignFeatures:
+      undone = session_->RemoveConstraint(ToolEditId(r));
       break;
     case v1::DesignRequest::kSetWeights:
       undone = session_->SetWeights(weights);
@@ -220,6 +232,13 @@ absl::Status DesignEditor::AdmitConstraints(int64_t constraints) {
   return absl::OkStatus();
 }
 
+absl::Status DesignEditor::AdmitGroup(int64_t size) {
+  if (int64_t{session_->num_constraints()} + size > options_.max_constraints) {
+    return absl::ResourceExhaustedError("too many constraints in this session");
+  }
+  return AdmitConstraints(int64_t{session_->num_constraints()} + size);
+}
+
 absl::Status DesignEditor::Edit(const v1::DesignRequest& r) {
   if (session_ == nullptr) {
     return absl::FailedPreconditionError("the first message of a session must be 'open'");
@@ -235,7 +254,22 @@ absl::Status DesignEditor::Edit(const v1::DesignRequest& r) {
                                            absl::StrCat("add id ", r.add().id())));
       return session_->AddConstraint(r.add().id(), c);
     }
+    case v1::DesignRequest::kAddStroke:
+    case v1::DesignRequest::kPlaceSingularity:
+    case v1::DesignRequest::kAlignBoundary:
+    case v1::DesignRequest::kAlignFeatures: {
+      ASSIGN_OR_RETURN(ToolEdit edit, ToolEditFromProto(*basis_, r));
+      RETURN_IF_ERROR(AdmitGroup(static_cast<int64_t>(edit.constraints.size())));
+      return session_->AddConstraintGroup(edit.id, edit.constraints);
+    }
     case v1::DesignRequest::kMove: {
+      if (r.move().has_group()) {
+        ASSIGN_OR_RETURN(std::vector<FieldConstraint> constraints,
+                         ConstraintGroupFromProto(*basis_, r.move().group(),
+                                                  absl::StrCat("move id ", r.move().id())));
+        RETURN_IF_ERROR(AdmitGroup(static_cast<int64_t>(constraints.size())));
+        return session_->MoveConstraintGroup(r.move().id(), constraints);
+      }
       ASSIGN_OR_RETURN(
           Eigen::VectorXd value,
           ConstraintValueFromProto(*basis_, r.move().face(), r.move().value(), r.move().encoding(),

@@ -80,6 +80,8 @@ class DesignEditor {
   // Admits the memory of `constraints` constraints into constraints_grant_, which grows by at
   // least doubling (as the session's own capacity does) and never shrinks (nor does that).
   absl::Status AdmitConstraints(int64_t constraints);
+  // max_constraints and AdmitConstraints for `size` more constraints (a tool's group).
+  absl::Status AdmitGroup(int64_t size);
 
   WorkGrant grant_;              // the open session's admitted memory
   WorkGrant constraints_grant_;  // its constraints' (AdmitConstraints)

@@ -14,6 +14,7 @@
 #include "core/subspace/projection.h"
 #include "core/subspace/spectrum.h"
 #include "server/clock.h"
+#include "server/design_tools_convert.h"
 #include "server/field_answers.h"
 #include "server/handlers.h"
 #include "server/proto_convert.h"
@@ -55,14 +56,18 @@ absl::Status Solve(const HandlerContext& ctx, const v1::SolveRequest& request,
   problem.scale_free = !request.raw_weights();
   ASSIGN_OR_RETURN(problem.biharmonic, BiharmonicFormFromProto(request.biharmonic()));
   RETURN_IF_ERROR(ValidateWeightsWithoutDataTerm(problem.weights));
-  if (request.constraints_size() > kMaxConstraints) {
+  std::vector<FieldConstraint> groups;  // the designer's tools' constraints
+  RETURN_IF_ERROR(AppendConstraintGroups(*basis, request.constraint_groups(), &groups));
+  const int64_t total = request.constraints_size() + static_cast<int64_t>(groups.size());
+  if (total > kMaxConstraints) {
     return absl::ResourceExhaustedError(
         absl::StrCat("at most ", kMaxConstraints, " constraints per request"));
   }
   int64_t hard = 0;
   for (const v1::Constraint& c : request.constraints()) hard += c.hard() ? 1 : 0;
-  int64_t work = SolveWorkingBytes(*basis->system, request.constraints_size() - hard, hard,
-                                   problem.scale_free, HardwareThreads());
+  for (const FieldConstraint& c : groups) hard += c.hard() ? 1 : 0;
+  int64_t work = SolveWorkingBytes(*basis->system, total - hard, hard, problem.scale_free,
+                                   HardwareThreads());
   if (request.return_field()) {
     work += int64_t{12} * basis->basis->type.dofs_per_face() * basis->mesh->num_faces();
   }
@@ -73,6 +78,7 @@ absl::Status Solve(const HandlerContext& ctx, const v1::SolveRequest& request,
                                                             absl::StrCat("constraint ", i)));
     problem.constraints.push_back(std::move(c));
   }
+  for (FieldConstraint& c : groups) problem.constraints.push_back(std::move(c));
   ASSIGN_OR_RETURN(FieldEncoding encoding, EncodingFromProto(request.field_encoding()));
   if (request.return_field()) {
     RETURN_IF_ERROR(CheckFieldFits(*basis, encoding, ctx.options->message_room()));

@@ -581,6 +581,29 @@ int64_t SupernodalFactor::ForwardSparse(absl::Span<const int32_t> rows,
   return visited_rows;
 }
 
+void SupernodalFactor::ForwardSparseColumns(absl::Span<const absl::Span<const int32_t>> rows,
+                                            absl::Span<const absl::Span<const double>> vals,
+                                            Eigen::Ref<Eigen::MatrixXd> Y) const {
+  const SupernodalSymbolic& sym = *symbolic_;
+  std::vector<int32_t> reach;
+  std::vector<char> marked(sym.num_supernodes(), 0);
+  RowMajorMatrix X = RowMajorMatrix::Zero(sym.n_, static_cast<int64_t>(rows.size()));
+  for (size_t j = 0; j < rows.size(); ++j) {
+    for (size_t q = 0; q < rows[j].size(); ++q) {
+      const int32_t k = sym.iperm_[rows[j][q]];
+      X(k, static_cast<int64_t>(j)) += vals[j][q];
+      for (int32_t s = sym.col_super_[k]; s >= 0 && !marked[s]; s = sym.parent_[s]) {
+        marked[s] = 1;
+        reach.push_back(s);
+      }
+    }
+  }
+  std::sort(reach.begin(), reach.end());  // children before parents
+  RowMajorMatrix tmp;
+  for (const int32_t s : reach) ForwardSupernode(s, X, tmp);
+  Y = X;
+}
+
 void SupernodalFactor::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {
   const SupernodalSymbolic& sym = *symbolic_;
   const int64_t n = sym.n_;

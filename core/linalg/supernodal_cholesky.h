@@ -151,6 +151,12 @@ class SupernodalFactor {
   // substitution. Returns the number of rows of L visited (the work done). y: n values, written.
   int64_t ForwardSparse(absl::Span<const int32_t> rows, absl::Span<const double> vals,
                         Eigen::Ref<Eigen::VectorXd> y) const;
+  // The same for k sparse columns at once (column j: vals[j][q] at row rows[j][q]): one pass over
+  // the union of their reaches with the k columns as one block, so each supernode costs one
+  // matrix-matrix product instead of k matrix-vector products. Y: n x k, written.
+  void ForwardSparseColumns(absl::Span<const absl::Span<const int32_t>> rows,
+                            absl::Span<const absl::Span<const double>> vals,
+                            Eigen::Ref<Eigen::MatrixXd> Y) const;
 
   bool is_valid() const { return valid_; }
   int64_t rows() const { return symbolic_->rows(); }

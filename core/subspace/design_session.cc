@@ -1,5 +1,6 @@
 #include "core/subspace/design_session.h"
 
+#include <algorithm>
 #include <tuple>
 #include <utility>
 
@@ -195,104 +196,195 @@ absl::Status DesignSession::RestoreCoefficients(const Eigen::VectorXd& x) {
   return absl::OkStatus();
 }
 
+absl::StatusOr<std::vector<double>> DesignSession::PrepareConstraints(
+    int64_t id, absl::Span<const FieldConstraint> constraints) const {
+  auto it = entries_.find(id);
+  const std::vector<int32_t>* slots = it == entries_.end() ? nullptr : &it->second.slots;
+  std::vector<double> stiffness(constraints.size(), 1.0);
+  for (size_t i = 0; i < constraints.size(); ++i) {
+    const FieldConstraint& c = constraints[i];
+    if (absl::Status st = ValidateConstraint(c, system_->num_faces(), system_->type()); !st.ok()) {
+      if (constraints.size() == 1) return st;
+      return absl::Status(st.code(),
+                          absl::StrCat("constraint ", i, " of group ", id, ": ", st.message()));
+    }
+    if (c.hard()) continue;
+    if (slots != nullptr && i < slots->size() && records_[(*slots)[i]].face == c.face &&
+        !records_[(*slots)[i]].hard()) {
+      stiffness[i] = stiffness_[(*slots)[i]];
+      continue;
+    }
+    ASSIGN_OR_RETURN(stiffness[i], Stiffness(BasisRowsOfFace(*system_, c.face)));
+  }
+  return stiffness;
+}
+
+void DesignSession::RemoveSlot(int32_t slot) {
+  const int32_t last = static_cast<int32_t>(ids_by_slot_.size()) - 1;
+  if (records_[slot].hard()) --num_hard_;
+  kkt_->RemoveSwapLast(slot);
+  if (slot != last) {
+    ids_by_slot_[slot] = ids_by_slot_[last];
+    position_by_slot_[slot] = position_by_slot_[last];
+    records_[slot] = std::move(records_[last]);
+    stiffness_[slot] = stiffness_[last];
+    entries_.at(ids_by_slot_[slot]).slots[position_by_slot_[slot]] = slot;
+  }
+  ids_by_slot_.pop_back();
+  position_by_slot_.pop_back();
+  records_.pop_back();
+  stiffness_.pop_back();
+}
+
+bool DesignSession::SetSlots(int64_t id, absl::Span<const FieldConstraint> constraints,
+                             absl::Span<const double> stiffness) {
+  std::vector<int32_t>& slots = entries_.at(id).slots;
+  bool changed = false;
+  const size_t kept = std::min(slots.size(), constraints.size());
+  std::vector<int32_t> replaced_slots;
+  std::vector<KktSolver::NewGroup> replaced;
+  for (size_t i = 0; i < kept; ++i) {
+    const int32_t slot = slots[i];
+    const FieldConstraint& c = constraints[i];
+    FieldConstraint& record = records_[slot];
+    const double e = c.hard() ? 0.0 : SoftE(c.weight, stiffness[i]);
+    if (c.face == record.face && c.hard() == record.hard()) {
+      kkt_->SetTarget(slot, c.value);
+      if (!c.hard() && (c.weight != record.weight || stiffness[i] != stiffness_[slot])) {
+        kkt_->SetE(slot, e);
+        changed = true;
+      }
+    } else {
+      replaced_slots.push_back(slot);
+      replaced.push_back({BasisRowsOfFace(*system_, c.face), c.value, e, c.hard()});
+      num_hard_ += (c.hard() ? 1 : 0) - (record.hard() ? 1 : 0);
+      changed = true;
+    }
+    record = c;
+    stiffness_[slot] = stiffness[i];
+  }
+  // Before any slot moves (RemoveSlot below).
+  kkt_->ReplaceGroups(replaced_slots, std::move(replaced));
+  if (slots.size() > kept) {
+    // Highest slot first: the last slot, which moves into the removed one's place, is then never
+    // one still to be removed.
+    std::vector<int32_t> surplus(slots.begin() + kept, slots.end());
+    slots.resize(kept);
+    std::sort(surplus.rbegin(), surplus.rend());
+    for (int32_t slot : surplus) RemoveSlot(slot);
+    changed = true;
+  }
+  std::vector<KktSolver::NewGroup> appended;
+  for (size_t i = kept; i < constraints.size(); ++i) {
+    const FieldConstraint& c = constraints[i];
+    appended.push_back({BasisRowsOfFace(*system_, c.face), c.value,
+                        c.hard() ? 0.0 : SoftE(c.weight, stiffness[i]), c.hard()});
+    slots.push_back(static_cast<int32_t>(ids_by_slot_.size()));
+    ids_by_slot_.push_back(id);
+    position_by_slot_.push_back(static_cast<int32_t>(i));
+    records_.push_back(c);
+    stiffness_.push_back(stiffness[i]);
+    num_hard_ += c.hard() ? 1 : 0;
+    changed = true;
+  }
+  kkt_->AppendGroups(std::move(appended));
+  return changed;
+}
+
+absl::Status DesignSession::CommitSlots(int64_t id, absl::Span<const FieldConstraint> constraints,
+                                        absl::Span<const double> stiffness,
+                                        absl::Span<const FieldConstraint> old_constraints,
+                                        absl::Span<const double> old_stiffness) {
+  if (!SetSlots(id, constraints, stiffness)) return absl::OkStatus();
+  absl::Status st = kkt_->FactorizeSchur();
+  if (st.ok()) return st;
+  // The previous factorization of H is still in place and matches the restored state.
+  SetSlots(id, old_constraints, old_stiffness);
+  RETURN_IF_ERROR(kkt_->FactorizeSchur());
+  return st;
+}
+
 absl::Status DesignSession::AddConstraint(int64_t id, const FieldConstraint& constraint) {
-  if (slot_by_id_.count(id)) {
+  if (entries_.count(id)) {
     return absl::AlreadyExistsError(absl::StrCat("constraint id ", id, " already exists"));
   }
-  const bool soft = !constraint.hard();
-  RETURN_IF_ERROR(ValidateConstraint(constraint, system_->num_faces(), system_->type()));
-  std::vector<SparseRow> rows = BasisRowsOfFace(*system_, constraint.face);
-  double stiffness = 1.0;
-  if (soft) {
-    ASSIGN_OR_RETURN(stiffness, Stiffness(rows));
-  }
-  kkt_->Append(std::move(rows), constraint.value, soft ? SoftE(constraint.weight, stiffness) : 0.0,
-               !soft);
-  if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
-    // The previous factorization of H is still in place and matches the restored state.
-    kkt_->RemoveSwapLast(kkt_->num_groups() - 1);
-    RETURN_IF_ERROR(kkt_->FactorizeSchur());
+  ASSIGN_OR_RETURN(std::vector<double> stiffness, PrepareConstraints(id, {&constraint, 1}));
+  entries_[id] = Entry{};
+  if (absl::Status st = CommitSlots(id, {&constraint, 1}, stiffness, {}, {}); !st.ok()) {
+    entries_.erase(id);
     return st;
   }
-  slot_by_id_[id] = static_cast<int32_t>(ids_by_slot_.size());
-  ids_by_slot_.push_back(id);
-  records_.push_back(constraint);
-  stiffness_.push_back(stiffness);
-  num_hard_ += soft ? 0 : 1;
+  Resolve();
+  return absl::OkStatus();
+}
+
+absl::Status DesignSession::AddConstraintGroup(int64_t id,
+                                               absl::Span<const FieldConstraint> constraints) {
+  if (entries_.count(id)) {
+    return absl::AlreadyExistsError(absl::StrCat("constraint id ", id, " already exists"));
+  }
+  if (constraints.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("constraint group ", id, " is empty"));
+  }
+  ASSIGN_OR_RETURN(std::vector<double> stiffness, PrepareConstraints(id, constraints));
+  entries_[id] = Entry{.slots = {}, .group = true};
+  if (absl::Status st = CommitSlots(id, constraints, stiffness, {}, {}); !st.ok()) {
+    entries_.erase(id);
+    return st;
+  }
   Resolve();
   return absl::OkStatus();
 }
 
 absl::Status DesignSession::MoveConstraint(int64_t id, int32_t face, Eigen::VectorXd value) {
-  auto it = slot_by_id_.find(id);
-  if (it == slot_by_id_.end()) {
-    return absl::NotFoundError(absl::StrCat("constraint id ", id, " does not exist"));
-  }
-  FieldConstraint moved = records_[it->second];
+  ASSIGN_OR_RETURN(FieldConstraint moved, GetConstraint(id));
   moved.face = face;
   moved.value = std::move(value);
   return MoveConstraint(id, moved);
 }
 
 absl::Status DesignSession::MoveConstraint(int64_t id, const FieldConstraint& target) {
-  auto it = slot_by_id_.find(id);
-  if (it == slot_by_id_.end()) {
+  ASSIGN_OR_RETURN(FieldConstraint old, GetConstraint(id));
+  FieldConstraint constraint = target;
+  constraint.kind = old.kind;  // a move keeps the kind
+  ASSIGN_OR_RETURN(std::vector<double> stiffness, PrepareConstraints(id, {&constraint, 1}));
+  const double old_stiffness = stiffness_[entries_.at(id).slots[0]];
+  RETURN_IF_ERROR(CommitSlots(id, {&constraint, 1}, stiffness, {&old, 1}, {&old_stiffness, 1}));
+  Resolve();
+  return absl::OkStatus();
+}
+
+absl::Status DesignSession::MoveConstraintGroup(int64_t id,
+                                                absl::Span<const FieldConstraint> constraints) {
+  auto it = entries_.find(id);
+  if (it == entries_.end()) {
     return absl::NotFoundError(absl::StrCat("constraint id ", id, " does not exist"));
   }
-  const int32_t slot = it->second;
-  FieldConstraint& record = records_[slot];
-  FieldConstraint constraint = target;
-  constraint.kind = record.kind;  // a move keeps the kind
-  const bool soft = !record.hard();
-  RETURN_IF_ERROR(ValidateConstraint(constraint, system_->num_faces(), system_->type()));
-  double stiffness = stiffness_[slot];
-  if (constraint.face == record.face) {
-    kkt_->SetTarget(slot, constraint.value);
-    if (soft && constraint.weight != record.weight) {
-      kkt_->SetE(slot, SoftE(constraint.weight, stiffness));
-      // A positive change of a soft row's diagonal cannot create a dependence.
-      RETURN_IF_ERROR(kkt_->FactorizeSchur());
-    }
-  } else {
-    std::vector<SparseRow> rows = BasisRowsOfFace(*system_, constraint.face);
-    if (soft) {
-      ASSIGN_OR_RETURN(stiffness, Stiffness(rows));
-    }
-    kkt_->Replace(slot, std::move(rows), constraint.value,
-                  soft ? SoftE(constraint.weight, stiffness) : 0.0);
-    if (absl::Status st = kkt_->FactorizeSchur(); !st.ok()) {
-      const FieldConstraint& old = record;
-      kkt_->Replace(slot, BasisRowsOfFace(*system_, old.face), old.value,
-                    soft ? SoftE(old.weight, stiffness_[slot]) : 0.0);
-      RETURN_IF_ERROR(kkt_->FactorizeSchur());
-      return st;
-    }
+  if (!it->second.group) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("constraint id ", id, " is a single constraint, not a group: move it alone"));
   }
-  record = std::move(constraint);
-  stiffness_[slot] = stiffness;
+  if (constraints.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat("constraint group ", id, " is empty"));
+  }
+  ASSIGN_OR_RETURN(std::vector<double> stiffness, PrepareConstraints(id, constraints));
+  std::vector<FieldConstraint> old;
+  std::vector<double> old_stiffness;
+  for (int32_t slot : it->second.slots) {
+    old.push_back(records_[slot]);
+    old_stiffness.push_back(stiffness_[slot]);
+  }
+  RETURN_IF_ERROR(CommitSlots(id, constraints, stiffness, old, old_stiffness));
   Resolve();
   return absl::OkStatus();
 }
 
 absl::Status DesignSession::RemoveConstraint(int64_t id) {
-  auto it = slot_by_id_.find(id);
-  if (it == slot_by_id_.end()) {
+  if (!entries_.count(id)) {
     return absl::NotFoundError(absl::StrCat("constraint id ", id, " does not exist"));
   }
-  const int32_t slot = it->second;
-  const int32_t last = static_cast<int32_t>(ids_by_slot_.size()) - 1;
-  if (records_[slot].hard()) --num_hard_;
-  kkt_->RemoveSwapLast(slot);
-  slot_by_id_.erase(it);
-  if (slot != last) {
-    ids_by_slot_[slot] = ids_by_slot_[last];
-    records_[slot] = std::move(records_[last]);
-    stiffness_[slot] = stiffness_[last];
-    slot_by_id_[ids_by_slot_[slot]] = slot;
-  }
-  ids_by_slot_.pop_back();
-  records_.pop_back();
-  stiffness_.pop_back();
+  SetSlots(id, {}, {});
+  entries_.erase(id);
   // Removing rows keeps the remaining hard rows independent, so this cannot fail.
   RETURN_IF_ERROR(kkt_->FactorizeSchur());
   Resolve();
@@ -301,8 +393,9 @@ absl::Status DesignSession::RemoveConstraint(int64_t id) {
 
 void DesignSession::ClearConstraints() {
   while (kkt_->num_groups() > 0) kkt_->RemoveSwapLast(kkt_->num_groups() - 1);
-  slot_by_id_.clear();
+  entries_.clear();
   ids_by_slot_.clear();
+  position_by_slot_.clear();
   records_.clear();
   stiffness_.clear();
   num_hard_ = 0;
@@ -372,11 +465,26 @@ absl::StatusOr<Eigen::VectorXd> DesignSession::LiftAll() const {
 }
 
 absl::StatusOr<FieldConstraint> DesignSession::GetConstraint(int64_t id) const {
-  auto it = slot_by_id_.find(id);
-  if (it == slot_by_id_.end()) {
+  auto it = entries_.find(id);
+  if (it == entries_.end()) {
     return absl::NotFoundError(absl::StrCat("constraint id ", id, " does not exist"));
   }
-  return records_[it->second];
+  if (it->second.group) {
+    return absl::FailedPreconditionError(absl::StrCat("constraint id ", id, " is a group of ",
+                                                      it->second.slots.size(), " constraints"));
+  }
+  return records_[it->second.slots[0]];
+}
+
+absl::StatusOr<std::vector<FieldConstraint>> DesignSession::GetConstraintGroup(int64_t id) const {
+  auto it = entries_.find(id);
+  if (it == entries_.end()) {
+    return absl::NotFoundError(absl::StrCat("constraint id ", id, " does not exist"));
+  }
+  std::vector<FieldConstraint> out;
+  out.reserve(it->second.slots.size());
+  for (int32_t slot : it->second.slots) out.push_back(records_[slot]);
+  return out;
 }
 
 ModelProblem DesignSession::problem() const {
@@ -385,7 +493,9 @@ ModelProblem DesignSession::problem() const {
   problem.weights.mu_a = 0;  // the data term is the session's own
   problem.scale_free = options_.scale_free;
   problem.biharmonic = options_.biharmonic;
-  for (const auto& [id, slot] : slot_by_id_) problem.constraints.push_back(records_[slot]);
+  for (const auto& [id, entry] : entries_) {
+    for (int32_t slot : entry.slots) problem.constraints.push_back(records_[slot]);
+  }
   return problem;
 }
 

@@ -147,12 +147,26 @@ class DesignSession {
   // in the subspace (e.g. a second hard constraint on the same face).
   absl::Status AddConstraint(int64_t id, const FieldConstraint& constraint);
   // Replaces constraint `id`'s face, value and weight (its kind stays: constraint.kind is
-  // ignored). NotFound for an unknown id; otherwise the errors of AddConstraint. Moving within
+  // ignored). NotFound for an unknown id; FailedPrecondition for a group's id (use
+  // MoveConstraintGroup); otherwise the errors of AddConstraint. Moving within
   // the same face (new value or weight) needs no solve with A.
   absl::Status MoveConstraint(int64_t id, const FieldConstraint& constraint);
   // The same, keeping the constraint's weight too (an interactive drag).
   absl::Status MoveConstraint(int64_t id, int32_t face, Eigen::VectorXd value);
-  // NotFound for an unknown id.
+  // Adds a group of constraints under one id (a designer's tool: a stroke's faces, a placed
+  // singularity's fan; see core/subspace/design_tools.h): one edit that appends the group's rows
+  // and refactorizes H once. Each constraint keeps its own kind and weight. AlreadyExists for an id
+  // in use; InvalidArgument for an empty group or an invalid constraint (as AddConstraint, naming
+  // its position); FailedPrecondition when the hard constraints would become dependent (two hard
+  // ones on a face, within the group or with the session's). All or nothing.
+  absl::Status AddConstraintGroup(int64_t id, absl::Span<const FieldConstraint> constraints);
+  // Replaces group `id`'s constraints by `constraints` (any number, faces, values, weights and
+  // kinds) in one edit: rows on the same face at the same position only change their value (and
+  // weight), others are replaced, appended or removed; H is refactorized once, and not at all when
+  // only values changed. NotFound for an unknown id; FailedPrecondition for the id of a single
+  // constraint (use MoveConstraint); otherwise the errors of AddConstraintGroup. All or nothing.
+  absl::Status MoveConstraintGroup(int64_t id, absl::Span<const FieldConstraint> constraints);
+  // Removes constraint or group `id` (a group as one edit). NotFound for an unknown id.
   absl::Status RemoveConstraint(int64_t id);
   // Removes every constraint (the solution becomes 0, or the data term's minimizer).
   void ClearConstraints();
@@ -173,11 +187,19 @@ class DesignSession {
   absl::StatusOr<Eigen::VectorXd> LiftAll() const;
 
   const EnergyWeights& weights() const { return weights_; }
+  // Per-face constraints, a group's counted one by one.
   int32_t num_constraints() const { return static_cast<int32_t>(ids_by_slot_.size()); }
   int32_t num_hard_constraints() const { return num_hard_; }
-  bool HasConstraint(int64_t id) const { return slot_by_id_.count(id) > 0; }
-  // NotFound for an unknown id.
+  bool HasConstraint(int64_t id) const { return entries_.count(id) > 0; }
+  bool IsConstraintGroup(int64_t id) const {
+    auto it = entries_.find(id);
+    return it != entries_.end() && it->second.group;
+  }
+  // NotFound for an unknown id; FailedPrecondition for a group's id (see GetConstraintGroup).
   absl::StatusOr<FieldConstraint> GetConstraint(int64_t id) const;
+  // The constraints of group `id` in their order (of a single constraint: that one). NotFound for
+  // an unknown id.
+  absl::StatusOr<std::vector<FieldConstraint>> GetConstraintGroup(int64_t id) const;
   // The current problem (soft and hard constraints in increasing id order), as solved by
   // SolveReducedModelProblem or, in the full space, SolveModelProblem (without the data term,
   // which neither has).
@@ -210,16 +232,40 @@ class DesignSession {
   // mu_A' U^T W M X0 for the current weights (empty without a data term).
   void UpdateDataRhs();
   void Resolve();
+  // Validates `constraints` (InvalidArgument naming the position) and gives each soft one its
+  // stiffness, reusing that of the slot at the same position of entry `id` (if any) on the same
+  // face.
+  absl::StatusOr<std::vector<double>> PrepareConstraints(
+      int64_t id, absl::Span<const FieldConstraint> constraints) const;
+  // Makes entry `id`'s slots hold `constraints` (with `stiffness`): same face and kind at the same
+  // position: new value and weight only; otherwise the slot's rows are replaced, appended or
+  // removed. Does not factorize H. Returns whether H changed.
+  bool SetSlots(int64_t id, absl::Span<const FieldConstraint> constraints,
+                absl::Span<const double> stiffness);
+  // Removes one slot; the last slot moves into its place.
+  void RemoveSlot(int32_t slot);
+  // SetSlots for an edit of entry `id` whose previous state is `old_*`: factorizes H when it
+  // changed and on failure puts the old constraints back (status of the failure).
+  absl::Status CommitSlots(int64_t id, absl::Span<const FieldConstraint> constraints,
+                           absl::Span<const double> stiffness,
+                           absl::Span<const FieldConstraint> old_constraints,
+                           absl::Span<const double> old_stiffness);
 
   std::shared_ptr<const ReducedSystem> system_;
   DesignSessionOptions options_;
   EnergyWeights weights_;
   std::shared_ptr<const EnergyFactorization> energy_;
   std::unique_ptr<KktSolver> kkt_;
-  std::map<int64_t, int32_t> slot_by_id_;
+  // A constraint id: its slots (rows of the KKT solver), in the group's order.
+  struct Entry {
+    std::vector<int32_t> slots;
+    bool group = false;
+  };
+  std::map<int64_t, Entry> entries_;
   std::vector<int64_t> ids_by_slot_;
-  std::vector<FieldConstraint> records_;  // by slot
-  std::vector<double> stiffness_;         // by slot: see Stiffness()
+  std::vector<int32_t> position_by_slot_;  // in its entry's slots
+  std::vector<FieldConstraint> records_;   // by slot
+  std::vector<double> stiffness_;          // by slot: see Stiffness()
   Eigen::VectorXd data_rhs_;
   int32_t num_hard_ = 0;
   Eigen::VectorXd coefficients_;

@@ -129,6 +129,19 @@ void KktSolver::ComputeGroupColumns(int32_t g) {
   }
 }
 
+void KktSolver::GroupColumns(absl::Span<const int32_t> groups,
+                             Eigen::Ref<Eigen::MatrixXd> out) const {
+  std::vector<absl::Span<const int32_t>> cols;
+  std::vector<absl::Span<const double>> vals;
+  for (int32_t g : groups) {
+    for (const SparseRow& row : rows_[g]) {
+      cols.emplace_back(row.cols);
+      vals.emplace_back(row.vals);
+    }
+  }
+  factor_->ForwardSparseColumns(cols, vals, out);
+}
+
 void KktSolver::ComputeGroup(int32_t g) {
   if (factor_ == nullptr) return;  // SetMatrix() computes every group later
   ComputeGroupColumns(g);
@@ -184,13 +197,54 @@ void KktSolver::Append(std::vector<SparseRow> rows, const Eigen::VectorXd& targe
   schur_valid_ = false;
 }
 
-void KktSolver::Replace(int32_t g, std::vector<SparseRow> rows, const Eigen::VectorXd& target,
-                        double e) {
-  rows_[g] = std::move(rows);
-  t_.segment(static_cast<int64_t>(g) * p_, p_) = target;
-  e_.segment(static_cast<int64_t>(g) * p_, p_).setConstant(e);
-  ComputeGroup(g);
+void KktSolver::AppendGroups(std::vector<NewGroup> groups) {
+  const int32_t g0 = num_groups_;
+  const int32_t k = static_cast<int32_t>(groups.size());
+  if (k == 0) return;
+  EnsureCapacity(static_cast<int64_t>(g0 + k) * p_);
+  for (NewGroup& group : groups) {
+    const int64_t r0 = static_cast<int64_t>(num_groups_) * p_;
+    t_.segment(r0, p_) = group.target;
+    e_.segment(r0, p_).setConstant(group.e);
+    rows_.push_back(std::move(group.rows));
+    hard_.push_back(group.hard ? 1 : 0);
+    ++num_groups_;
+  }
   schur_valid_ = false;
+  if (factor_ == nullptr) return;  // SetMatrix() computes every group later
+  std::vector<int32_t> added(k);
+  for (int32_t i = 0; i < k; ++i) added[i] = g0 + i;
+  GroupColumns(added, W_.middleCols(static_cast<int64_t>(g0) * p_, static_cast<int64_t>(k) * p_));
+  const int64_t r0 = static_cast<int64_t>(g0) * p_;
+  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  const int64_t nc = r - r0;
+  // K = W^T W: the new columns against all groups, then the new rows by symmetry.
+  K_.block(0, r0, r, nc).noalias() = W_.leftCols(r).transpose() * W_.middleCols(r0, nc);
+  K_.block(r0, 0, nc, r0) = K_.block(0, r0, r0, nc).transpose();
+}
+
+void KktSolver::ReplaceGroups(const std::vector<int32_t>& slots, std::vector<NewGroup> groups) {
+  const int64_t k = static_cast<int64_t>(slots.size());
+  if (k == 0) return;
+  for (int64_t i = 0; i < k; ++i) {
+    const int64_t r0 = static_cast<int64_t>(slots[i]) * p_;
+    t_.segment(r0, p_) = groups[i].target;
+    e_.segment(r0, p_).setConstant(groups[i].e);
+    rows_[slots[i]] = std::move(groups[i].rows);
+    hard_[slots[i]] = groups[i].hard ? 1 : 0;
+  }
+  schur_valid_ = false;
+  if (factor_ == nullptr) return;
+  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  Eigen::MatrixXd Wc(d_, k * p_);
+  GroupColumns(slots, Wc);
+  for (int64_t i = 0; i < k; ++i) W_.middleCols(slots[i] * p_, p_) = Wc.middleCols(i * p_, p_);
+  const Eigen::MatrixXd G = W_.leftCols(r).transpose() * Wc;  // r x k p
+  for (int64_t i = 0; i < k; ++i) {
+    const int64_t c0 = static_cast<int64_t>(slots[i]) * p_;
+    K_.block(0, c0, r, p_) = G.middleCols(i * p_, p_);
+    K_.block(c0, 0, p_, r) = G.middleCols(i * p_, p_).transpose();
+  }
 }
 
 void KktSolver::SetTarget(int32_t g, const Eigen::VectorXd& target) {

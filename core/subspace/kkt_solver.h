@@ -12,6 +12,7 @@
 #include "Eigen/SparseCore"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "absl/types/span.h"
 #include "core/linalg/supernodal_cholesky.h"
 #include "core/subspace/model_problem.h"
 
@@ -100,8 +101,20 @@ class KktSolver {
   // Appends a constraint (rows: p sparse rows; target: p values; e >= 0, 0 for hard). Before the
   // first SetMatrix() this only records it (SetMatrix solves for all groups at once).
   void Append(std::vector<SparseRow> rows, const Eigen::VectorXd& target, double e, bool hard);
-  // Replaces group g's rows (recomputing its Z columns), target and e.
-  void Replace(int32_t g, std::vector<SparseRow> rows, const Eigen::VectorXd& target, double e);
+  // Appends several constraints (as Append each) in one step: their W columns by independent
+  // sparse forward substitutions (in parallel with options.parallel), then their rows and
+  // columns of K in one matrix product, which a group edit (a stroke's faces) needs instead of
+  // one matrix-vector product per row.
+  struct NewGroup {
+    std::vector<SparseRow> rows;
+    Eigen::VectorXd target;
+    double e = 0;
+    bool hard = false;
+  };
+  void AppendGroups(std::vector<NewGroup> groups);
+  // Replace for several groups at once (slots[i] gets groups[i], whose `hard` is set too), the
+  // same way: parallel W columns, one matrix product for K.
+  void ReplaceGroups(const std::vector<int32_t>& slots, std::vector<NewGroup> groups);
   void SetTarget(int32_t g, const Eigen::VectorXd& target);
   void SetE(int32_t g, double e);
   // Removes group g; the last group moves into slot g (callers track ids by slot).
@@ -132,6 +145,8 @@ class KktSolver {
   void EnsureCapacity(int64_t rows);
   // W columns of group g, then its entries of K against all current groups.
   void ComputeGroupColumns(int32_t g);
+  // The W columns of groups `groups` (one block forward substitution) into `out` (d x p k).
+  void GroupColumns(absl::Span<const int32_t> groups, Eigen::Ref<Eigen::MatrixXd> out) const;
   void ComputeGroup(int32_t g);
   // H^-1 v (v: r values).
   Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;

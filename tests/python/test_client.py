@@ -429,6 +429,29 @@ class SolveAndDesignTest(unittest.TestCase):
             self.assertEqual(s2.add(3, [1, 0, 0]).num_constraints, 1)
 
 
+class DesignToolsTest(unittest.TestCase):
+    def test_tools_are_groups_moved_and_removed_as_one(self):
+        arc = [(np.cos(t), np.sin(t), 0.1) for t in np.linspace(0.0, 1.2, 4)]
+        with CLIENT.design(NFIELD, fs.Weights(1.0, 0.0, 1.0), watch=[0]) as s:
+            a = s.stroke(arc, weight=2.0)
+            self.assertEqual((a.edit, a.constraint_id), ("stroke", 1))
+            self.assertGreater(a.num_constraints, 5)  # one per crossed face
+            b = s.place_singularity(17, 0.25, weight=10.0)
+            self.assertEqual(b.constraint_id, 2)
+            self.assertGreater(b.num_constraints, a.num_constraints + 4)  # its 5 or 6 faces
+            # A face point stroke replaces the first stroke as one edit.
+            m = s.stroke([(3, (0.2, 0.3, 0.5)), (40, (0.3, 0.3, 0.4))], id=1, move=True)
+            self.assertEqual(m.edit, "move")
+            r = s.remove(2)
+            self.assertEqual(r.num_constraints, m.num_constraints - (b.num_constraints
+                                                                     - a.num_constraints))
+            with self.assertRaises(fs.FailedPrecondition):
+                s.align_boundary()  # the sphere has no boundary
+        with CLIENT.design(NFIELD) as s:
+            with self.assertRaises(fs.InvalidArgument):
+                s.place_singularity(17, 0.3)  # not a multiple of 1/4
+
+
 class RoutingKeyTest(unittest.TestCase):
     def test_calls_that_name_an_id_send_it_as_routing_key(self):
         recorded = []

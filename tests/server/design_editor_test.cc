@@ -11,6 +11,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/mesh/shapes.h"
+#include "core/subspace/design_tools.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/projection.h"
 #include "gmock/gmock.h"
@@ -423,6 +424,137 @@ TEST_F(DesignEditorTest, ConstraintMemoryIsAdmittedAsConstraintsAreAdded) {
     }
   }
   EXPECT_EQ(account.held, 0);
+}
+
+// The designer's tools: each is one group under its id (its faces' constraints as the core
+// functions make them), moved and removed as one, every answer a fresh solve; a tool the mesh
+// cannot take fails with its code and leaves the session as it was.
+TEST_F(DesignEditorTest, ToolsAreConstraintGroupsMovedAndRemovedAsOne) {
+  const TriangleMesh& mesh = *(*basis_)->mesh;
+  DesignEditor editor = NewEditor();
+  v1::DesignRequest open = Open(1, 0, 1);
+  open.mutable_open()->set_singularities(true);
+  v1::DesignUpdate u;
+  ASSERT_TRUE(editor.Apply(open, &u).ok());
+  v1::DesignRequest stroke;
+  stroke.mutable_add_stroke()->set_id(1);
+  v1::SurfacePoint::FacePoint* p = stroke.mutable_add_stroke()->add_points()->mutable_face_point();
+  p->set_face(3);
+  for (double w : {0.2, 0.3, 0.5}) p->add_barycentric(w);
+  const Eigen::Vector3d far = mesh.face_barycenters().row(900).transpose();
+  v1::Point3* q = stroke.mutable_add_stroke()->add_points()->mutable_position();
+  q->set_x(1.1 * far.x());  // off the surface: snapped
+  q->set_y(1.1 * far.y());
+  q->set_z(1.1 * far.z());
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(stroke, &u).ok());
+  ExpectFresh(editor, u);
+  auto expected =
+      StrokeConstraints(mesh, FieldType::Vector(),
+                        {SurfacePoint{3, {0.2, 0.3, 0.5}}, *SnapToSurface(mesh, 1.1 * far)});
+  ASSERT_TRUE(expected.ok()) << expected.status();
+  EXPECT_EQ(u.num_constraints(), static_cast<int32_t>(expected->size()));
+  EXPECT_TRUE(editor.session()->IsConstraintGroup(1));
+
+  // A +1 singularity at vertex 40 (soft: this 60-dimensional basis has too few fields around one
+  // vertex for 12 hard rows): the update reports it there.
+  v1::DesignRequest singularity;
+  singularity.mutable_place_singularity()->set_id(2);
+  singularity.mutable_place_singularity()->set_vertex(40);
+  singularity.mutable_place_singularity()->set_index(1.0);
+  singularity.mutable_place_singularity()->set_weight(100);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(singularity, &u).ok());
+  ExpectFresh(editor, u);
+  bool found = false;
+  for (const v1::Singularity& s : u.singularities().appeared()) {
+    if (s.vertex() == 40) found = s.index() == 1;
+  }
+  EXPECT_TRUE(found);
+  const int32_t with_both = u.num_constraints();
+
+  // Move the stroke (reversed: the same faces, opposite values) and then the singularity's group
+  // to a stroke: each one edit.
+  v1::DesignRequest move;
+  move.mutable_move()->set_id(1);
+  *move.mutable_move()->mutable_group()->mutable_stroke() = stroke.add_stroke();
+  move.mutable_move()->mutable_group()->mutable_stroke()->mutable_points()->SwapElements(0, 1);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(move, &u).ok());
+  ExpectFresh(editor, u);
+  EXPECT_EQ(u.num_constraints(), with_both);
+  move.mutable_move()->set_id(2);
+  u.Clear();
+  ASSERT_TRUE(editor.Apply(move, &u).ok());
+  ExpectFresh(editor, u);
+
+  // Tools a sphere cannot take, bad tools, a group move on a single constraint, a hard group on
+  // hard faces: exact codes, session unchanged.
+  const Eigen::VectorXd before = editor.session()->coefficients();
+  const int32_t constraints = editor.session()->num_constraints();
+  const auto expect_unchanged = [&](const char* what) {
+    EXPECT_EQ(editor.session()->num_constraints(), constraints) << what;
+    EXPECT_EQ(std::memcmp(editor.session()->coefficients().data(), before.data(),
+                          sizeof(double) * before.size()),
+              0)
+        << what;
+  };
+  v1::DesignRequest boundary;
+  boundary.mutable_align_boundary()->set_id(3);
+  EXPECT_EQ(editor.Apply(boundary, &u).code(), absl::StatusCode::kFailedPrecondition);
+  expect_unchanged("boundary");
+  v1::DesignRequest features;
+  features.mutable_align_features()->set_id(3);
+  EXPECT_EQ(editor.Apply(features, &u).code(), absl::StatusCode::kFailedPrecondition);
+  expect_unchanged("features");
+  v1::DesignRequest bad = singularity;
+  bad.mutable_place_singularity()->set_id(3);
+  bad.mutable_place_singularity()->set_index(0.5);
+  EXPECT_EQ(editor.Apply(bad, &u).code(), absl::StatusCode::kInvalidArgument);
+  expect_unchanged("index 0.5");
+  bad = stroke;
+  bad.mutable_add_stroke()->set_id(3);
+  bad.mutable_add_stroke()->mutable_points()->RemoveLast();
+  EXPECT_EQ(editor.Apply(bad, &u).code(), absl::StatusCode::kInvalidArgument);
+  expect_unchanged("one point");
+  bad = stroke;
+  bad.mutable_add_stroke()->set_id(1);
+  EXPECT_EQ(editor.Apply(bad, &u).code(), absl::StatusCode::kAlreadyExists);
+  expect_unchanged("id in use");
+  ASSERT_TRUE(editor.Apply(Add(9, 1000, 1, 0, /*hard=*/true), &u).ok());
+  move.mutable_move()->set_id(9);
+  EXPECT_EQ(editor.Apply(move, &u).code(), absl::StatusCode::kFailedPrecondition);
+  // A hard stroke inside face 1000, already hard-constrained: dependent.
+  bad.Clear();
+  bad.mutable_add_stroke()->set_id(5);
+  bad.mutable_add_stroke()->set_hard(true);
+  for (double w : {0.1, 0.8}) {
+    v1::SurfacePoint::FacePoint* f = bad.mutable_add_stroke()->add_points()->mutable_face_point();
+    f->set_face(1000);
+    f->add_barycentric(w);
+    f->add_barycentric(1 - w);
+    f->add_barycentric(0);
+  }
+  const Eigen::VectorXd hard_before = editor.session()->coefficients();
+  EXPECT_EQ(editor.Apply(bad, &u).code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(std::memcmp(editor.session()->coefficients().data(), hard_before.data(),
+                        sizeof(double) * hard_before.size()),
+            0);
+  EXPECT_FALSE(editor.session()->HasConstraint(5));
+  v1::DesignRequest remove;
+  remove.mutable_remove()->set_id(9);
+  ASSERT_TRUE(editor.Apply(remove, &u).ok());
+  // Now the same stroke is accepted.
+  ASSERT_TRUE(editor.Apply(bad, &u).ok());
+
+  // Removing the groups, one edit each, leaves nothing.
+  for (int id : {1, 2, 5}) {
+    remove.mutable_remove()->set_id(id);
+    u.Clear();
+    ASSERT_TRUE(editor.Apply(remove, &u).ok()) << id;
+    ExpectFresh(editor, u);
+  }
+  EXPECT_EQ(u.num_constraints(), 0);
 }
 
 }  // namespace

@@ -97,6 +97,7 @@ class DesignSession:
         # the constraints by id, in the order they were added, as the server last confirmed.
         self._open = pb.OpenDesign()
         self._constraints = collections.OrderedDict()
+        self._tools = collections.OrderedDict()  # tool edits by id (see _remember_tool)
         self._start_call()
         self._send("open", pb.DesignRequest(open=open_message), None)
 
@@ -154,6 +155,95 @@ class DesignSession:
         message.faces.extend(faces.tolist())
         return self._send("watch", pb.DesignRequest(watch=message), None, faces, encoding)
 
+    # -- the designer's tools: one constraint group each, under one id --------------------------
+
+    def stroke(self, points, *, hard=False, weight=None, anisotropy=None, id=None, move=False):
+        """A stroke through ``points``: an (m, 3) array of 3D points (each snapped to the closest
+        point of the surface) or a list of ``(face, (b0, b1, b2))`` surface points; consecutive
+        points are joined by the shortest path on the mesh. It constrains every face it crosses
+        to its direction there (n-fields: one of the n; tensors: the principal direction with
+        eigenvalues 1 and 1 - ``anisotropy``), soft weights by its length in each face, ``weight``
+        their mean. ``move=True`` replaces the tool ``id`` instead (one edit)."""
+        message = pb.Stroke(hard=bool(hard))
+        for p in points:
+            if len(p) == 2 and np.ndim(p[1]) == 1:
+                face, b = p
+                message.points.add().face_point.CopyFrom(
+                    pb.SurfacePoint.FacePoint(face=int(face), barycentric=[float(x) for x in b]))
+            else:
+                x, y, z = (float(c) for c in p)
+                message.points.add().position.CopyFrom(pb.Point3(x=x, y=y, z=z))
+        if weight is not None:
+            message.weight = float(weight)
+        if anisotropy is not None:
+            message.anisotropy = float(anisotropy)
+        return self._tool("stroke", "add_stroke", message, id, move)
+
+    def place_singularity(self, vertex, index, *, hard=False, weight=None, id=None, move=False):
+        """A singularity of ``index`` (whole turns, a multiple of 1/n: 1 for a vector source,
+        0.25 or -0.25 for a 4-field) at interior ``vertex``, by constraints on the faces around
+        it that turn the field that much (soft, or ``hard``)."""
+        message = pb.PlaceSingularity(vertex=int(vertex), index=float(index), hard=bool(hard))
+        if weight is not None:
+            message.weight = float(weight)
+        return self._tool("singularity", "place_singularity", message, id, move)
+
+    def align_boundary(self, mode="tangent", *, loops=None, hard=False, weight=None, id=None,
+                       move=False):
+        """The boundary faces (all loops, or the listed loop indices) aligned to their boundary
+        edges (``mode="tangent"``) or to the edges' in-plane normals (``"normal"``)."""
+        modes = {"tangent": pb.BOUNDARY_ALIGN_TANGENT, "normal": pb.BOUNDARY_ALIGN_NORMAL}
+        if mode not in modes:
+            raise ValueError("align_boundary: mode must be 'tangent' or 'normal', got %r" % mode)
+        message = pb.AlignBoundary(mode=modes[mode], hard=bool(hard))
+        message.loops.extend(int(x) for x in (loops or ()))
+        if weight is not None:
+            message.weight = float(weight)
+        return self._tool("align_boundary", "align_boundary", message, id, move)
+
+    def align_features(self, angle_degrees=60.0, *, hard=False, weight=None, id=None,
+                       move=False):
+        """The faces along sharp edges (normals differing by more than ``angle_degrees``) aligned
+        to those edges."""
+        message = pb.AlignFeatures(angle_degrees=float(angle_degrees), hard=bool(hard))
+        if weight is not None:
+            message.weight = float(weight)
+        return self._tool("align_features", "align_features", message, id, move)
+
+    def _tool(self, kind, field, message, id, move):
+        """Sends a tool as the add edit `field` (or, with `move`, as the move of group `id`)."""
+        if move:
+            if id is None:
+                raise ValueError("Design %s: move=True needs the id of the tool to replace" % kind)
+            group = pb.ConstraintGroup(**{kind: message})  # its fields are named as the kinds
+            return self._send("move", pb.DesignRequest(move=pb.MoveConstraint(
+                id=int(id), group=group)), id)
+        if id is None:
+            while self._next_id in self._ids:
+                self._next_id += 1
+            id = self._next_id
+        message.id = int(id)
+        update = self._send(kind, pb.DesignRequest(**{field: message}), id)
+        self._ids.add(int(id))
+        return update
+
+    def _remember_tool(self, kind, request):
+        """Keeps the tools a reopened session replays; whether `request` was a tool's edit."""
+        edit = request.WhichOneof("edit")
+        if edit in ("add_stroke", "place_singularity", "align_boundary", "align_features"):
+            self._tools[getattr(request, edit).id] = (kind, request)
+            return True
+        if edit == "move" and request.move.HasField("group"):
+            tool = request.move.group.WhichOneof("tool")  # = the kind of its add
+            field = {"stroke": "add_stroke", "singularity": "place_singularity"}.get(tool, tool)
+            replay = pb.DesignRequest(**{field: getattr(request.move.group, tool)})
+            getattr(replay, field).id = request.move.id
+            self._tools[request.move.id] = (tool, replay)
+            return True
+        if edit == "remove":
+            self._tools.pop(request.remove.id, None)
+        return False
+
     @property
     def coefficients(self):
         """The current solution's d coefficients (of the last update)."""
@@ -187,6 +277,8 @@ class DesignSession:
                     for cid, constraint in self._constraints.items():
                         self._exchange("add", pb.DesignRequest(
                             add=pb.AddConstraint(id=cid, constraint=constraint)))
+                    for tool_kind, tool in self._tools.values():
+                        self._exchange(tool_kind, tool)
                 message = self._exchange(kind, request)
             except grpc.RpcError as e:
                 if not _replica_lost(e):
@@ -198,6 +290,8 @@ class DesignSession:
 
     def _remember(self, kind, request):
         """Keeps the state a reopened session replays, once the server confirmed `request`."""
+        if self._remember_tool(kind, request):
+            return
         if kind == "open":
             self._open.CopyFrom(request.open)
         elif kind == "add":
