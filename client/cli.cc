@@ -70,8 +70,9 @@ commands (JSON on stdout, errors on stderr, non-zero exit on failure):
                                       1, 0, 1; scale-free: a soft constraint alone pulls its
                                       face >= mu_c w / (1 + mu_c w) of the way, unless
                                       --raw-weights); --singularities: also the singular vertices;
-                                      --biharmonic mixed: the mu_b term as the subspace's own
-                                      (closer to the full space; 50-270 ms per solve)
+                                      --biharmonic: the mu_b term as the subspace's own (mixed,
+                                      the default: closer to the full space) or the paper's
+                                      (exact)
   lift BASIS_ID COEFFS_FILE (--out FIELD_FILE | --faces F1,F2,...) [--encoding ambient|dof]
         [--mode K]                    --mode K: eigenfield K of `eigen --coefficients` output
   eigen BASIS_ID --count K [--coefficients]
@@ -961,9 +962,9 @@ int Cli::LiftToFile(const std::string& basis_id, const std::vector<double>& coef
   return 0;
 }
 
-// --biharmonic exact|mixed (default exact).
+// --biharmonic exact|mixed (default mixed).
 v1::BiharmonicForm BiharmonicFormFlag(const CommandLine& a) {
-  if (!a.Has("biharmonic")) return v1::BIHARMONIC_FORM_EXACT;
+  if (!a.Has("biharmonic")) return v1::BIHARMONIC_FORM_MIXED;
   const std::string form = GetString(a, "biharmonic");
   if (form == "exact") return v1::BIHARMONIC_FORM_EXACT;
   if (form == "mixed") return v1::BIHARMONIC_FORM_MIXED;
