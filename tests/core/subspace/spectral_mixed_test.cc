@@ -114,6 +114,12 @@ struct Fixture {
   }
 };
 
+// The mixed form is the default of every reduced solve (the exact one stays selectable).
+TEST(BiharmonicFormTest, MixedIsTheDefault) {
+  EXPECT_EQ(ModelProblem{}.biharmonic, BiharmonicForm::kMixed);
+  EXPECT_EQ(DesignSessionOptions{}.biharmonic, BiharmonicForm::kMixed);
+}
+
 TEST(MixedSpectrumTest, DiagonalizesStiffnessAndMass) {
   const TriangleMesh mesh = Icosphere(2);
   uint64_t seed = 3;
