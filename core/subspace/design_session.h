@@ -96,9 +96,9 @@ struct DesignSessionOptions {
   bool scale_free = false;
   // The biharmonic term's form (ModelProblem::biharmonic; the default kMixed). With kMixed and
   // mu_B > 0 the session solves in the simultaneous eigenbasis of K and Mr (spectral_mixed.h:
-  // computed once per reduced system on first use, then shared; an edit costs about as much as
-  // with kExact); with a data term (mu_A > 0) the exact form's factorization preconditions a
-  // conjugate gradient solve per edit instead (15-150 solves with it).
+  // computed once per reduced system on first use, then shared; an edit is one dense d x d
+  // product with its eigenvectors); with a data term (mu_A > 0) the exact form's factorization
+  // preconditions a conjugate gradient solve per edit instead (15-150 solves with it).
   BiharmonicForm biharmonic = BiharmonicForm::kMixed;
   // A data (alignment) term mu_A (X - X0)^T W M (X - X0) in the energy (paper section 8, Fig. 16:
   // a field aligned to curvature, then interpolation constraints on top), with X0, W and their

@@ -9,8 +9,16 @@
 #include "core/common/status_macros.h"
 #include "core/subspace/kkt_solver.h"
 #include "core/subspace/spectrum.h"
+#include "oneapi/tbb/blocked_range.h"
+#include "oneapi/tbb/parallel_for.h"
 
 namespace fieldspace {
+namespace {
+
+// Rows or columns of V^T per task of a product with it.
+constexpr Eigen::Index kBand = 256;
+
+}  // namespace
 
 absl::StatusOr<std::shared_ptr<const MixedSpectrum>> ComputeMixedSpectrum(
     const ReducedSystem& system, const CancelFlag* cancel) {
@@ -107,16 +115,30 @@ void MixedEnergyInverse::ForwardSparse(const std::vector<int32_t>& cols,
 }
 
 Eigen::VectorXd MixedEnergyInverse::Forward(const Eigen::VectorXd& v) const {
-  // V^T v = vt v.
-  Eigen::VectorXd out = spectrum_->vt * v;
+  // V^T v = vt v, by bands of rows (bands of columns of V^T would race on the output).
+  const Eigen::MatrixXd& vt = spectrum_->vt;
+  Eigen::VectorXd out(vt.rows());
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, vt.rows(), kBand),
+                    [&](const tbb::blocked_range<Eigen::Index>& r) {
+                      out.segment(r.begin(), r.size()).noalias() =
+                          vt.middleRows(r.begin(), r.size()) * v;
+                    });
   out.array() *= inv_sqrt_d_.array();
   return out;
 }
 
 Eigen::VectorXd MixedEnergyInverse::Backward(const Eigen::VectorXd& u) const {
-  // V (D^-1/2 u) = vt^T (D^-1/2 u): dot products with vt's contiguous columns.
+  // V (D^-1/2 u) = vt^T (D^-1/2 u): dot products with vt's contiguous columns, a band of them
+  // per task (the product streams all of V from memory: two cores fetch it faster than one).
+  const Eigen::MatrixXd& vt = spectrum_->vt;
   const Eigen::VectorXd scaled = inv_sqrt_d_.cwiseProduct(u);
-  return spectrum_->vt.transpose() * scaled;
+  Eigen::VectorXd out(vt.cols());
+  tbb::parallel_for(tbb::blocked_range<Eigen::Index>(0, vt.cols(), kBand),
+                    [&](const tbb::blocked_range<Eigen::Index>& r) {
+                      out.segment(r.begin(), r.size()).noalias() =
+                          vt.middleCols(r.begin(), r.size()).transpose() * scaled;
+                    });
+  return out;
 }
 
 Eigen::VectorXd MixedEnergyInverse::Multiply(const Eigen::VectorXd& v) const {
