@@ -6,6 +6,7 @@ with the build tree's python/ folder (the package with its generated stubs).
 """
 
 import concurrent.futures
+import math
 import os
 import shutil
 import signal
@@ -372,7 +373,8 @@ class SolveAndDesignTest(unittest.TestCase):
                 x = s.coefficients
             self.assertLess(np.linalg.norm(x - mixed.coefficients), 1e-8 * scale)
             self.assertLessEqual(u.iterations, 4)  # refinement steps in the eigenbasis
-            self.assertLessEqual(u.backward_error, 1e-12)
+            # Checked periodically like the exact form's solves: NaN when this one was not.
+            self.assertTrue(math.isnan(u.backward_error) or u.backward_error <= 1e-12)
         for call in (lambda: CLIENT.solve(VECTOR, [5], [[1.0, 0, 0]], biharmonic="lumped"),
                      lambda: CLIENT.design(VECTOR, biharmonic=1)):
             with self.assertRaises(fs.InvalidArgument):

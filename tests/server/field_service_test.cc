@@ -1338,7 +1338,10 @@ TEST_F(ServiceTest, MixedBiharmonicSolveAndDesignAgreeAndDifferFromTheExactForm)
   ASSERT_EQ(s.updates.size(), 3u);
   EXPECT_LT(MaxAbsDiff(s.updates[2].coefficients(), mixed.coefficients()), 1e-7 * scale);
   EXPECT_LE(s.updates[2].iterations(), 4);
-  EXPECT_LE(s.updates[2].backward_error(), 1e-12);
+  // Checked periodically (the server's verify interval) like the exact form's solves: NaN when
+  // this one was not.
+  EXPECT_TRUE(std::isnan(s.updates[2].backward_error()) || s.updates[2].backward_error() <= 1e-12)
+      << s.updates[2].backward_error();
   EXPECT_NEAR(s.updates[2].watched().values(0), 0.2, 1e-4);
   // A form the enum does not name.
   v1::SolveRequest bad;
