@@ -20,7 +20,7 @@ namespace fieldspace {
 // All d solutions of K v = lambda Mr v for K = U^T S U and Mr = U^T M U of one reduced system
 // (dense generalized symmetric eigensolve, ReducedEigenpairs with the dense method): with
 // V = [v_1 .. v_d], V^T Mr V = I and V^T K V = Lambda, so K = Mr V Lambda V^T Mr and
-// K Mr^-1 K = Mr V Lambda^2 V^T Mr. O(d^3) once per system (19-25 s at d = 2000 on a busy
+// K Mr^-1 K = Mr V Lambda^2 V^T Mr. O(d^3) once per system (6-25 s at d = 2000 on a shared
 // 2-core machine).
 struct MixedSpectrum {
   Eigen::VectorXd lambda;  // d, ascending (>= 0 up to rounding: K is PSD)
