@@ -16,7 +16,7 @@
 // mu_B = 1 and the test fields' hard constraints solved in the subspace against its full-space
 // solution, the test field (BiharmonicModelErrors); biharmonic_design_error: the same constraints
 // as soft ones at kBiharmonicDesignWeights (mu_S = 0, mu_B = 1, mu_C = 1e4 or --design-mu-c,
-// raw), subspace (biharmonic term in the --biharmonic form, default exact: BiharmonicForm)
+// raw), subspace (biharmonic term in the --biharmonic form, default mixed: BiharmonicForm)
 // against full-space solution (BiharmonicDesignErrors).
 #include <cmath>
 #include <cstdio>
@@ -62,8 +62,8 @@ absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path) {
 
 absl::StatusOr<BiharmonicForm> BiharmonicFormFromArgs(const Args& args) {
   const auto form = args.Get("biharmonic");
-  if (!form.has_value() || *form == "exact") return BiharmonicForm::kExact;
-  if (*form == "mixed") return BiharmonicForm::kMixed;
+  if (!form.has_value() || *form == "mixed") return BiharmonicForm::kMixed;
+  if (*form == "exact") return BiharmonicForm::kExact;
   return absl::InvalidArgumentError(
       absl::StrCat("--biharmonic must be exact or mixed, got '", *form, "'"));
 }

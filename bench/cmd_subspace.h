@@ -25,7 +25,7 @@ absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path);
 // see BasisQuality) and kernel columns unless --no-kernel-columns.
 // --quality: paper (default), low-modes or smooth (BasisQuality).
 absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args);
-// --biharmonic exact|mixed (default exact): the reduced solvers' BiharmonicForm.
+// --biharmonic exact|mixed (default mixed): the reduced solvers' BiharmonicForm.
 absl::StatusOr<BiharmonicForm> BiharmonicFormFromArgs(const Args& args);
 
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,

@@ -79,7 +79,7 @@ v1::FieldEncoding ParseEncoding(const CommandLine& a) {
 }
 
 v1::BiharmonicForm ParseBiharmonic(const CommandLine& a) {
-  if (!a.Has("biharmonic")) return v1::BIHARMONIC_FORM_EXACT;
+  if (!a.Has("biharmonic")) return v1::BIHARMONIC_FORM_MIXED;  // the default
   const std::string form = GetString(a, "biharmonic");
   if (form == "exact") return v1::BIHARMONIC_FORM_EXACT;
   if (form == "mixed") return v1::BIHARMONIC_FORM_MIXED;

@@ -80,8 +80,9 @@ const std::vector<CliCommand>& Commands() {
          kBiharmonic},
         "the model problem with soft/hard constraints (defaults 1, 0, 1; scale-free: a soft "
         "constraint alone pulls its face >= mu_c w / (1 + mu_c w) of the way, unless "
-        "--raw-weights); --singularities: also the singular vertices; --biharmonic mixed: the "
-        "mu_b term as the subspace's own (closer to the full space; 50-270 ms per solve)"},
+        "--raw-weights); --singularities: also the singular vertices; --biharmonic: the mu_b term "
+        "as the subspace's own (mixed, the default: closer to the full space) or the paper's "
+        "(exact)"},
        Solve},
       {{"lift",
         "BASIS_ID COEFFS_FILE",

@@ -72,6 +72,7 @@ absl::StatusOr<BiharmonicForm> BiharmonicFormFromProto(int form) {
   switch (form) {
     case v1::BIHARMONIC_FORM_EXACT:
       return BiharmonicForm::kExact;
+    case v1::BIHARMONIC_FORM_UNSPECIFIED:  // the default
     case v1::BIHARMONIC_FORM_MIXED:
       return BiharmonicForm::kMixed;
     default:

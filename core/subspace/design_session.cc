@@ -8,6 +8,7 @@
 #include "core/common/status_macros.h"
 #include "core/subspace/kkt_solver.h"
 #include "core/subspace/projection.h"
+#include "core/subspace/spectral_mixed.h"
 
 namespace fieldspace {
 
@@ -116,7 +117,7 @@ absl::StatusOr<std::unique_ptr<DesignSession>> DesignSession::Create(
   session->UpdateDataRhs();
   session->kkt_ = std::make_unique<KktSolver>(session->system_->dimension(),
                                               session->system_->dofs_per_face(), options.solve);
-  session->AttachEnergy(weights);
+  RETURN_IF_ERROR(session->AttachEnergy(weights));
   RETURN_IF_ERROR(session->kkt_->FactorizeSchur());
   session->Resolve();
   return session;
@@ -144,12 +145,22 @@ absl::StatusOr<double> DesignSession::Stiffness(const std::vector<SparseRow>& ro
   return FaceStiffness(*system_, *energy_->factor, rows, /*skip_kernel_columns=*/!data_energy);
 }
 
-void DesignSession::AttachEnergy(const EnergyWeights& weights) {
+absl::Status DesignSession::AttachEnergy(const EnergyWeights& weights) {
+  const EnergyWeights effective = EffectiveEnergyWeights(*system_, weights, options_.scale_free);
+  const double mu_b = options_.biharmonic == BiharmonicForm::kMixed ? effective.mu_b : 0.0;
+  // The mixed energy is diagonal in the simultaneous eigenbasis of K and Mr (spectral_mixed.h):
+  // edits as cheap as the exact form's. A data term's mass breaks that diagonal form: then the
+  // exact form's factorization preconditions conjugate gradients (KktSolver::Solve).
+  if (mu_b > 0 && !(has_data_term() && weights.mu_a > 0)) {
+    ASSIGN_OR_RETURN(std::shared_ptr<const MixedSpectrum> spectrum,
+                     MixedSpectrumCache::Global().Get(system_, options_.solve.cancel));
+    kkt_->SetSpectral(std::make_unique<MixedEnergyInverse>(system_.get(), std::move(spectrum),
+                                                           effective.mu_s, mu_b));
+    return absl::OkStatus();
+  }
   kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
-  const double mu_b = options_.biharmonic == BiharmonicForm::kMixed
-                          ? EffectiveEnergyWeights(*system_, weights, options_.scale_free).mu_b
-                          : 0.0;
   kkt_->SetMixedBiharmonic(system_.get(), mu_b);
+  return absl::OkStatus();
 }
 
 void DesignSession::UpdateDataRhs() {
@@ -418,7 +429,8 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
     UpdateDataRhs();
     if (energy_changed) {
       energy_ = old_energy;
-      AttachEnergy(old_weights);
+      // The old energy was attached before: its spectrum, if any, is cached.
+      RETURN_IF_ERROR(AttachEnergy(old_weights));
       verified_since_factorization_ = false;
     }
     for (int32_t slot = 0; slot < static_cast<int32_t>(records_.size()); ++slot) {
@@ -429,7 +441,10 @@ absl::Status DesignSession::SetWeights(const EnergyWeights& weights) {
   if (energy_changed) {
     ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> energy, Energy(weights));
     energy_ = std::move(energy);
-    AttachEnergy(weights);
+    if (absl::Status st = AttachEnergy(weights); !st.ok()) {
+      RETURN_IF_ERROR(restore());
+      return st;
+    }
     verified_since_factorization_ = false;
     weights_ = weights;  // Stiffness() reads mu_a; restore() puts the old weights back
     // Scale-free soft weights are relative to the faces' stiffness under the new energy.

@@ -94,11 +94,12 @@ struct DesignSessionOptions {
   // constraint's weight divided by its face's stiffness (FaceStiffness), a data term's mu_A
   // divided by the total area (as SmoothingOptions::scale_free).
   bool scale_free = false;
-  // The biharmonic term's form (ModelProblem::biharmonic). kMixed keeps the exact form's
-  // factorization as the preconditioner of a conjugate gradient solve per edit (see
-  // KktSolver::Solve): with mu_B > 0 an edit then costs 15-150 solves with the factorization
-  // instead of one (bench/RESULTS.md, "Session 14").
-  BiharmonicForm biharmonic = BiharmonicForm::kExact;
+  // The biharmonic term's form (ModelProblem::biharmonic; the default kMixed). With kMixed and
+  // mu_B > 0 the session solves in the simultaneous eigenbasis of K and Mr (spectral_mixed.h:
+  // computed once per reduced system on first use, then shared; an edit is one dense d x d
+  // product with its eigenvectors); with a data term (mu_A > 0) the exact form's factorization
+  // preconditions a conjugate gradient solve per edit instead (15-150 solves with it).
+  BiharmonicForm biharmonic = BiharmonicForm::kMixed;
   // A data (alignment) term mu_A (X - X0)^T W M (X - X0) in the energy (paper section 8, Fig. 16:
   // a field aligned to curvature, then interpolation constraints on top), with X0, W and their
   // passes over U from the smoother (of the same system; its own scale_free is not used). Null:
@@ -227,8 +228,9 @@ class DesignSession {
   }
   // 1 with raw weights; else FaceStiffness of `rows` under the current energy factorization.
   absl::StatusOr<double> Stiffness(const std::vector<SparseRow>& rows) const;
-  // Hands energy_ to the KKT solver, with the mixed biharmonic's weight for `weights`.
-  void AttachEnergy(const EnergyWeights& weights);
+  // Hands energy_ to the KKT solver, with the mixed biharmonic's weight for `weights` (its
+  // spectrum computed on first use: Cancelled or Internal when that fails).
+  absl::Status AttachEnergy(const EnergyWeights& weights);
   // mu_A' U^T W M X0 for the current weights (empty without a data term).
   void UpdateDataRhs();
   void Resolve();

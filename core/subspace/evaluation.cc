@@ -229,6 +229,7 @@ absl::StatusOr<Eigen::VectorXd> BiharmonicModelErrors(const ReducedSystem& syste
   for (int64_t j = 0; j < m; ++j) {
     ModelProblem problem;
     problem.weights = {/*mu_s=*/0.0, /*mu_b=*/1.0, /*mu_c=*/1.0};
+    problem.biharmonic = BiharmonicForm::kExact;  // the paper's experiment (Table 3)
     problem.constraints = tests.constraints[j];
     ASSIGN_OR_RETURN(ReducedSolution solution, SolveReducedModelProblem(system, problem));
     x.col(j) = solution.coefficients;

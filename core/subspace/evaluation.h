@@ -60,7 +60,8 @@ absl::StatusOr<Eigen::MatrixXd> SmoothingErrors(const FieldOperator& op,
 
 // The model problem with a biharmonic energy (eq. 8 with mu_S = 0, mu_B = 1 and each test
 // field's hard constraints, paper weights), whose full-space minimizer is the test field itself,
-// solved in the subspace (SolveReducedModelProblem): ||X_f - U x||_M / ||X_f||_M per field.
+// solved in the subspace (SolveReducedModelProblem, the paper's exact form):
+// ||X_f - U x||_M / ||X_f||_M per field.
 // The paper's local fields kink at their region's edge, where the biharmonic energy is large, so
 // this error is much larger than the projection error of the same fields.
 absl::StatusOr<Eigen::VectorXd> BiharmonicModelErrors(const ReducedSystem& system,

@@ -125,7 +125,11 @@ void KktSolver::ComputeGroupColumns(int32_t g) {
   const int64_t r0 = static_cast<int64_t>(g) * p_;
   for (int32_t c = 0; c < p_; ++c) {
     const SparseRow& row = rows_[g][c];
-    factor_->ForwardSparse(row.cols, row.vals, W_.col(r0 + c));
+    if (spectral_ != nullptr) {
+      spectral_->ForwardSparse(row.cols, row.vals, W_.col(r0 + c));
+    } else {
+      factor_->ForwardSparse(row.cols, row.vals, W_.col(r0 + c));
+    }
   }
 }
 
@@ -143,7 +147,8 @@ void KktSolver::GroupColumns(absl::Span<const int32_t> groups,
 }
 
 void KktSolver::ComputeGroup(int32_t g) {
-  if (factor_ == nullptr) return;  // SetMatrix() computes every group later
+  // SetMatrix() or SetSpectral() computes every group later.
+  if (factor_ == nullptr && spectral_ == nullptr) return;
   ComputeGroupColumns(g);
   const int64_t r0 = static_cast<int64_t>(g) * p_;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
@@ -160,6 +165,20 @@ void KktSolver::ComputeGroup(int32_t g) {
 absl::Status KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor) {
   A_ = A;
   factor_ = factor;
+  spectral_.reset();
+  ComputeAllGroups();
+}
+
+void KktSolver::SetSpectral(std::unique_ptr<const MixedEnergyInverse> inverse) {
+  A_ = nullptr;
+  factor_ = nullptr;
+  mixed_system_ = nullptr;
+  mixed_mu_b_ = 0;
+  spectral_ = std::move(inverse);
+  ComputeAllGroups();
+}
+
+void KktSolver::ComputeAllGroups() {
   schur_valid_ = false;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   const absl::Status cancelled = absl::CancelledError("hard constraint system: cancelled");
@@ -347,6 +366,24 @@ Eigen::VectorXd KktSolver::SolveSchur(const Eigen::VectorXd& v) const {
   return out;
 }
 
+void KktSolver::SpectralSolve(const Eigen::VectorXd* f, const Eigen::VectorXd& g,
+                              Eigen::VectorXd* dx, Eigen::VectorXd* dnu) const {
+  // With G = V D^-1/2 (A^-1 = G G^T) in the role of P^T L^-T and W = G^T R^T:
+  //   u = G^T f,  H nu = W^T u - g,  x = G (u - W nu):
+  // one pass over V for the solution (a dense d x d matrix-vector product), one more when f != 0.
+  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  Eigen::VectorXd u = f != nullptr ? spectral_->Forward(*f) : Eigen::VectorXd::Zero(d_);
+  if (r > 0) {
+    Eigen::VectorXd h = -g;
+    if (f != nullptr) h.noalias() += W_.leftCols(r).transpose() * u;
+    *dnu = SolveSchur(h);
+    u.noalias() -= W_.leftCols(r) * *dnu;
+  } else {
+    dnu->resize(0);
+  }
+  *dx = spectral_->Backward(u);
+}
+
 ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
   // With P A_hat P^T = L L^T and W = L^-1 P R^T: A_hat^-1 v = P^T L^-T u for u = L^-1 P v,
   // R A_hat^-1 v = W^T u, and the solution of the saddle-point system is
@@ -371,6 +408,10 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
   // [dx; dnu] for right-hand sides (f, g) of the saddle-point system with A replaced by A_hat.
   const auto solve_kkt = [&](const Eigen::VectorXd* f, const Eigen::VectorXd& g,
                              Eigen::VectorXd* dx, Eigen::VectorXd* dnu) {
+    if (spectral_ != nullptr) {
+      SpectralSolve(f, g, dx, dnu);
+      return;
+    }
     Eigen::VectorXd u = Eigen::VectorXd::Zero(d_);
     if (f != nullptr) {
       u = factor_->PermuteIn(*f);
@@ -389,6 +430,7 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
   };
   // The true matrix times v: A, or with the mixed biharmonic A - mu_b U^T B U + mu_b K Mr^-1 K.
   const auto apply_A = [&](const Eigen::VectorXd& v) {
+    if (spectral_ != nullptr) return spectral_->Multiply(v);
     Eigen::VectorXd out = A_->Multiply(v);
     if (mixed_system_ != nullptr) {
       const ReducedSystem& system = *mixed_system_;

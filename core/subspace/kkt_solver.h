@@ -5,6 +5,7 @@
 // SolveReducedModelProblem. Not a public API.
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "Eigen/Cholesky"
@@ -15,6 +16,7 @@
 #include "absl/types/span.h"
 #include "core/linalg/supernodal_cholesky.h"
 #include "core/subspace/model_problem.h"
+#include "core/subspace/spectral_mixed.h"
 
 namespace fieldspace {
 
@@ -89,6 +91,14 @@ class KktSolver {
   // then incomplete: call again before solving) when the options' cancel flag is set meanwhile.
   absl::Status SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor);
 
+  // The mixed energy by simultaneous diagonalization instead (MixedEnergyInverse): the true
+  // matrix is mu_s K + mu_b K Mr^-1 K, W = D^-1/2 V^T R^T (O(d) per nonzero of a constraint row)
+  // and every solve is one product with V (d x d, dense); verified solves refine against the
+  // true matrix like the exact form's. Replaces
+  // SetMatrix's matrix and factorization (and SetMixedBiharmonic's conjugate gradients) until the
+  // next SetMatrix. Recomputes W and K for all constraints.
+  void SetSpectral(std::unique_ptr<const MixedEnergyInverse> inverse);
+
   // The mixed biharmonic (BiharmonicForm::kMixed) with weight mu_b (> 0; 0 turns it off): the
   // true matrix becomes A - mu_b U^T B U + mu_b K Mr^-1 K (K = U^T S U, Mr = U^T M U of
   // `system`, which must stay alive), with A the matrix of SetMatrix (holding mu_b U^T B U).
@@ -148,14 +158,20 @@ class KktSolver {
   // The W columns of groups `groups` (one block forward substitution) into `out` (d x p k).
   void GroupColumns(absl::Span<const int32_t> groups, Eigen::Ref<Eigen::MatrixXd> out) const;
   void ComputeGroup(int32_t g);
+  // W and K for every group (after SetMatrix / SetSpectral).
+  void ComputeAllGroups();
   // H^-1 v (v: r values).
   Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;
+  // The KKT solve for right-hand sides (f, g) (f may be null: 0) with the spectral inverse.
+  void SpectralSolve(const Eigen::VectorXd* f, const Eigen::VectorXd& g, Eigen::VectorXd* dx,
+                     Eigen::VectorXd* dnu) const;
 
   int64_t d_;
   int32_t p_;
   ReducedSolveOptions options_;
   const SupernodalMatrix* A_ = nullptr;
   const SupernodalFactor* factor_ = nullptr;
+  std::unique_ptr<const MixedEnergyInverse> spectral_;  // see SetSpectral
   const ReducedSystem* mixed_system_ = nullptr;  // with mixed_mu_b_ > 0: see SetMixedBiharmonic
   double mixed_mu_b_ = 0;
   int32_t num_groups_ = 0;

@@ -69,8 +69,9 @@ enum class BiharmonicForm : uint8_t {
   kExact = 0,
   // x^T K Mr^-1 K x with K = U^T S U and Mr = U^T M U: the biharmonic energy of the subspace's own
   // Laplacian (the M-projection of M^-1 S U x onto span(U)), never more than the exact form.
-  // Closer to the full-space minimizer with local bases (bench/RESULTS.md), solved by conjugate
-  // gradients preconditioned by the exact form's factorization: 15-150 iterations at d = 2000.
+  // Closer to the full-space minimizer with local bases (bench/RESULTS.md). Design sessions solve
+  // it in the simultaneous eigenbasis of K and Mr (core/subspace/spectral_mixed.h); one-shot
+  // solves by conjugate gradients preconditioned by the exact form's factorization. The default.
   kMixed = 1,
 };
 
@@ -90,7 +91,7 @@ struct ModelProblem {
   // InvalidArgument. false: the paper's raw weights.
   bool scale_free = false;
   // The biharmonic term's form in a subspace (reduced solvers only; no effect when mu_b = 0).
-  BiharmonicForm biharmonic = BiharmonicForm::kExact;
+  BiharmonicForm biharmonic = BiharmonicForm::kMixed;
 };
 
 }  // namespace fieldspace

@@ -125,20 +125,24 @@ def main():
         check(len(rows) == torus_faces, "solved field rows")
         check(abs(rows[5][0] - 0.5) < 1e-4 and abs(rows[5][1] + 0.25) < 1e-4,
               "hard constraint holds: %s" % rows[5])
-        # The mixed biharmonic: another minimizer through the same flags, hard constraint kept.
-        mixed_txt = os.path.join(work, "mixed.txt")
+        # The biharmonic forms: mixed is the default; exact (the paper's) another minimizer
+        # through the same flags, hard constraint kept.
         mixed = cli.json("solve", vector["id"], "--constraints", constraints, "--mu-s", "1",
-                         "--mu-b", "0.001", "--mu-c", "1", "--out", mixed_txt, "--encoding", "dof",
-                         "--biharmonic", "mixed")
-        mixed_rows = read_field_text(mixed_txt)
-        check(abs(mixed_rows[5][0] - 0.5) < 1e-4 and abs(mixed_rows[5][1] + 0.25) < 1e-4,
-              "mixed: hard constraint holds: %s" % mixed_rows[5])
-        check(max(abs(a - b) for a, b in zip(mixed["coefficients"], solved["coefficients"])) >
+                         "--mu-b", "0.001", "--mu-c", "1", "--biharmonic", "mixed")
+        check(mixed["coefficients"] == solved["coefficients"], "the default form is mixed")
+        exact_txt = os.path.join(work, "exact.txt")
+        exact = cli.json("solve", vector["id"], "--constraints", constraints, "--mu-s", "1",
+                         "--mu-b", "0.001", "--mu-c", "1", "--out", exact_txt, "--encoding", "dof",
+                         "--biharmonic", "exact")
+        exact_rows = read_field_text(exact_txt)
+        check(abs(exact_rows[5][0] - 0.5) < 1e-4 and abs(exact_rows[5][1] + 0.25) < 1e-4,
+              "exact: hard constraint holds: %s" % exact_rows[5])
+        check(max(abs(a - b) for a, b in zip(mixed["coefficients"], exact["coefficients"])) >
               1e-6, "mixed and exact forms give different minimizers")
-        check(mixed["backward_error"] <= 1e-12 and solved["backward_error"] <= 1e-12 and
-              mixed["iterations"] > solved["iterations"], "solve reports its convergence: %s %s"
+        check(mixed["backward_error"] <= 1e-12 and exact["backward_error"] <= 1e-12 and
+              mixed["iterations"] > exact["iterations"], "solve reports its convergence: %s %s"
               % ((mixed["backward_error"], mixed["iterations"]),
-                 (solved["backward_error"], solved["iterations"])))
+                 (exact["backward_error"], exact["iterations"])))
         rc, _, err = cli("solve", vector["id"], "--constraints", constraints, "--biharmonic",
                          "lumped", expect=2)
         check("--biharmonic" in err, "biharmonic usage error: %s" % err)
@@ -188,15 +192,16 @@ def main():
         check(updates[4]["num_hard_constraints"] == 1 and updates[5]["num_constraints"] == 1,
               "constraint counts")
         check(all(len(u["coefficients"]) == vector["columns"] for u in updates), "coefficients")
-        # The same script with the mixed biharmonic: the same answers until mu_b > 0, then another.
-        _, out, _ = cli("design", vector["id"], "--script", script, "--biharmonic", "mixed")
-        mixed_updates = [json.loads(line) for line in out.splitlines()]
-        check([u["edit"] for u in mixed_updates] == [u["edit"] for u in updates],
-              "mixed design edits")
+        # The same script with the exact biharmonic (the default is mixed): the same answers
+        # until mu_b > 0, then another.
+        _, out, _ = cli("design", vector["id"], "--script", script, "--biharmonic", "exact")
+        exact_updates = [json.loads(line) for line in out.splitlines()]
+        check([u["edit"] for u in exact_updates] == [u["edit"] for u in updates],
+              "exact design edits")
         gap = lambda a, b: max(abs(p - q) for p, q in zip(a["coefficients"], b["coefficients"]))
-        check(gap(mixed_updates[5], updates[5]) < 1e-12, "mu_b = 0: the forms are one solve")
+        check(gap(exact_updates[5], updates[5]) < 1e-12, "mu_b = 0: the forms are one solve")
         # mu_b = 0.001 (scale-free) is light on this mesh: the forms differ by ~3e-7, not rounding.
-        check(gap(mixed_updates[6], updates[6]) > 1e-9, "mu_b > 0: the forms differ")
+        check(gap(exact_updates[6], updates[6]) > 1e-9, "mu_b > 0: the forms differ")
 
         # CLI errors: clear message, non-zero exit, no crash.
         rc, _, err = cli("mesh", "m-0000000000000000", expect=1)

@@ -1282,6 +1282,9 @@ TEST_F(ServiceTest, MixedBiharmonicSolveAndDesignAgreeAndDifferFromTheExactForm)
   };
   const v1::SolveResponse mixed = solve(v1::BIHARMONIC_FORM_MIXED);
   const v1::SolveResponse exact = solve(v1::BIHARMONIC_FORM_EXACT);
+  // Unset (UNSPECIFIED) is the default: mixed.
+  const v1::SolveResponse unset = solve(v1::BIHARMONIC_FORM_UNSPECIFIED);
+  EXPECT_EQ(MaxAbsDiff(unset.coefficients(), mixed.coefficients()), 0.0);
   const double scale = 1 + MaxAbs(mixed.coefficients());
   EXPECT_GT(MaxAbsDiff(mixed.coefficients(), exact.coefficients()), 1e-3 * scale);
   // Both converged; the mixed one by conjugate gradients, the exact one by at most a refinement.
@@ -1290,15 +1293,19 @@ TEST_F(ServiceTest, MixedBiharmonicSolveAndDesignAgreeAndDifferFromTheExactForm)
   EXPECT_GT(mixed.iterations(), 2);
   EXPECT_LE(exact.iterations(), 1);
   // A session opened with the mixed form reaches the same solution through its own solver
-  // (soft constraints in the Schur complement instead of the matrix).
+  // (soft constraints in the Schur complement instead of the matrix, in the eigenbasis of K and
+  // Mr: refinement steps, no conjugate gradients).
   v1::DesignRequest open = Open(*vector_id_, 0.1, 1.0, 1.0, {700});
   open.mutable_open()->set_biharmonic(v1::BIHARMONIC_FORM_MIXED);
   Session s = RunSession(stub(), {open, Add(1, soft), Add(2, hard)});
   ASSERT_TRUE(s.status.ok()) << s.status.error_message();
   ASSERT_EQ(s.updates.size(), 3u);
   EXPECT_LT(MaxAbsDiff(s.updates[2].coefficients(), mixed.coefficients()), 1e-7 * scale);
-  EXPECT_GT(s.updates[2].iterations(), 2);
-  EXPECT_LE(s.updates[2].backward_error(), 1e-12);
+  EXPECT_LE(s.updates[2].iterations(), 4);
+  // Checked periodically (the server's verify interval) like the exact form's solves: NaN when
+  // this one was not.
+  EXPECT_TRUE(std::isnan(s.updates[2].backward_error()) || s.updates[2].backward_error() <= 1e-12)
+      << s.updates[2].backward_error();
   EXPECT_NEAR(s.updates[2].watched().values(0), 0.2, 1e-4);
   // A form the enum does not name.
   v1::SolveRequest bad;

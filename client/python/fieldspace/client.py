@@ -453,7 +453,7 @@ class Client:
 
     def solve(self, basis, faces=(), values=None, *, weights=None, constraint_weights=None,
               hard=False, encoding=None, return_field=False, field_encoding=fld.AMBIENT,
-              singularities=False, raw_weights=False, biharmonic="exact", timeout=_DEFAULT):
+              singularities=False, raw_weights=False, biharmonic="mixed", timeout=_DEFAULT):
         """The reduced model problem with constraints given as arrays.
 
         Args:
@@ -470,10 +470,9 @@ class Client:
             raw_weights: the paper's raw weights instead of the scale-free ones (by default a
                 soft constraint alone pulls its face >= mu_c w / (1 + mu_c w) of the way, and
                 mu_b is relative to the total area; docs/conventions.md).
-            biharmonic: ``"exact"`` (default: the lifted field's energy, as the paper) or
-                ``"mixed"`` (the subspace's own biharmonic energy: designs with mu_b > 0 follow
-                the full space far more closely, for 50-270 ms per solve at d = 2000;
-                docs/conventions.md, "Biharmonic form").
+            biharmonic: ``"mixed"`` (default: the subspace's own biharmonic energy; designs with
+                mu_b > 0 follow the full space far more closely) or ``"exact"`` (the lifted
+                field's energy, as the paper); docs/conventions.md, "Biharmonic form".
         Returns:
             Solution(coefficients, field, timings, singularities=...).
         """
@@ -670,7 +669,7 @@ class Client:
     # -- design sessions -----------------------------------------------------------------------
 
     def design(self, basis, weights=None, watch=None, watch_encoding=fld.AMBIENT, timeout=None,
-               *, raw_weights=False, biharmonic="exact", align_curvature=False, estimator="jet",
+               *, raw_weights=False, biharmonic="mixed", align_curvature=False, estimator="jet",
                data=None, data_face_weights=None):
         """Opens an interactive design session (a Design stream) and returns it; use it as a
         context manager. ``weights`` default (1, 0, 1); ``watch``: faces whose lifted values

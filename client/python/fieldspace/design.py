@@ -70,7 +70,7 @@ class DesignSession:
     """
 
     def __init__(self, client, basis, weights, watch, watch_encoding, timeout, *,
-                 raw_weights=False, biharmonic=pb.BIHARMONIC_FORM_EXACT, data_term=None):
+                 raw_weights=False, biharmonic=pb.BIHARMONIC_FORM_MIXED, data_term=None):
         self._client = client
         self.basis_id = basis if isinstance(basis, str) else basis.id
         self.field_type, self.mesh_id = client._basis(self.basis_id)

@@ -244,6 +244,6 @@ class DesignUpdate:
     # are then those of the lost session plus that edit.
     resumed: bool = False
     # Of the session's last solve: backward error (NaN when the server did not check it) and
-    # refinement steps or, with ``biharmonic="mixed"``, conjugate gradient iterations.
+    # refinement steps (or, with the mixed form and a data term, conjugate gradient iterations).
     backward_error: float = float("nan")
     iterations: int = 0

@@ -81,6 +81,9 @@ TEST(ScaleFreeWeightsTest, OneSoftConstraintPullsItsFaceAtLeastMuOverOnePlusMu) 
         ModelProblem problem;
         problem.weights = {.mu_s = 1.0, .mu_b = mu_b, .mu_c = mu};
         problem.scale_free = true;
+        // Exactly mu / (1 + mu) in the form the stiffness is measured in; the mixed form's
+        // energy is never larger, so it pulls at least as far (checked below).
+        problem.biharmonic = BiharmonicForm::kExact;
         problem.constraints.push_back({.face = face, .value = least});
         auto x = SolveReducedModelProblem(*f.system, problem);
         ASSERT_TRUE(x.ok()) << x.status();
@@ -91,6 +94,11 @@ TEST(ScaleFreeWeightsTest, OneSoftConstraintPullsItsFaceAtLeastMuOverOnePlusMu) 
         auto y = SolveReducedModelProblem(*f.system, problem);
         ASSERT_TRUE(y.ok()) << y.status();
         EXPECT_GE(c.dot(Uf * y->coefficients) / c.squaredNorm(), mu / (1 + mu) - 1e-9);
+        problem.biharmonic = BiharmonicForm::kMixed;
+        auto mixed = SolveReducedModelProblem(*f.system, problem);
+        ASSERT_TRUE(mixed.ok()) << mixed.status();
+        EXPECT_GE(c.dot(Uf * mixed->coefficients) / c.squaredNorm(), mu / (1 + mu) - 1e-9);
+        problem.biharmonic = BiharmonicForm::kExact;
         // Raw weights on this basis pull by a different amount (the normalization is not 1).
         problem.scale_free = false;
         problem.weights.mu_b = mu_b * f.area;
@@ -234,6 +242,8 @@ TEST(DataTermSessionTest, EqualsDenseSolutionThroughEditsAndWeightChanges) {
     DesignSessionOptions options;
     options.data_term = std::make_shared<const ReducedSmoother>(*std::move(smoother));
     options.energy_cache = std::make_shared<EnergyFactorCache>();
+    // The reference below is the exact form's (the mixed one: spectral_mixed_test).
+    options.biharmonic = BiharmonicForm::kExact;
     EnergyWeights w{.mu_s = 0.01, .mu_b = 0.001, .mu_c = 5.0, .mu_a = 2.0};
     auto session = DesignSession::Create(f.system, w, options);
     ASSERT_TRUE(session.ok()) << session.status();

@@ -1,0 +1,310 @@
+// The mixed biharmonic by simultaneous diagonalization (core/subspace/spectral_mixed.h): the
+// spectrum itself, and design sessions with BiharmonicForm::kMixed (which use it unless a data
+// term is on) against the one-shot solve's conjugate gradients and a dense KKT solve with
+// K Mr^-1 K written here.
+
+#include "core/subspace/spectral_mixed.h"
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <random>
+#include <vector>
+
+#include "Eigen/Dense"
+#include "core/basis/basis.h"
+#include "core/operators/reference_solvers.h"
+#include "core/subspace/design_session.h"
+#include "core/subspace/model_problem.h"
+#include "core/subspace/reduced_system.h"
+#include "core/subspace/smoothing.h"
+#include "gtest/gtest.h"
+#include "tests/testing/fixtures.h"
+#include "tests/testing/test_meshes.h"
+
+namespace fieldspace {
+namespace {
+
+using ::fieldspace::testing::DenseU;
+using ::fieldspace::testing::Icosphere;
+using ::fieldspace::testing::MustBuildOperator;
+using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::RelativeDifference;
+using ::fieldspace::testing::Torus;
+
+Eigen::VectorXd RandomVector(int64_t n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd v(n);
+  for (int64_t i = 0; i < n; ++i) v[i] = u(rng);
+  return v;
+}
+
+struct Fixture {
+  FieldOperator op;
+  std::shared_ptr<const Basis> basis;
+  std::shared_ptr<const ReducedSystem> system;
+  Eigen::MatrixXd U, K, Mr;  // dense copies: U k x d, K = U^T S U, Mr = U^T M U
+
+  Fixture(const TriangleMesh& mesh, const FieldType& type, std::shared_ptr<const Basis> b,
+          FieldOperator o)
+      : op(std::move(o)), basis(std::move(b)) {
+    auto sys = ReducedSystem::Build(basis, op);
+    EXPECT_TRUE(sys.ok()) << sys.status();
+    system = *std::move(sys);
+    U = DenseU(*basis);
+    const Eigen::MatrixXd S(op.stiffness);
+    K = U.transpose() * S * U;
+    Mr = U.transpose() * op.mass.asDiagonal() * U;
+  }
+  static Fixture Random(const TriangleMesh& mesh, const FieldType& type, int64_t d, uint64_t seed) {
+    FieldOperator op = MustBuildOperator(mesh, type);
+    auto basis = RandomBasis(type, op.dofs(), d, 30, seed);
+    return Fixture(mesh, type, std::move(basis), std::move(op));
+  }
+  // A basis whose last columns are the harmonic fields of a torus (zero energy).
+  static Fixture WithKernelColumns(const TriangleMesh& torus, int32_t d) {
+    FieldOperator op = MustBuildOperator(torus, FieldType::Vector());
+    BasisOptions options;
+    options.params.dimension = d;
+    options.kernel_columns = true;
+    absl::StatusOr<Basis> basis = BuildTwoLevelBasis(torus, op, options, 0);
+    EXPECT_TRUE(basis.ok()) << basis.status();
+    EXPECT_EQ(basis->kernel_columns, 2);
+    return Fixture(torus, FieldType::Vector(), std::make_shared<const Basis>(*std::move(basis)),
+                   std::move(op));
+  }
+  int32_t p() const { return op.type.dofs_per_face(); }
+  Eigen::MatrixXd Rows(int32_t face) const { return U.middleRows(int64_t{face} * p(), p()); }
+  Eigen::MatrixXd MixedEnergy(double mu_s, double mu_b) const {
+    return mu_s * K + mu_b * K * Mr.llt().solve(K);
+  }
+  // The minimizer of x^T (A + mu_a D) x - 2 b^T x + sum_soft mu_c w |U_f x - c|^2 subject to the
+  // hard constraints, by a dense KKT solve (raw weights; D, b: a data term or empty).
+  Eigen::VectorXd DenseSolution(const EnergyWeights& w, const std::vector<FieldConstraint>& cs,
+                                const Eigen::MatrixXd& D = {},
+                                const Eigen::VectorXd& data_b = {}) const {
+    const int64_t d = K.cols();
+    Eigen::MatrixXd A = MixedEnergy(w.mu_s, w.mu_b);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(d);
+    if (D.size() > 0) {
+      A += w.mu_a * D;
+      b += w.mu_a * data_b;
+    }
+    std::vector<const FieldConstraint*> hard;
+    for (const FieldConstraint& c : cs) {
+      if (c.hard()) {
+        hard.push_back(&c);
+        continue;
+      }
+      A += w.mu_c * c.weight * Rows(c.face).transpose() * Rows(c.face);
+      b += w.mu_c * c.weight * Rows(c.face).transpose() * c.value;
+    }
+    const int64_t h = static_cast<int64_t>(hard.size()) * p();
+    Eigen::MatrixXd kkt = Eigen::MatrixXd::Zero(d + h, d + h);
+    Eigen::VectorXd rhs(d + h);
+    kkt.topLeftCorner(d, d) = A;
+    rhs.head(d) = b;
+    for (size_t i = 0; i < hard.size(); ++i) {
+      kkt.block(d + i * p(), 0, p(), d) = Rows(hard[i]->face);
+      kkt.block(0, d + i * p(), d, p()) = Rows(hard[i]->face).transpose();
+      rhs.segment(d + i * p(), p()) = hard[i]->value;
+    }
+    return kkt.fullPivLu().solve(rhs).head(d);
+  }
+};
+
+// The mixed form is the default of every reduced solve (the exact one stays selectable).
+TEST(BiharmonicFormTest, MixedIsTheDefault) {
+  EXPECT_EQ(ModelProblem{}.biharmonic, BiharmonicForm::kMixed);
+  EXPECT_EQ(DesignSessionOptions{}.biharmonic, BiharmonicForm::kMixed);
+}
+
+TEST(MixedSpectrumTest, DiagonalizesStiffnessAndMass) {
+  const TriangleMesh mesh = Icosphere(2);
+  uint64_t seed = 3;
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
+    const Fixture f = Fixture::Random(mesh, type, 90, ++seed);
+    auto spectrum = ComputeMixedSpectrum(*f.system);
+    ASSERT_TRUE(spectrum.ok()) << spectrum.status();
+    const Eigen::MatrixXd V = (*spectrum)->vt.transpose();
+    const Eigen::VectorXd& lambda = (*spectrum)->lambda;
+    const int64_t d = f.K.cols();
+    ASSERT_EQ(V.rows(), d);
+    ASSERT_EQ(lambda.size(), d);
+    EXPECT_LT((V.transpose() * f.Mr * V - Eigen::MatrixXd::Identity(d, d)).cwiseAbs().maxCoeff(),
+              1e-10);
+    const double lambda_max = lambda.maxCoeff();
+    EXPECT_LT(
+        (V.transpose() * f.K * V - Eigen::MatrixXd(lambda.asDiagonal())).cwiseAbs().maxCoeff(),
+        1e-10 * lambda_max);
+    // An independent solver's eigenvalues.
+    Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> ges(f.K, f.Mr);
+    EXPECT_LT((ges.eigenvalues() - lambda).cwiseAbs().maxCoeff(), 1e-10 * lambda_max);
+    EXPECT_GT(lambda.minCoeff(), 0.0);  // a generic random basis holds no harmonic field
+    EXPECT_EQ((*spectrum)->memory_bytes(), MixedSpectrumBytes(d));
+
+    // G G^T = A^-1 and Multiply = A for the mixed energy.
+    const double mu_s = 0.3, mu_b = 2.0;
+    const MixedEnergyInverse inverse(f.system.get(), *spectrum, mu_s, mu_b);
+    const Eigen::MatrixXd A = f.MixedEnergy(mu_s, mu_b);
+    const Eigen::VectorXd v = RandomVector(d, seed);
+    EXPECT_LT(RelativeDifference(inverse.Multiply(v), A * v), 1e-12);
+    EXPECT_LT(RelativeDifference(inverse.Backward(inverse.Forward(A * v)), v), 1e-9);
+    // ForwardSparse is Forward of a sparse vector.
+    Eigen::VectorXd sparse = Eigen::VectorXd::Zero(d);
+    sparse[3] = 1.5;
+    sparse[d - 1] = -0.25;
+    Eigen::VectorXd out(d);
+    inverse.ForwardSparse({3, static_cast<int32_t>(d - 1)}, {1.5, -0.25}, out);
+    EXPECT_LT(RelativeDifference(out, inverse.Forward(sparse)), 1e-14);
+  }
+}
+
+TEST(MixedSpectrumTest, CacheComputesOncePerSystemAndForgetsDeadSystems) {
+  const TriangleMesh mesh = Icosphere(1);
+  MixedSpectrumCache cache;
+  Fixture f = Fixture::Random(mesh, FieldType::Vector(), 30, 2);
+  auto a = cache.Get(f.system);
+  auto b = cache.Get(f.system);
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(a->get(), b->get());
+  EXPECT_EQ(cache.memory_bytes(), MixedSpectrumBytes(30));
+  Fixture g = Fixture::Random(mesh, FieldType::Vector(), 20, 3);
+  auto c = cache.Get(g.system);
+  ASSERT_TRUE(c.ok());
+  EXPECT_NE(a->get(), c->get());
+  EXPECT_EQ(cache.memory_bytes(), MixedSpectrumBytes(30) + MixedSpectrumBytes(20));
+  f.system.reset();  // the first system is gone: its entry no longer counts
+  EXPECT_EQ(cache.memory_bytes(), MixedSpectrumBytes(20));
+  CancelFlag cancel{true};
+  auto cancelled = cache.Get(Fixture::Random(mesh, FieldType::Vector(), 20, 4).system, &cancel);
+  EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
+  EXPECT_EQ(cache.Get(nullptr).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+// One session per variant: constraints added one at a time, each solution against the one-shot
+// solve (conjugate gradients preconditioned by the exact form) and, with raw weights, the dense
+// KKT solve.
+// From the `first_checked`-th constraint on (a basis with kernel columns: once the constraints
+// control the harmonic directions, before which neither solve is unique).
+void ExpectSessionMatches(const Fixture& f, const std::vector<FieldConstraint>& all,
+                          const EnergyWeights& w, bool scale_free, const std::string& what,
+                          size_t first_checked = 1) {
+  DesignSessionOptions options;
+  options.biharmonic = BiharmonicForm::kMixed;
+  options.scale_free = scale_free;
+  // The conjugate gradients would stop after one iteration, unconverged: the session's 1e-12
+  // below shows that it solved by the spectrum (and refinement) instead.
+  options.solve.max_iterations = 1;
+  auto session = DesignSession::Create(f.system, w, options);
+  ASSERT_TRUE(session.ok()) << session.status();
+  DesignSession& s = **session;
+  std::vector<FieldConstraint> added;
+  for (size_t i = 0; i < all.size(); ++i) {
+    ASSERT_TRUE(s.AddConstraint(static_cast<int64_t>(i), all[i]).ok()) << what;
+    added.push_back(all[i]);
+    if (added.size() < first_checked) continue;
+    EXPECT_LE(s.last_backward_error(), 1e-12) << what << " after " << i + 1;
+    EXPECT_LE(s.last_refinement_steps(), options.solve.max_refinement_steps);
+    ModelProblem problem = s.problem();
+    auto cg = SolveReducedModelProblem(*f.system, problem);  // max_iterations 400
+    ASSERT_TRUE(cg.ok()) << cg.status();
+    EXPECT_LE(cg->backward_error, 1e-10);  // its conjugate gradients stall near 1e-11 here
+    EXPECT_LT(RelativeDifference(s.coefficients(), cg->coefficients), 1e-9)
+        << what << " after " << i + 1;
+    if (!scale_free) {
+      EXPECT_LT(RelativeDifference(s.coefficients(), f.DenseSolution(w, added)), 1e-9)
+          << what << " after " << i + 1;
+    }
+  }
+}
+
+std::vector<FieldConstraint> Constraints(const Fixture& f, const std::vector<int32_t>& faces,
+                                         int variant, uint64_t seed) {
+  std::vector<FieldConstraint> out;
+  for (size_t i = 0; i < faces.size(); ++i) {
+    FieldConstraint c;
+    c.face = faces[i];
+    c.value = RandomVector(f.p(), seed + i);
+    c.weight = 0.5 + static_cast<double>(i % 3);
+    // 0: soft, 1: hard, 2: both.
+    if (variant == 1 || (variant == 2 && i % 2 == 0)) c.kind = ConstraintKind::kHard;
+    out.push_back(c);
+  }
+  return out;
+}
+
+TEST(SpectralMixedSessionTest, EqualsConjugateGradientsAndDenseKkt) {
+  const TriangleMesh mesh = Icosphere(2);  // 320 faces
+  uint64_t seed = 60;
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
+    const Fixture f = Fixture::Random(mesh, type, 100, ++seed);
+    for (int variant = 0; variant < 3; ++variant) {
+      for (const bool scale_free : {false, true}) {
+        const std::vector<FieldConstraint> cs =
+            Constraints(f, {4, 51, 130, 207, 299}, variant, ++seed);
+        ExpectSessionMatches(f, cs, {0.5, 0.2, 3.0}, scale_free,
+                             type.ToString() + " variant " + std::to_string(variant) +
+                                 (scale_free ? " scale-free" : " raw"));
+        // Purely biharmonic (mu_S = 0: D = mu_B Lambda^2).
+        ExpectSessionMatches(f, cs, {0.0, 1.0, 3.0}, scale_free, "mu_s = 0");
+      }
+    }
+  }
+}
+
+TEST(SpectralMixedSessionTest, KernelColumns) {
+  const Fixture f = Fixture::WithKernelColumns(Torus(24, 12), 60);
+  auto spectrum = ComputeMixedSpectrum(*f.system);
+  ASSERT_TRUE(spectrum.ok()) << spectrum.status();
+  const Eigen::VectorXd& lambda = (*spectrum)->lambda;
+  // The two harmonic fields: zero energy, to rounding.
+  EXPECT_LT(std::abs(lambda[1]), 1e-10 * lambda.maxCoeff());
+  EXPECT_GT(lambda[2], 1e-6 * lambda.maxCoeff());
+  uint64_t seed = 90;
+  for (int variant = 0; variant < 3; ++variant) {
+    for (const bool scale_free : {false, true}) {
+      // Enough faces all around the torus that the constraints control the harmonic directions.
+      const std::vector<FieldConstraint> cs =
+          Constraints(f, {3, 100, 170, 260, 333, 420, 515}, variant, ++seed);
+      ExpectSessionMatches(f, cs, {1.0, 0.5, 2.0}, scale_free,
+                           "kernel columns, variant " + std::to_string(variant), 3);
+    }
+  }
+}
+
+// With a data term the energy has its mass: the session keeps the conjugate gradients.
+TEST(SpectralMixedSessionTest, DataTermStillSolvesTheMixedForm) {
+  const Fixture f = Fixture::Random(Torus(16, 8), FieldType::Vector(), 60, 7);
+  const int32_t faces = f.system->num_faces();
+  const Eigen::VectorXd X0 = RandomVector(f.op.dofs(), 1);
+  const Eigen::VectorXd face_weights = RandomVector(faces, 2).cwiseAbs();
+  auto smoother = ReducedSmoother::Create(
+      f.system, X0, absl::MakeConstSpan(face_weights.data(), face_weights.size()));
+  ASSERT_TRUE(smoother.ok()) << smoother.status();
+  Eigen::VectorXd wm = f.op.mass;
+  for (int64_t i = 0; i < wm.size(); ++i) wm[i] *= face_weights[i / f.p()];
+  const Eigen::MatrixXd D = f.U.transpose() * wm.asDiagonal() * f.U;
+  const Eigen::VectorXd data_b = f.U.transpose() * wm.asDiagonal() * X0;
+  DesignSessionOptions options;
+  options.biharmonic = BiharmonicForm::kMixed;
+  options.data_term = std::make_shared<const ReducedSmoother>(*std::move(smoother));
+  EnergyWeights w{.mu_s = 0.1, .mu_b = 0.5, .mu_c = 4.0, .mu_a = 2.0};
+  auto session = DesignSession::Create(f.system, w, options);
+  ASSERT_TRUE(session.ok()) << session.status();
+  DesignSession& s = **session;
+  std::vector<FieldConstraint> cs = Constraints(f, {5, 77, 140}, 2, 3);
+  for (size_t i = 0; i < cs.size(); ++i) ASSERT_TRUE(s.AddConstraint(i, cs[i]).ok());
+  EXPECT_LE(s.last_backward_error(), 1e-12);
+  EXPECT_GT(s.last_refinement_steps(), 0);  // conjugate gradient iterations
+  EXPECT_LT(RelativeDifference(s.coefficients(), f.DenseSolution(w, cs, D, data_b)), 1e-8);
+  // mu_a = 0: the data term's mass is out of the energy, and the spectrum takes over.
+  w.mu_a = 0.0;
+  ASSERT_TRUE(s.SetWeights(w).ok());
+  EXPECT_LE(s.last_backward_error(), 1e-12);
+  EXPECT_LT(RelativeDifference(s.coefficients(), f.DenseSolution(w, cs)), 1e-9);
+}
+
+}  // namespace
+}  // namespace fieldspace
