@@ -7,6 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "client/cli_commands.h"
+#include "client/design_tools_json.h"
 #include "client/cli_flags.h"
 #include "client/cli_json.h"
 

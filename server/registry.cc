@@ -12,7 +12,7 @@
 #include "core/basis/basis_io.h"
 #include "core/common/status_macros.h"
 #include "server/hash.h"
-#include "server/status_util.h"
+#include "server/shown_text.h"
 
 namespace fieldspace::server {
 namespace {

@@ -11,7 +11,7 @@
 #include "core/common/status_macros.h"
 #include "server/hash.h"
 #include "server/registry.h"
-#include "server/status_util.h"
+#include "server/shown_text.h"
 
 namespace fieldspace::server {
 

@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_replace.h"
+#include "server/shown_text.h"
 
 namespace fieldspace::server {
 
@@ -30,23 +31,9 @@ std::string Redacted(std::string message) {
   return message;
 }
 
-constexpr size_t kMaxIdShown = 64;
 constexpr size_t kMaxMessageBytes = 4096;
 
-// Cuts `text` to at most `max` bytes (never inside a UTF-8 sequence), marking the cut with "…".
-std::string Cut(std::string_view text, size_t max) {
-  if (text.size() <= max) return std::string(text);
-  size_t end = max;
-  while (end > 0 && (static_cast<unsigned char>(text[end]) & 0xC0) == 0x80) --end;
-  return std::string(text.substr(0, end)) + "\u2026";
-}
-
 }  // namespace
-
-std::string ShownId(std::string_view id) {
-  if (id.size() <= kMaxIdShown) return "'" + std::string(id) + "'";
-  return absl::StrCat("'", Cut(id, kMaxIdShown), "' (", id.size(), " bytes)");
-}
 
 void RedactPathOnTheWire(const std::string& path, const std::string& shown) {
   if (path.empty()) return;
@@ -70,7 +57,7 @@ grpc::Status ToGrpcStatus(const absl::Status& status) {
   if (message.empty()) message = absl::StatusCodeToString(status.code());
   message = Redacted(std::move(message));
   if (message.size() > kMaxMessageBytes) {
-    message = absl::StrCat(Cut(message, kMaxMessageBytes), " (", message.size(), " bytes)");
+    message = absl::StrCat(CutText(message, kMaxMessageBytes), " (", message.size(), " bytes)");
   }
   return grpc::Status(code, std::move(message));
 }

@@ -17,11 +17,6 @@ namespace fieldspace::server {
 // longer than 4 KiB are cut there (a header that large is refused or stalls on the way).
 grpc::Status ToGrpcStatus(const absl::Status& status);
 
-// A client-given id as error messages show it: quoted, and cut after 64 bytes ("'m-0123…' (70000
-// bytes)"), so that a message never echoes a huge id (a 60 MB id made a 60 MB grpc-message header:
-// a 20 s stall, then UNKNOWN on the client's side).
-std::string ShownId(std::string_view id);
-
 // Registers `path` (e.g. the store directory, as given and absolute) to be shown as `shown`
 // (e.g. "<store>") in every status sent to clients. Process-wide and additive (each server in a
 // process registers its own store); thread-safe.

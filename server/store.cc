@@ -14,7 +14,7 @@
 #include "core/common/file_util.h"
 #include "core/common/status_macros.h"
 #include "server/hash.h"
-#include "server/status_util.h"
+#include "server/shown_text.h"
 
 namespace fieldspace::server {
 namespace {

@@ -154,11 +154,10 @@ absl::Status DesignSession::AttachEnergy(const EnergyWeights& weights) {
   if (mu_b > 0 && !(has_data_term() && weights.mu_a > 0)) {
     ASSIGN_OR_RETURN(std::shared_ptr<const MixedSpectrum> spectrum,
                      MixedSpectrumCache::Global().Get(system_, options_.solve.cancel));
-    kkt_->SetSpectral(std::make_unique<MixedEnergyInverse>(system_.get(), std::move(spectrum),
-                                                           effective.mu_s, mu_b));
-    return absl::OkStatus();
+    return kkt_->SetSpectral(std::make_unique<MixedEnergyInverse>(
+        system_.get(), std::move(spectrum), effective.mu_s, mu_b));
   }
-  kkt_->SetMatrix(energy_->A.get(), energy_->factor.get());
+  RETURN_IF_ERROR(kkt_->SetMatrix(energy_->A.get(), energy_->factor.get()));
   kkt_->SetMixedBiharmonic(system_.get(), mu_b);
   return absl::OkStatus();
 }

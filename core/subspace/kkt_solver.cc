@@ -143,6 +143,11 @@ void KktSolver::GroupColumns(absl::Span<const int32_t> groups,
       vals.emplace_back(row.vals);
     }
   }
+  if (spectral_ != nullptr) {
+    // D^-1/2 V^T R^T: each column a sum of a few rows of V (no elimination tree to share).
+    for (size_t i = 0; i < cols.size(); ++i) spectral_->ForwardSparse(cols[i], vals[i], out.col(i));
+    return;
+  }
   factor_->ForwardSparseColumns(cols, vals, out);
 }
 
@@ -166,19 +171,19 @@ absl::Status KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFac
   A_ = A;
   factor_ = factor;
   spectral_.reset();
-  ComputeAllGroups();
+  return ComputeAllGroups();
 }
 
-void KktSolver::SetSpectral(std::unique_ptr<const MixedEnergyInverse> inverse) {
+absl::Status KktSolver::SetSpectral(std::unique_ptr<const MixedEnergyInverse> inverse) {
   A_ = nullptr;
   factor_ = nullptr;
   mixed_system_ = nullptr;
   mixed_mu_b_ = 0;
   spectral_ = std::move(inverse);
-  ComputeAllGroups();
+  return ComputeAllGroups();
 }
 
-void KktSolver::ComputeAllGroups() {
+absl::Status KktSolver::ComputeAllGroups() {
   schur_valid_ = false;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   const absl::Status cancelled = absl::CancelledError("hard constraint system: cancelled");
@@ -230,7 +235,8 @@ void KktSolver::AppendGroups(std::vector<NewGroup> groups) {
     ++num_groups_;
   }
   schur_valid_ = false;
-  if (factor_ == nullptr) return;  // SetMatrix() computes every group later
+  // SetMatrix() or SetSpectral() computes every group later.
+  if (factor_ == nullptr && spectral_ == nullptr) return;
   std::vector<int32_t> added(k);
   for (int32_t i = 0; i < k; ++i) added[i] = g0 + i;
   GroupColumns(added, W_.middleCols(static_cast<int64_t>(g0) * p_, static_cast<int64_t>(k) * p_));
@@ -253,7 +259,7 @@ void KktSolver::ReplaceGroups(const std::vector<int32_t>& slots, std::vector<New
     hard_[slots[i]] = groups[i].hard ? 1 : 0;
   }
   schur_valid_ = false;
-  if (factor_ == nullptr) return;
+  if (factor_ == nullptr && spectral_ == nullptr) return;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   Eigen::MatrixXd Wc(d_, k * p_);
   GroupColumns(slots, Wc);

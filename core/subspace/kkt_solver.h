@@ -97,7 +97,7 @@ class KktSolver {
   // true matrix like the exact form's. Replaces
   // SetMatrix's matrix and factorization (and SetMixedBiharmonic's conjugate gradients) until the
   // next SetMatrix. Recomputes W and K for all constraints.
-  void SetSpectral(std::unique_ptr<const MixedEnergyInverse> inverse);
+  absl::Status SetSpectral(std::unique_ptr<const MixedEnergyInverse> inverse);
 
   // The mixed biharmonic (BiharmonicForm::kMixed) with weight mu_b (> 0; 0 turns it off): the
   // true matrix becomes A - mu_b U^T B U + mu_b K Mr^-1 K (K = U^T S U, Mr = U^T M U of
@@ -159,7 +159,7 @@ class KktSolver {
   void GroupColumns(absl::Span<const int32_t> groups, Eigen::Ref<Eigen::MatrixXd> out) const;
   void ComputeGroup(int32_t g);
   // W and K for every group (after SetMatrix / SetSpectral).
-  void ComputeAllGroups();
+  absl::Status ComputeAllGroups();
   // H^-1 v (v: r values).
   Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;
   // The KKT solve for right-hand sides (f, g) (f may be null: 0) with the spectral inverse.

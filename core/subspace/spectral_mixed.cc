@@ -105,8 +105,8 @@ MixedEnergyInverse::MixedEnergyInverse(const ReducedSystem* system,
   for (int64_t i = 0; i < d; ++i) inv_sqrt_d_[i] = 1.0 / std::sqrt(D[i] > 0 ? D[i] : shift);
 }
 
-void MixedEnergyInverse::ForwardSparse(const std::vector<int32_t>& cols,
-                                       const std::vector<double>& vals,
+void MixedEnergyInverse::ForwardSparse(absl::Span<const int32_t> cols,
+                                       absl::Span<const double> vals,
                                        Eigen::Ref<Eigen::VectorXd> out) const {
   // V^T r = sum_q r_q (row cols[q] of V) = sum_q r_q vt.col(cols[q]).
   out.setZero();

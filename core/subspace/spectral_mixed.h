@@ -12,6 +12,7 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
+#include "absl/types/span.h"
 #include "core/common/cancel.h"
 #include "core/subspace/reduced_system.h"
 
@@ -76,7 +77,7 @@ class MixedEnergyInverse {
 
   int64_t dimension() const { return inv_sqrt_d_.size(); }
   // out = G^T r (d) for a sparse r (cols, vals): O(d nnz(r)).
-  void ForwardSparse(const std::vector<int32_t>& cols, const std::vector<double>& vals,
+  void ForwardSparse(absl::Span<const int32_t> cols, absl::Span<const double> vals,
                      Eigen::Ref<Eigen::VectorXd> out) const;
   // G^T v and G u (d each): one pass over V each.
   Eigen::VectorXd Forward(const Eigen::VectorXd& v) const;

@@ -20,6 +20,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/data_root.h"
+#include "server/shown_text.h"
 #include "server/status_util.h"
 #include "server/tls.h"
 #include "tests/testing/matchers.h"

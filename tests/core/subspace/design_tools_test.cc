@@ -1,4 +1,5 @@
 #include "core/subspace/design_tools.h"
+#include "core/subspace/full_space_solver.h"
 
 #include <algorithm>
 #include <cmath>
