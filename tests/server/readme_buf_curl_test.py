@@ -94,8 +94,9 @@ def main():
                          '"factorize_ms":'):
             check(expected in cli_out, "CLI block output lacks %s:\n%s" % (expected, cli_out[-3000:]))
         design_lines = [l for l in cli_out.splitlines() if l.startswith('{"seq":')]
-        check(len(design_lines) == 6 + 3,
-              "the two design runs printed open + 5 and open + 2 updates")
+        check(len(design_lines) == 10 + 3,
+              "the tour's two design runs printed open + 9 and open + 2 updates, not %d" %
+              len(design_lines))
         # The session aligned to curvature: its weights edit (mu_a) refactorizes.
         check('"edit":"weights"' in design_lines[-1] and '"refactorized":true' in design_lines[-1],
               "a new mu_a refactorizes: %s" % design_lines[-1])
