@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
-"""Runs the tested shell blocks of README.md as written (the fieldspace CLI block and
-the buf curl block) against a live fieldspaced, and checks what they print.
+"""Runs the shell blocks tagged with this test as written against a live fieldspaced, and checks
+what they print: README.md's CLI block (a design script with a stroke and a placed singularity),
+docs/cli.md's tour of every command and docs/api.md's buf curl block.
 
 Exit 0 on success, 1 on failure, 77 (skip) when npx cannot provide buf (no node / no registry).
 """
 
 import argparse
+import json
 import os
 import re
 import shutil
@@ -20,12 +22,14 @@ MARKER = "<!-- tested-by: tests/server/readme_buf_curl_test.py -->"
 
 
 def blocks(readme):
-    text = open(readme).read()
+    """The tagged blocks of README.md, docs/cli.md and docs/api.md, in that order."""
+    docs = os.path.join(os.path.dirname(os.path.abspath(readme)), "docs")
     out = []
-    for part in text.split(MARKER)[1:]:
-        m = re.match(r"\s*```bash\n(.*?)\n```", part, re.S)
-        check(m is not None, "a ```bash block must follow the marker")
-        out.append(m.group(1))
+    for path in (readme, os.path.join(docs, "cli.md"), os.path.join(docs, "api.md")):
+        for part in open(path).read().split(MARKER)[1:]:
+            m = re.match(r"\s*```bash\n(.*?)\n```", part, re.S)
+            check(m is not None, "%s: a ```bash block must follow the marker" % path)
+            out.append(m.group(1))
     return out
 
 
@@ -35,8 +39,9 @@ def main():
     parser.add_argument("--client", required=True)
     parser.add_argument("--readme", required=True)
     args = parser.parse_args()
-    cli_block, buf_block = blocks(args.readme)
-    check("fieldspace --server" in cli_block and "buf curl" in buf_block, "block order")
+    readme_block, cli_block, buf_block = blocks(args.readme)
+    check("fieldspace --server" in readme_block and "fieldspace --server" in cli_block and
+          "buf curl" in buf_block, "block order")
 
     npx = shutil.which("npx")
     if npx is None:
@@ -50,7 +55,7 @@ def main():
 
     work = tempfile.mkdtemp(prefix="fs_readme_")
     # The blocks expect ../shared/meshes/sphere_1k.obj; without it, an identical icosphere.
-    repo = os.path.dirname(os.path.dirname(os.path.abspath(args.readme)))
+    repo = os.path.dirname(os.path.abspath(args.readme))
     meshes = os.path.join(repo, "..", "shared", "meshes")
     if not os.path.exists(os.path.join(meshes, "sphere_1k.obj")):
         meshes = os.path.join(work, "meshes")
@@ -68,13 +73,20 @@ def main():
         env["MESHES"] = os.path.abspath(meshes)
         env["PATH"] = os.path.dirname(os.path.abspath(args.client)) + os.pathsep + env["PATH"]
         outputs = []
-        for block in (buf_block, cli_block):
+        for block in (buf_block, readme_block, cli_block):
             p = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=repo, env=env,
                                capture_output=True, text=True, timeout=600)
             check(p.returncode == 0, "block failed (%d):\n%s\nstdout:\n%s\nstderr:\n%s" %
                   (p.returncode, block, p.stdout[-3000:], p.stderr[-3000:]))
             outputs.append(p.stdout)
-        buf_out, cli_out = outputs
+        buf_out, readme_out, cli_out = outputs
+        # README's block: open, the add, the stroke, the placed singularity and its removal.
+        readme_lines = [l for l in readme_out.splitlines() if l.startswith('{"seq":')]
+        check([json.loads(l)["edit"] for l in readme_lines] ==
+              ["open", "add", "stroke", "singularity", "remove"],
+              "README's design script: open + 4 updates:\n%s" % readme_out[-3000:])
+        check(all(json.loads(l)["num_constraints"] > 0 for l in readme_lines[1:]),
+              "README's design script keeps its constraints:\n%s" % readme_out[-3000:])
         for expected in ('{"status":"SERVING"}', '"relative_error":', '"eigenvalues":',
                          '"edit":"weights"', '"refactorized":true', '"field":"nfield4"'):
             check(expected in cli_out, "CLI block output lacks %s:\n%s" % (expected, cli_out[-3000:]))
@@ -82,8 +94,9 @@ def main():
                          '"factorize_ms":'):
             check(expected in cli_out, "CLI block output lacks %s:\n%s" % (expected, cli_out[-3000:]))
         design_lines = [l for l in cli_out.splitlines() if l.startswith('{"seq":')]
-        check(len(design_lines) == 6 + 3,
-              "the two design runs printed open + 5 and open + 2 updates")
+        check(len(design_lines) == 10 + 3,
+              "the tour's two design runs printed open + 9 and open + 2 updates, not %d" %
+              len(design_lines))
         # The session aligned to curvature: its weights edit (mu_a) refactorizes.
         check('"edit":"weights"' in design_lines[-1] and '"refactorized":true' in design_lines[-1],
               "a new mu_a refactorizes: %s" % design_lines[-1])

@@ -3,12 +3,16 @@
 // each step the page's coefficients equal a Solve over the wire with the page's constraints and
 // weights (1e-9 relative), and the faces the page edited are the faces this test finds by casting
 // the same screen rays itself. A screenshot shows the glyphs over the mesh.
+// The gateway is started with the command line of README.md's studio block (its addresses
+// replaced), so that the README's way to start the studio by hand is run here.
 //   node studio_design_test.mjs --web-dir client/web --daemon build/bin/fieldspaced --out DIR
+//       --readme README.md
 import { readFileSync, writeFileSync } from "node:fs";
 import { join } from "node:path";
 import {
   castRay, cameraRay, check, chooseBasis, cleanup, decodePng, dot, faceCentroid, faceNormal,
-  launchChromium, pageProbe, parseArgs, project, startDaemon, startGateway, torusObj,
+  launchChromium, pageProbe, parseArgs, project, readmeGatewayArgs, startDaemon, startGateway,
+  torusObj,
   uploadAndBuild, webModules,
 } from "./studio_lib.mjs";
 
@@ -34,7 +38,8 @@ for await (const chunk of client.getMeshGeometry({ meshId: mesh.id })) {
   geometry.vertices.push(...chunk.vertices);
   geometry.faces.push(...chunk.faces);
 }
-const gateway = await startGateway(args["web-dir"], ["--daemon", daemon.address]);
+const gateway = await startGateway(args["web-dir"],
+  readmeGatewayArgs(args.readme, "tests/studio/studio_design_test.mjs", daemon.address));
 const browser = await launchChromium(chromium);
 const page = await browser.newPage({ viewport: { width: 1100, height: 760 } });
 page.on("pageerror", (e) => console.error(`page error: ${e.message}`));

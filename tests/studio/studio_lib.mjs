@@ -1,7 +1,7 @@
 // Helpers of the studio's browser tests: a daemon with a temporary store, a mesh made here, the
 // gateway, a headless Chromium, rays cast through the page's camera, and PNG pixels.
 import { spawn } from "node:child_process";
-import { existsSync, mkdtempSync, rmSync } from "node:fs";
+import { existsSync, mkdtempSync, readFileSync, rmSync } from "node:fs";
 import { createRequire } from "node:module";
 import { tmpdir } from "node:os";
 import { join, resolve } from "node:path";
@@ -81,12 +81,41 @@ export async function startDaemon(bin, { listen = "127.0.0.1:0", store = null, e
   return { child, address, store, stop };
 }
 
-/** The gateway (client/web/gateway/main.mjs) on 127.0.0.1:0; resolves to its URL. */
+/** The gateway (client/web/gateway/main.mjs), on 127.0.0.1:0 unless `args` has a --listen;
+ *  resolves to its URL. */
 export async function startGateway(webDir, args) {
   webDir = resolve(webDir);
+  const listen = args.includes("--listen") ? [] : ["--listen", "127.0.0.1:0"];
   const [child, url] = await startProcess(process.execPath,
-    [join(webDir, "gateway", "main.mjs"), "--listen", "127.0.0.1:0", ...args], /studio: (\S+)/);
+    [join(webDir, "gateway", "main.mjs"), ...listen, ...args], /studio: (\S+)/);
   return { child, url };
+}
+
+/** The gateway's arguments as README.md's studio block writes them (the ```sh block after the
+ *  tested-by comment naming `testPath`), with its two addresses replaced: --listen by
+ *  127.0.0.1:0 and --daemon by `daemonAddress`. Checks that the block's daemon listens where its
+ *  gateway calls. */
+export function readmeGatewayArgs(readmePath, testPath, daemonAddress) {
+  const text = readFileSync(readmePath, "utf8");
+  const marker = `<!-- tested-by: ${testPath} -->`;
+  const at = text.indexOf(marker);
+  check(at >= 0, `${readmePath} has a block tagged ${marker}`);
+  const block = /^\s*```sh\n([\s\S]*?)\n```/.exec(text.slice(at + marker.length));
+  check(block !== null, `a \`\`\`sh block follows ${marker}`);
+  const lines = block[1].split("\n");
+  const words = (start) => lines.find((l) => l.startsWith(start))?.slice(start.length).trim()
+    .replace(/\s*&$/, "").split(/\s+/);
+  const flag = (argv, name) => argv[argv.indexOf(name) + 1];
+  const gateway = words("node client/web/gateway/main.mjs ");
+  const daemon = words("build/bin/fieldspaced ");
+  check(gateway && daemon, "the studio block starts fieldspaced and the gateway");
+  check(gateway.includes("--listen") && gateway.includes("--daemon"),
+    "the block's gateway names --listen and --daemon");
+  check(flag(daemon, "--listen") === flag(gateway, "--daemon"),
+    `the block's gateway calls ${flag(gateway, "--daemon")}, its daemon listens on ` +
+    `${flag(daemon, "--listen")}`);
+  const replaced = { "--listen": "127.0.0.1:0", "--daemon": daemonAddress };
+  return gateway.map((w, i) => (i > 0 && gateway[i - 1] in replaced ? replaced[gateway[i - 1]] : w));
 }
 
 /** OBJ text of a closed torus (genus 1) with 2 * major * minor faces. */
