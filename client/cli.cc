@@ -44,7 +44,7 @@ const CommandDoc& GlobalOptions() {
 constexpr char kNotes[] =
     R"(
 FIELD_FILE: text (one face per line; '# encoding: dof' or ambient, the default) in a .txt file
-or, for output, .ply (the mesh with the field as face properties). Formats: README.md.
+or, for output, .ply (the mesh with the field as face properties). Formats: docs/cli.md.
 
 The server is --server, else $FIELDSPACE_SERVER, else 127.0.0.1:50051. TLS (a server started
 with --tls-cert): any --tls-* option turns it on: --tls-ca FILE (the CA of the server's

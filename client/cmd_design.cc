@@ -7,9 +7,9 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "client/cli_commands.h"
-#include "client/design_tools_json.h"
 #include "client/cli_flags.h"
 #include "client/cli_json.h"
+#include "client/design_tools_json.h"
 
 namespace fieldspace::client::cli {
 
@@ -74,10 +74,28 @@ int Design(Cli& cli, const CommandLine& a) {
   // is reopened and replayed, and the answer of that edit says "resumed": true.
   ResumableDesign session(&cli.client(), open.open());
   absl::Status failed;
+  int refused = 0;  // edits the server refused while the session went on
   for (size_t i = 0; i < edits.size() + 1; ++i) {
     const auto sent = Clock::now();
     absl::StatusOr<ResumableDesign::Update> resumable =
         i == 0 ? session.Open(0) : session.Edit(edits[i - 1]);
+    if (!resumable.ok() && i > 0 && session.is_open()) {
+      // A refused edit costs only that edit (the session is as it was): its line says why, on
+      // stdout with the updates and on stderr as an error, and the script goes on.
+      ++refused;
+      JsonWriter j;
+      j.BeginObject();
+      j.Key("seq").Int(static_cast<int64_t>(edits[i - 1].seq()));
+      j.Key("edit").String(kinds[i]);
+      j.Key("error").BeginObject();
+      j.Key("code").String(absl::StatusCodeToString(resumable.status().code()));
+      j.Key("message").String(std::string(resumable.status().message()));
+      j.EndObject();
+      j.EndObject();
+      cli.Emit(j);
+      cli.Fail(resumable.status(), absl::StrCat("Design edit (line ", edits[i - 1].seq(), ")"));
+      continue;
+    }
     if (!resumable.ok()) {
       failed = resumable.status();
       break;
@@ -126,7 +144,7 @@ int Design(Cli& cli, const CommandLine& a) {
   }
   if (!failed.ok()) return cli.Fail(failed, "Design");
   if (absl::Status status = session.Close(); !status.ok()) return cli.Fail(status, "Design");
-  return 0;
+  return refused == 0 ? 0 : 1;
 }
 
 }  // namespace fieldspace::client::cli

@@ -1,7 +1,7 @@
 #ifndef FIELDSPACE_CLIENT_FIELD_FILES_H_
 #define FIELDSPACE_CLIENT_FIELD_FILES_H_
 
-// The client's file formats (documented in README.md):
+// The client's file formats (documented in docs/cli.md, "File formats"):
 // - field files (text, one face per line; or PLY with face properties for viewers),
 // - coefficient files (whitespace-separated numbers, or the JSON that `solve` / `project` print),
 // - constraint files (JSON lines, one constraint each),

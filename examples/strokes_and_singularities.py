@@ -99,9 +99,9 @@ def main():
     field = client.lift(basis, coefficients)  # (F, 4, 3): the cross at every face
     V, F = client.mesh_geometry(mesh.id)
     out_png = os.path.join(args.out_dir, "strokes.png")
-    picture = render.render(V, F, field, "nfield", out_png=out_png, style="streamlines",
-                            size=(800, 600), camera={"direction": (1.0, -1.2, 0.8)}, streamline_count=3000,
-                            colorize=False, surface_color=(0.97, 0.95, 0.9))
+    # render's defaults: the automatic view, the hatching style; the singularities as spheres.
+    picture = render.render(V, F, field, "nfield", out=out_png, style="hatching",
+                            singularities=sing)
     covered = float(np.mean(np.any(picture["image"] < 250, axis=2)))
     print(json.dumps({"faces": len(F), "picture_lines": picture["lines"],
                       "covered_fraction": round(covered, 3)}))

@@ -7,6 +7,7 @@
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
+#include "core/mesh/surface_path.h"
 #include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_type.h"
 #include "core/subspace/problem.h"
@@ -23,43 +24,6 @@ namespace fieldspace {
 // Weights: a tool's `weight` is the mean soft weight of its faces; each face's share is
 // proportional to the tool's length inside it (strokes, boundary and feature edges), so a face
 // the stroke only grazes pulls little. Hard tools ignore weights.
-
-// A point on the surface: face `face` and barycentric coordinates of its corners
-// faces()(face, 0..2), each in [0, 1] (to 1e-9), summing to 1 (to 1e-9).
-struct SurfacePoint {
-  int32_t face = 0;
-  Eigen::Vector3d barycentric = Eigen::Vector3d::Constant(1.0 / 3.0);
-};
-
-// InvalidArgument for a face out of range or barycentric coordinates that are not as above.
-absl::Status ValidateSurfacePoint(const TriangleMesh& mesh, const SurfacePoint& point);
-
-// The 3D position of a surface point.
-Eigen::Vector3d SurfacePosition(const TriangleMesh& mesh, const SurfacePoint& point);
-
-// The closest point of the surface to `p` (ties: the lowest face). O(#F), in parallel: ~20 ms per
-// point per million faces on 2 cores; callers that know the face (a picking client) send
-// SurfacePoints.
-// InvalidArgument for a non-finite p.
-absl::StatusOr<SurfacePoint> SnapToSurface(const TriangleMesh& mesh, const Eigen::Vector3d& p);
-
-// One straight piece of a path on the surface, inside face `face` (from `a` to `b`, both in the
-// face's closure).
-struct PathSegment {
-  int32_t face = 0;
-  Eigen::Vector3d a, b;
-};
-
-// A shortest path on the surface from `from` to `to`: the faces of the shortest path between
-// their faces in the dual graph (A*, edge lengths between barycenters), then the exact shortest
-// polyline through that strip of faces (unfolded into the plane, funnel algorithm), with the
-// strip rerouted the other way around any vertex the polyline touches while that shortens it
-// (on convex parts of a surface this gives the geodesic). One segment per face, consecutive
-// segments joined. InvalidArgument for invalid points or points on different connected
-// components.
-absl::StatusOr<std::vector<PathSegment>> ShortestSurfacePath(const TriangleMesh& mesh,
-                                                             const SurfacePoint& from,
-                                                             const SurfacePoint& to);
 
 struct StrokeOptions {
   ConstraintKind kind = ConstraintKind::kSoft;

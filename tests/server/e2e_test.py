@@ -215,6 +215,32 @@ def main():
             f.write('{"add": {"id": 1, "face": 10}}\n')
         rc, _, err = cli("design", vector["id"], "--script", bad_script, expect=1)
         check("bad.jsonl:1" in err, "script error names the line: %s" % err)
+        # A refused edit (an unknown id, a face out of range) costs only that edit: its line
+        # carries the error, the script goes on, the session is as it was, the exit code is 1.
+        refused_script = os.path.join(work, "refused.jsonl")
+        with open(refused_script, "w") as f:
+            f.write('{"add": {"id": 1, "face": 10, "vector": [1, 0, 0]}}\n')
+            f.write('{"remove": {"id": 7}}\n')
+            f.write('{"add": {"id": 2, "face": 99999999, "vector": [0, 1, 0]}}\n')
+            f.write('{"add": {"id": 3, "face": 12, "vector": [0, 1, 0]}}\n')
+        rc, out, err = cli("design", vector["id"], "--script", refused_script, expect=1)
+        lines = [json.loads(line) for line in out.splitlines()]
+        check([l["edit"] for l in lines] == ["open", "add", "remove", "add", "add"],
+              "refused edits keep their lines: %s" % lines)
+        check(lines[2]["error"]["code"] == "NOT_FOUND" and
+              lines[3]["error"]["code"] == "INVALID_ARGUMENT" and "error" not in lines[4],
+              "refused edits carry their codes: %s" % lines[2:])
+        check(lines[4]["num_constraints"] == 2, "the session went on: %s" % lines[4])
+        # The session after the refusals equals one that never saw them.
+        clean_script = os.path.join(work, "clean.jsonl")
+        with open(clean_script, "w") as f:
+            f.write('{"add": {"id": 1, "face": 10, "vector": [1, 0, 0]}}\n')
+            f.write('{"add": {"id": 3, "face": 12, "vector": [0, 1, 0]}}\n')
+        _, out, _ = cli("design", vector["id"], "--script", clean_script)
+        clean = [json.loads(line) for line in out.splitlines()]
+        check(max(abs(p - q) for p, q in zip(clean[-1]["coefficients"], lines[4]["coefficients"]))
+              < 1e-9, "refusals left the session as it was")
+        check("line 2" in err and "NOT_FOUND" in err, "stderr names the refused line: %s" % err)
         rc, _, err = cli("upload", os.path.join(work, "missing.obj"), expect=1)
 
         # --- 2. a Python grpcio client through reflection -------------------------------------------

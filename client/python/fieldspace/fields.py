@@ -276,7 +276,7 @@ def _check_n(n):
 
 
 # ---------------------------------------------------------------------------------------------
-# The CLI's text field files (README, "File formats"; client/field_files.cc).
+# The CLI's text field files (docs/cli.md, "File formats"; client/field_files.cc).
 
 
 @dataclass

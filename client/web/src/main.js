@@ -258,6 +258,9 @@ function openSession() {
       onReady: () => {
         if (session === studio.session && studio.error?.startsWith("The session")) showMessage("");
       },
+      onRefused: (code, message, edit) => {
+        if (session === studio.session) onEditRefused(session, code, message, edit);
+      },
       onClosed: (code, message, edit) => {
         if (session === studio.session) onSessionClosed(code, message, edit);
       },
@@ -308,6 +311,18 @@ function onUpdate(session, update, edit, roundTripMs) {
 
 function fmt(ms) {
   return ms === undefined ? "-" : ms < 10 ? ms.toFixed(2) : ms.toFixed(1);
+}
+
+// The daemon refused an edit (its answer carries the error) and the session goes on as it was.
+function onEditRefused(session, code, message, edit) {
+  studio.constraints = session.constraints;
+  if (!made().constraints.has(studio.selected)) studio.selected = null;
+  persist();
+  showMessage(`The daemon refused the edit '${edit.kind}' (${codeName(code)}): ${message}. ` +
+    "The session goes on without it.", { error: true });
+  drawMarkers();
+  syncWeightSliders();
+  syncSelection();
 }
 
 function onSessionClosed(code, message, edit) {

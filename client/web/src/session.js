@@ -5,8 +5,9 @@
 // constraint that the last queued edit moves, or new weights after queued weights, replace that
 // entry: a drag never builds a backlog of stale positions, and the last state sent is the last
 // state the user made. The session keeps what the server confirmed (weights, constraints in the
-// order added): the page stores it, and a new session (after a reload, or after the server
-// refused an edit and ended the stream) replays it.
+// order added): the page stores it, and a new session (after a reload, or after the connection
+// was lost) replays it. An edit the daemon refuses is answered with its error and costs only
+// that edit.
 import { create, fromBinary, toBinary } from "@bufbuild/protobuf";
 import {
   DesignRequestSchema, DesignUpdateSchema, FieldEncoding,
@@ -48,7 +49,8 @@ export class DesignSession {
    * url: the gateway's ws(s) URL of design sessions; token: "" or the studio's token;
    * open: { basisId, weights {muS, muB, muC}, watchFaces, singularities };
    * confirmed: { weights, constraints: Map id -> constraint } to replay after the open;
-   * handlers: onUpdate(update, edit, roundTripMs), onReady(), onClosed(code, message, edit),
+   * handlers: onUpdate(update, edit, roundTripMs), onRefused(code, message, edit) (the daemon
+   * refused that edit; the session goes on without it), onReady(), onClosed(code, message, edit),
    * onEvent(object).
    */
   constructor({ url, token, open, confirmed, handlers }) {
@@ -124,6 +126,16 @@ export class DesignSession {
     const { edit, sent } = this.inFlight;
     const roundTripMs = performance.now() - sent;
     this.inFlight = null;
+    if (update.error !== undefined) {
+      // The daemon refused this edit and the session goes on as it was: what the user made is
+      // the confirmed state with the edits still queued.
+      this.desired = { weights: { ...this.weights },
+        constraints: new Map([...this.constraints].map(([id, c]) => [id, { ...c }])) };
+      for (const queued of this.queue) applyEdit(this.desired, queued);
+      this.handlers.onRefused?.(update.error.code, update.error.message, edit);
+      this.pump();
+      return;
+    }
     this.confirm(edit);
     this.last = update;
     if (!this.ready && this.queue.every((e) => !e.replay)) {
