@@ -74,6 +74,7 @@ trap 'exit 143' TERM
 # --- The replicas, each on a free port (fieldspaced prints the one it got).
 addresses=()
 for k in $(seq 1 "$replicas"); do
+  : >"$work/replica-$k.out"  # before the replica's own redirection: read below at once
   "$daemon" --listen 127.0.0.1:0 --store "$store" --shared-store --daemon-id "replica-$k" \
     "${daemon_args[@]}" >"$work/replica-$k.out" 2>"$work/replica-$k.log" &
   pids+=($!)

@@ -36,15 +36,6 @@ def alive(pid):
         return False
 
 
-def numbers(value):
-    """The numbers of a JSON value (nested lists and objects), in order."""
-    if isinstance(value, dict):
-        return [x for v in value.values() for x in numbers(v)]
-    if isinstance(value, list):
-        return [x for v in value for x in numbers(v)]
-    return [value] if isinstance(value, (int, float)) and not isinstance(value, bool) else []
-
-
 def design_upstreams(work):
     """The upstream address(es) nginx logged for each Design call, in order ("A, B" when the first
     did not answer)."""
@@ -139,7 +130,8 @@ def main():
         served = design_upstreams(work)
         check(served[-1] != victim and served[-1].split(", ")[-1] in replicas,
               "the second design went to %s (killed: %s)" % (served[-1], victim))
-        a, b = (numbers([u["watched"], u["coefficients"]]) for u in (first[-1], second[-1]))
+        a, b = ([x for w in u["watched"] for x in w["value"]] + u["coefficients"]
+                for u in (first[-1], second[-1]))
         check(len(a) == len(b) and len(a) > 60 and
               max(abs(x - y) for x, y in zip(a, b)) <= 1e-9,
               "the last update differs after the failover:\n%s\n%s" % (first[-1], second[-1]))
