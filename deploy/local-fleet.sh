@@ -48,6 +48,10 @@ done
 nginx=${NGINX:-$(command -v nginx || echo /usr/sbin/nginx)}
 [ -x "$nginx" ] || { echo "local-fleet: nginx not found (apt-get install nginx-light)" >&2; exit 1; }
 
+port_in_use() { (exec 3<>"/dev/tcp/127.0.0.1/$1") 2>/dev/null; }
+port_taken() { echo "local-fleet: 127.0.0.1:$1 is in use (--port P, or --port 0: a free one)" >&2; }
+if [ "$router_port" != 0 ] && port_in_use "$router_port"; then port_taken "$router_port"; exit 1; fi
+
 work=$(mktemp -d "${TMPDIR:-/tmp}/fieldspace-fleet.XXXXXX")
 [ -n "$store" ] || store=$work/store
 pids=()
@@ -137,13 +141,14 @@ EOF
   } >"$work/nginx.conf"
 }
 
-port_in_use() { (exec 3<>"/dev/tcp/127.0.0.1/$1") 2>/dev/null; }
-
 for attempt in $(seq 20); do
   port=$router_port
   if [ "$router_port" = 0 ]; then
     port=$((20000 + RANDOM % 30000))
     ! port_in_use "$port" || continue
+  elif port_in_use "$port"; then
+    port_taken "$port"
+    exit 1
   fi
   write_conf "$port"
   "$nginx" -p "$work" -c "$work/nginx.conf" -e "$work/nginx-error.log" \
@@ -179,6 +184,7 @@ done
 for _ in $(seq 0 "$replicas"); do
   health "127.0.0.1:$port" || { echo "local-fleet: no health through the router" >&2; exit 1; }
 done
+kill -0 "$nginx_pid" 2>/dev/null || { echo "local-fleet: nginx exited" >&2; exit 1; }
 echo "work: $work"
 echo "router: 127.0.0.1:$port"
 
