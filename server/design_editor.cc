@@ -8,8 +8,8 @@
 #include "core/subspace/projection.h"
 #include "server/clock.h"
 #include "server/curvature_alignment.h"
-#include "server/field_answers.h"
 #include "server/design_tools_convert.h"
+#include "server/field_answers.h"
 #include "server/proto_convert.h"
 
 namespace fieldspace::server {

@@ -66,8 +66,8 @@ absl::Status Solve(const HandlerContext& ctx, const v1::SolveRequest& request,
   int64_t hard = 0;
   for (const v1::Constraint& c : request.constraints()) hard += c.hard() ? 1 : 0;
   for (const FieldConstraint& c : groups) hard += c.hard() ? 1 : 0;
-  int64_t work = SolveWorkingBytes(*basis->system, total - hard, hard, problem.scale_free,
-                                   HardwareThreads());
+  int64_t work =
+      SolveWorkingBytes(*basis->system, total - hard, hard, problem.scale_free, HardwareThreads());
   if (request.return_field()) {
     work += int64_t{12} * basis->basis->type.dofs_per_face() * basis->mesh->num_faces();
   }

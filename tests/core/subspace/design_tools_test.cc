@@ -1,5 +1,4 @@
 #include "core/subspace/design_tools.h"
-#include "core/subspace/full_space_solver.h"
 
 #include <algorithm>
 #include <cmath>
@@ -15,6 +14,7 @@
 #include "core/mesh/shapes.h"
 #include "core/operators/singularities.h"
 #include "core/subspace/design_session.h"
+#include "core/subspace/full_space_solver.h"
 #include "core/subspace/model_problem.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
