@@ -42,8 +42,10 @@ def main():
         start = time.monotonic()
         basis = client.build(mesh.id, "vector", 3000, progress=False)
         log("basis d = 3000 on %d faces built in %.1f s" % (len(F), time.monotonic() - start))
-        V7, F7 = obj_arrays(icosphere_obj(7)[0])  # 327,680 faces
-        big_mesh = client.upload(V7, F7)
+        # Large enough that one Curvature call takes well over DEADLINE on an idle machine too
+        # (327,680 faces finished within 0.4 s there, so the cancel came after the answer).
+        V8, F8 = obj_arrays(icosphere_obj(8)[0])  # 1,310,720 faces
+        big_mesh = client.upload(V8, F8)
 
         rng = np.random.default_rng(7)
         hard_faces = rng.choice(len(F), 1400, replace=False)
@@ -65,7 +67,7 @@ def main():
                 basis, faces=hard_faces, values=hard_values, hard=True, timeout=timeout),
             "Solve, 60000 soft constraints": lambda timeout: client.solve(
                 basis, faces=soft_faces, values=soft_values, timeout=timeout),
-            "Curvature with principal directions, 327,680 faces": lambda timeout: client.curvature(
+            "Curvature with principal directions, 1,310,720 faces": lambda timeout: client.curvature(
                 big_mesh.id, principal=True, timeout=timeout),
             "Eigenfields, 1000 of d = 3000": lambda timeout: client.eigen(basis, 1000,
                                                                           timeout=timeout),
