@@ -15,6 +15,14 @@ FieldOperator MustBuildOperator(const TriangleMesh& mesh, const FieldType& type)
   return *std::move(op);
 }
 
+Eigen::VectorXd RandomVector(int64_t n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd v(n);
+  for (int64_t i = 0; i < n; ++i) v[i] = u(rng);
+  return v;
+}
+
 std::shared_ptr<Basis> RandomBasis(const FieldType& type, int64_t k, int64_t d,
                                    int64_t rows_per_column, uint64_t seed) {
   std::mt19937_64 rng(seed);

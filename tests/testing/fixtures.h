@@ -23,6 +23,9 @@ FieldOperator MustBuildOperator(const TriangleMesh& mesh, const FieldType& type)
 std::shared_ptr<Basis> RandomBasis(const FieldType& type, int64_t k, int64_t d,
                                    int64_t rows_per_column, uint64_t seed);
 
+// n values uniform in [-1, 1] from `seed` (the same vector for the same seed).
+Eigen::VectorXd RandomVector(int64_t n, uint64_t seed);
+
 // U = I (k x k).
 std::shared_ptr<Basis> IdentityBasis(const FieldType& type, int64_t k);
 

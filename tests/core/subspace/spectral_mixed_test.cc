@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
-#include <random>
 #include <vector>
 
 #include "Eigen/Dense"
@@ -29,16 +28,9 @@ using ::fieldspace::testing::DenseU;
 using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::RandomVector;
 using ::fieldspace::testing::RelativeDifference;
 using ::fieldspace::testing::Torus;
-
-Eigen::VectorXd RandomVector(int64_t n, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd v(n);
-  for (int64_t i = 0; i < n; ++i) v[i] = u(rng);
-  return v;
-}
 
 struct Fixture {
   FieldOperator op;

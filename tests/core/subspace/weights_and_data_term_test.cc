@@ -5,7 +5,6 @@
 
 #include <cmath>
 #include <memory>
-#include <random>
 #include <vector>
 
 #include "Eigen/Dense"
@@ -27,16 +26,9 @@ using ::fieldspace::testing::DenseU;
 using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::RandomVector;
 using ::fieldspace::testing::StatusIs;
 using ::fieldspace::testing::Torus;
-
-Eigen::VectorXd RandomVector(int64_t n, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  Eigen::VectorXd v(n);
-  for (int64_t i = 0; i < n; ++i) v[i] = u(rng);
-  return v;
-}
 
 // A reduced system on a random sparse basis, with the dense matrices of the reference solves.
 struct Fixture {
