@@ -459,6 +459,27 @@ class DesignToolsTest(unittest.TestCase):
             with self.assertRaises(fs.InvalidArgument):
                 s.place_singularity(17, 0.3)  # not a multiple of 1/4
 
+    def test_solve_with_groups_equals_the_session(self):
+        arc = [(np.cos(t), np.sin(t), 0.1) for t in np.linspace(0.0, 1.2, 4)]
+        weights = fs.Weights(1.0, 0.0, 1.0)
+        stroke = fs.tools.stroke(arc, weight=2.0)
+        singularity = fs.tools.singularity(17, 0.25, hard=True)
+        with CLIENT.design(NFIELD, weights) as s:
+            s.add(30, [0, 0, 1], weight=0.5)
+            s.stroke(arc, weight=2.0)
+            session = s.place_singularity(17, 0.25, hard=True)
+        solved = CLIENT.solve(NFIELD, [30], [[0, 0, 1]], constraint_weights=[0.5],
+                              groups=[stroke, singularity], weights=weights)
+        scale = np.linalg.norm(session.coefficients)
+        self.assertGreater(scale, 0.0)
+        np.testing.assert_allclose(solved.coefficients, session.coefficients, rtol=0,
+                                   atol=1e-9 * scale)
+        # Without the groups the answer differs: they reached the Solve.
+        alone = CLIENT.solve(NFIELD, [30], [[0, 0, 1]], constraint_weights=[0.5], weights=weights)
+        self.assertGreater(np.linalg.norm(alone.coefficients - session.coefficients), 1e-3 * scale)
+        with self.assertRaises(TypeError):
+            CLIENT.solve(NFIELD, groups=[{"stroke": arc}])
+
 
 class RoutingKeyTest(unittest.TestCase):
     def test_calls_that_name_an_id_send_it_as_routing_key(self):

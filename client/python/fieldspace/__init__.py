@@ -18,7 +18,7 @@ ambient. Errors are FieldspaceError subclasses named after their gRPC code (NotF
 InvalidArgument, ...), with ``.code`` and the message ``<what> failed: <CODE>: <message>``.
 """
 
-from . import fields, wire
+from . import fields, tools, wire
 from .client import DEFAULT_ADDRESS, Client
 from .design import DesignSession
 from .errors import (Aborted, AlreadyExists, Cancelled, DataLoss, DeadlineExceeded,

@@ -451,8 +451,8 @@ class Client:
         r = self._unary(what, self._stub.Project, request, timeout)
         return Projection(np.array(r.coefficients), r.relative_error, r.seconds)
 
-    def solve(self, basis, faces=(), values=None, *, weights=None, constraint_weights=None,
-              hard=False, encoding=None, return_field=False, field_encoding=fld.AMBIENT,
+    def solve(self, basis, faces=(), values=None, *, groups=(), weights=None,
+              constraint_weights=None, hard=False, encoding=None, return_field=False, field_encoding=fld.AMBIENT,
               singularities=False, raw_weights=False, biharmonic="mixed", timeout=_DEFAULT):
         """The reduced model problem with constraints given as arrays.
 
@@ -465,6 +465,9 @@ class Client:
             weights: Weights(mu_s, mu_b, mu_c), a tuple or a dict (default (1, 0, 1)).
             constraint_weights: (k,) soft weights (default 1 each).
             hard: a bool, or (k,) bools: interpolate exactly instead of penalizing.
+            groups: the designer's tools, each a ConstraintGroup from ``fieldspace.tools``
+                (``stroke``, ``singularity``, ``align_boundary``, ``align_features``): the
+                constraints a design session would add for them.
             return_field: also return the lifted field (all faces) in ``field_encoding``.
             singularities: also return the solution's singularities (vector and n-fields).
             raw_weights: the paper's raw weights instead of the scale-free ones (by default a
@@ -486,6 +489,11 @@ class Client:
                                   field_encoding=fld.encoding_proto(field_encoding, what))
         request.constraints.extend(self._constraints(what, field_type, faces, values,
                                                      constraint_weights, hard, encoding))
+        for group in groups:
+            if not isinstance(group, pb.ConstraintGroup):
+                raise TypeError("Solve: groups take ConstraintGroups from fieldspace.tools, got %s"
+                                % type(group).__name__)
+            request.constraint_groups.add().CopyFrom(group)
         r = self._unary(what, self._stub.Solve, request, timeout)
         field = None
         if return_field:

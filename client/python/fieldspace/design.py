@@ -7,10 +7,15 @@ import time
 import grpc
 import numpy as np
 
+from . import tools
 from . import wire as fld
 from ._stubs import pb
 from .errors import FailedPrecondition, FieldspaceError, error_for, from_rpc_error
 from .types import DesignUpdate, Weights
+
+# The Design edit that adds each kind of ConstraintGroup (the group's oneof field -> the edit).
+_ADD_EDIT = {"stroke": "add_stroke", "singularity": "place_singularity",
+             "align_boundary": "align_boundary", "align_features": "align_features"}
 
 _END = object()
 # How often, and after which pauses (s), a session whose stream failed with UNAVAILABLE is
@@ -158,84 +163,57 @@ class DesignSession:
     # -- the designer's tools: one constraint group each, under one id --------------------------
 
     def stroke(self, points, *, hard=False, weight=None, anisotropy=None, id=None, move=False):
-        """A stroke through ``points``: an (m, 3) array of 3D points (each snapped to the closest
-        point of the surface) or a list of ``(face, (b0, b1, b2))`` surface points; consecutive
-        points are joined by the shortest path on the mesh. It constrains every face it crosses
-        to its direction there (n-fields: one of the n; tensors: the principal direction with
-        eigenvalues 1 and 1 - ``anisotropy``), soft weights by its length in each face, ``weight``
-        their mean. ``move=True`` replaces the tool ``id`` instead (one edit)."""
-        message = pb.Stroke(hard=bool(hard))
-        for p in points:
-            if len(p) == 2 and np.ndim(p[1]) == 1:
-                face, b = p
-                message.points.add().face_point.CopyFrom(
-                    pb.SurfacePoint.FacePoint(face=int(face), barycentric=[float(x) for x in b]))
-            else:
-                x, y, z = (float(c) for c in p)
-                message.points.add().position.CopyFrom(pb.Point3(x=x, y=y, z=z))
-        if weight is not None:
-            message.weight = float(weight)
-        if anisotropy is not None:
-            message.anisotropy = float(anisotropy)
-        return self._tool("stroke", "add_stroke", message, id, move)
+        """Adds ``fieldspace.tools.stroke(points, ...)`` as tool ``id`` (a new id when None);
+        ``move=True`` replaces the tool ``id`` instead (one edit)."""
+        return self._tool(tools.stroke(points, hard=hard, weight=weight, anisotropy=anisotropy),
+                          id, move)
 
     def place_singularity(self, vertex, index, *, hard=False, weight=None, id=None, move=False):
-        """A singularity of ``index`` (whole turns, a multiple of 1/n: 1 for a vector source,
-        0.25 or -0.25 for a 4-field) at interior ``vertex``, by constraints on the faces around
-        it that turn the field that much (soft, or ``hard``)."""
-        message = pb.PlaceSingularity(vertex=int(vertex), index=float(index), hard=bool(hard))
-        if weight is not None:
-            message.weight = float(weight)
-        return self._tool("singularity", "place_singularity", message, id, move)
+        """Adds ``fieldspace.tools.singularity(vertex, index, ...)``: the field turns ``index``
+        whole turns around interior ``vertex``."""
+        return self._tool(tools.singularity(vertex, index, hard=hard, weight=weight), id, move)
 
     def align_boundary(self, mode="tangent", *, loops=None, hard=False, weight=None, id=None,
                        move=False):
-        """The boundary faces (all loops, or the listed loop indices) aligned to their boundary
-        edges (``mode="tangent"``) or to the edges' in-plane normals (``"normal"``)."""
-        modes = {"tangent": pb.BOUNDARY_ALIGN_TANGENT, "normal": pb.BOUNDARY_ALIGN_NORMAL}
-        if mode not in modes:
-            raise ValueError("align_boundary: mode must be 'tangent' or 'normal', got %r" % mode)
-        message = pb.AlignBoundary(mode=modes[mode], hard=bool(hard))
-        message.loops.extend(int(x) for x in (loops or ()))
-        if weight is not None:
-            message.weight = float(weight)
-        return self._tool("align_boundary", "align_boundary", message, id, move)
+        """Adds ``fieldspace.tools.align_boundary(mode, ...)``: the boundary faces along their
+        boundary edges (``"tangent"``) or the edges' in-plane normals (``"normal"``)."""
+        return self._tool(tools.align_boundary(mode, loops=loops, hard=hard, weight=weight), id,
+                          move)
 
     def align_features(self, angle_degrees=60.0, *, hard=False, weight=None, id=None,
                        move=False):
-        """The faces along sharp edges (normals differing by more than ``angle_degrees``) aligned
-        to those edges."""
-        message = pb.AlignFeatures(angle_degrees=float(angle_degrees), hard=bool(hard))
-        if weight is not None:
-            message.weight = float(weight)
-        return self._tool("align_features", "align_features", message, id, move)
+        """Adds ``fieldspace.tools.align_features(angle_degrees, ...)``: the faces along edges
+        sharper than ``angle_degrees`` aligned to those edges."""
+        return self._tool(tools.align_features(angle_degrees, hard=hard, weight=weight), id, move)
 
-    def _tool(self, kind, field, message, id, move):
-        """Sends a tool as the add edit `field` (or, with `move`, as the move of group `id`)."""
+    def _tool(self, group, id, move):
+        """Sends a tool's ConstraintGroup as its add edit (or, with `move`, as the move of the
+        group `id`)."""
+        kind = group.WhichOneof("tool")
         if move:
             if id is None:
                 raise ValueError("Design %s: move=True needs the id of the tool to replace" % kind)
-            group = pb.ConstraintGroup(**{kind: message})  # its fields are named as the kinds
             return self._send("move", pb.DesignRequest(move=pb.MoveConstraint(
                 id=int(id), group=group)), id)
         if id is None:
             while self._next_id in self._ids:
                 self._next_id += 1
             id = self._next_id
+        message = getattr(group, kind)
         message.id = int(id)
-        update = self._send(kind, pb.DesignRequest(**{field: message}), id)
+        update = self._send(kind, pb.DesignRequest(**{_ADD_EDIT[kind]: message}), id)
         self._ids.add(int(id))
         return update
 
     def _remember_tool(self, kind, request):
         """Keeps the tools a reopened session replays; whether `request` was a tool's edit."""
         edit = request.WhichOneof("edit")
-        if edit in ("add_stroke", "place_singularity", "align_boundary", "align_features"):
+        if edit in _ADD_EDIT.values():
             self._tools[getattr(request, edit).id] = (kind, request)
             return True
         if edit == "move" and request.move.HasField("group"):
             tool = request.move.group.WhichOneof("tool")  # = the kind of its add
-            field = {"stroke": "add_stroke", "singularity": "place_singularity"}.get(tool, tool)
+            field = _ADD_EDIT[tool]
             replay = pb.DesignRequest(**{field: getattr(request.move.group, tool)})
             getattr(replay, field).id = request.move.id
             self._tools[request.move.id] = (tool, replay)
