@@ -404,6 +404,9 @@ function openSession() {
 
 function onUpdate(session, update, edit, roundTripMs) {
   studio.edits += 1;
+  if (studio.error?.startsWith("The daemon refused") && !edit.replay && edit.kind !== "watch") {
+    showMessage("");  // the user went on, and the daemon took it
+  }
   studio.weights = { ...session.weights };
   studio.constraints = session.constraints;
   if (!made().constraints.has(studio.selected)) studio.selected = null;
@@ -593,8 +596,8 @@ function drawMarkers() {
     }
   }
   view.setMarkers(markers, studio.sample.spacing);
-  view.setStrokes(strokes, gesture?.kind === "stroke" ? gesture.points.map((p) => p.position)
-    : null);
+  view.setStrokes(strokes, 0.08 * studio.sample.spacing,
+    gesture?.kind === "stroke" ? gesture.points.map((p) => p.position) : null);
 }
 
 // The constraint, placed singularity or stroke drawn nearest to a canvas point (within
@@ -691,9 +694,14 @@ canvas.addEventListener("pointermove", (event) => {
   if (!gesture.started && Math.hypot(x - gesture.x, y - gesture.y) < DRAG_START_PX) return;
   if (gesture.kind === "select" || gesture.kind === "singularity") return;
   if (gesture.kind === "stroke") {
+    // Every pointer position since the last event (the browser merges moves into one event per
+    // frame; a slow frame would leave gaps in the stroke).
     gesture.started = true;
-    const hit = view.pick(x, y);
-    if (hit !== null) strokePoint(x, y, hit);
+    for (const e of event.getCoalescedEvents?.() ?? [event]) {
+      const [cx, cy] = local(e);
+      const hit = view.pick(cx, cy);
+      if (hit !== null) strokePoint(cx, cy, hit);
+    }
     return;
   }
   if (gesture.kind === "move") {
@@ -804,7 +812,8 @@ function syncSelection() {
   }
   $("constraint-info").textContent = c.tool === "stroke"
     ? `#${studio.selected}: stroke of ${c.points.length} points`
-    : c.tool === "singularity" ? `#${studio.selected}: singularity ${c.index} at vertex ${c.vertex}`
+    : c.tool === "singularity"
+    ? `#${studio.selected}: singularity ${turns(c.index)} at vertex ${c.vertex}`
     : c.tool !== undefined ? `#${studio.selected}: ${TOOL_NAMES[c.tool]}`
     : `#${studio.selected} on face ${c.face}`;
   $("hard").checked = c.hard;
@@ -850,8 +859,7 @@ function syncTools() {
   const { kind, n } = studio.field;
   const select = $("sing-index");
   select.replaceChildren(...Array.from({ length: 2 * n }, (_, i) => (i < n ? i - n : i - n + 1))
-    .map((k) => new Option(n === 1 ? (k > 0 ? `+${k}` : String(k)) : `${k > 0 ? "+" : ""}${k}/${n}`,
-      String(k / n))));
+    .map((k) => new Option(turns(k / n), String(k / n))));
   select.value = String(1 / n);
   const singularity = document.querySelector("input[name=tool][value=singularity]");
   singularity.disabled = kind === "tensor";
@@ -862,6 +870,13 @@ function syncTools() {
   $("curvature").checked = studio.curvature;
   $("mu-a-row").hidden = !studio.curvature;
   syncAlignment();
+}
+
+// An index in whole turns as the toolbar writes it: +1, -1/4, +3/4.
+function turns(index) {
+  const n = studio.field.n;
+  const k = Math.round(index * n);
+  return `${k > 0 ? "+" : ""}${k}${n === 1 ? "" : `/${n}`}`;
 }
 
 function curvatureAllowed() {
@@ -1045,9 +1060,7 @@ window.__studio = {
     weights: { ...studio.weights },
     singularities: studio.singularities.size,
     sampleFaces: studio.sample?.faces.length ?? 0,
-    sample: studio.sample ? { faces: [...studio.sample.faces], spacing: studio.sample.spacing } : null,
-    watched: studio.session?.last?.watched ? { faces: [...studio.session.last.watched.faces],
-      values: [...studio.session.last.watched.values] } : null,
+    spacing: studio.sample?.spacing ?? 0,
     curvature: studio.curvature,
     edits: studio.edits,
     timings: studio.lastTimings,
@@ -1055,6 +1068,10 @@ window.__studio = {
     message: $("message").hidden ? "" : $("message").textContent,
   }),
   camera: () => view.cameraState(),
+  // The watched sample and the last update's watched faces and values.
+  sample: () => ({ faces: [...(studio.sample?.faces ?? [])], spacing: studio.sample?.spacing ?? 0,
+    watchedFaces: [...(studio.session?.last?.watched?.faces ?? [])],
+    watchedValues: [...(studio.session?.last?.watched?.values ?? [])] }),
   frameTimes: () => [...view.frameTimes],
   showGlyphs: (on) => view.setGlyphsVisible(on),
   edit,  // an edit as the gestures send them, for tests of refused edits

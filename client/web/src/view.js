@@ -127,19 +127,26 @@ export class View {
     this.requestRender();
   }
 
-  /** Strokes: [{ points: [[x, y, z], ...], hard, selected }], drawn as polylines in the markers'
-   *  colours; `preview`: the points of a stroke being drawn, or null. */
-  setStrokes(strokes, preview = null) {
+  /** Strokes: [{ points: [[x, y, z], ...], hard, selected }], drawn as tubes of radius `size`
+   *  in the markers' colours; `preview`: the points of a stroke being drawn (a line), or null. */
+  setStrokes(strokes, size, preview = null) {
     for (const child of [...this.strokes.children]) {
       this.strokes.remove(child);
       child.geometry.dispose();
     }
-    const all = preview ? [...strokes, { points: preview, preview: true }] : strokes;
-    for (const stroke of all) {
-      const geometry = new THREE.BufferGeometry().setFromPoints(
-        stroke.points.map((p) => new THREE.Vector3(...p)));
-      const line = new THREE.Line(geometry, new THREE.LineBasicMaterial({
-        color: stroke.preview ? 0x6a1b9a : markerColor(stroke), depthTest: !stroke.preview }));
+    for (const stroke of strokes) {
+      const path = new THREE.CurvePath();
+      for (let i = 1; i < stroke.points.length; i++) {
+        path.add(new THREE.LineCurve3(new THREE.Vector3(...stroke.points[i - 1]),
+          new THREE.Vector3(...stroke.points[i])));
+      }
+      this.strokes.add(new THREE.Mesh(new THREE.TubeGeometry(path, 4 * stroke.points.length, size, 6),
+        new THREE.MeshBasicMaterial({ color: markerColor(stroke) })));
+    }
+    if (preview && preview.length > 1) {
+      const line = new THREE.Line(new THREE.BufferGeometry().setFromPoints(
+        preview.map((p) => new THREE.Vector3(...p))), new THREE.LineBasicMaterial({
+        color: 0x6a1b9a, depthTest: false }));
       line.frustumCulled = false;
       this.strokes.add(line);
     }
