@@ -1,5 +1,6 @@
 // The studio's designer tools in a real headless Chromium against a real daemon: a mesh uploaded by
-// dropping its file on the page and its basis built from the page; boundary and feature alignment
+// dropping its file on the page and its basis built from the page (and a file that is not a mesh
+// refused with the daemon's message); boundary and feature alignment
 // toggles on that open box (and a refused one on a closed torus); curvature alignment of a
 // 4-field; a singularity placed by clicking near a vertex; a stroke drawn by pointer events,
 // selected, deleted and undone; the glyph sample following the zoom; the field downloaded as
@@ -96,6 +97,16 @@ const boxMesh = (await client.listMeshes({})).meshes.find((m) => m.id === boxBas
 check(boxMesh?.name === "box.obj" && boxMesh.numFaces === 5 * 2 * 64 &&
   boxBasis.field.kind === pb.FieldKind.VECTOR && boxBasis.dimension === 40,
   `the dropped box.obj was stored (${boxMesh?.numFaces} faces) and a vector basis of d = 40 built`);
+
+// A file that is not a mesh: the page shows the daemon's refusal and stays on the box.
+const bad = await page.evaluateHandle(() => {
+  const transfer = new DataTransfer();
+  transfer.items.add(new File(["this is not a mesh\n"], "bad.obj", { type: "text/plain" }));
+  return transfer;
+}, null);
+await page.dispatchEvent("#stage", "drop", { dataTransfer: bad });
+await waitForMessage(/Uploading bad\.obj refused \(invalid argument\): \S/);
+check((await state()).basisId === boxBasis.id, "the refused upload leaves the session as it was");
 
 // 2. Boundary alignment (tangent, then normal) and feature alignment: session edits, one
 // constraint group each, undoable.
@@ -330,6 +341,9 @@ for (let i = 0; i < 4; i++) {
   await page.mouse.wheel(0, -250);
   await page.waitForTimeout(50);
 }
+// The page samples again 250 ms after the camera's last change: past that, the sample is the
+// last view's (an earlier one may have been taken between two wheel steps).
+await page.waitForTimeout(800);
 await until("a denser sample", (h) => {
   const s = window.__studio.state();
   const sample = window.__studio.sample();
