@@ -217,8 +217,17 @@ async function loadGeometry(meshId) {
   }
   const frames = faceFrames(positions, faces);
   let area = 0;
-  for (const a of frames.areas) area += a;
-  return { meshId, positions, faces, frames, faceSize: Math.sqrt(area / frames.areas.length) };
+  let volume = 0;  // 3 x the enclosed volume: its sign says whether the normals point outward
+  for (let f = 0; f < frames.areas.length; f++) {
+    area += frames.areas[f];
+    for (let k = 0; k < 3; k++) {
+      volume += frames.areas[f] * frames.centroids[3 * f + k] * frames.normals[3 * f + k];
+    }
+  }
+  // On a closed mesh the faces turned away from the eye are hidden: the sample leaves them out.
+  const { numBoundaryLoops } = await api.getMesh({ meshId });
+  return { meshId, positions, faces, frames, faceSize: Math.sqrt(area / frames.areas.length),
+    outward: numBoundaryLoops === 0 ? Math.sign(volume) : 0 };
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -227,10 +236,14 @@ async function loadGeometry(meshId) {
 // session watches them instead (a `watch` edit: the next updates carry their values).
 
 function viewSample() {
-  const { frames, faceSize } = studio.geometry;
+  const { frames, faceSize, outward } = studio.geometry;
   const inView = view.inView();
   const c = frames.centroids;
-  const keep = (f) => inView(c[3 * f], c[3 * f + 1], c[3 * f + 2]);
+  const n = frames.normals;
+  const [ex, ey, ez] = view.camera.position.toArray();
+  const keep = (f) => inView(c[3 * f], c[3 * f + 1], c[3 * f + 2]) && (outward === 0 ||
+    outward * (n[3 * f] * (c[3 * f] - ex) + n[3 * f + 1] * (c[3 * f + 1] - ey) +
+      n[3 * f + 2] * (c[3 * f + 2] - ez)) < 0);
   let h = Math.max(GLYPH_PX * view.pixelSize(), faceSize);
   let sample = sampleFacesSpaced(frames, h, keep);
   while (sample.faces.length > GLYPH_MAX) {
