@@ -1,12 +1,12 @@
 // The studio's designer tools in a real headless Chromium against a real daemon: a mesh uploaded by
 // dropping its file on the page and its basis built from the page (and a file that is not a mesh
-// refused with the daemon's message); boundary and feature alignment
-// toggles on that open box (and a refused one on a closed torus); curvature alignment of a
-// 4-field; a singularity placed by clicking near a vertex; a stroke drawn by pointer events,
-// selected, deleted and undone; the glyph sample following the zoom; the field downloaded as
-// .rawfield and .vtu. After each edit the page's coefficients equal a Solve over the wire with the
-// same constraints and constraint groups (1e-9 relative); the faces, vertices and points the page
-// used are the ones this test finds by casting the same screen rays itself.
+// refused with the daemon's message); boundary and feature alignment toggles on that open box (and
+// a refused one on a closed torus); curvature alignment of a 4-field; a singularity placed by
+// clicking near a vertex; a stroke drawn by pointer events, selected, deleted and undone, and back
+// after a reload; the glyph sample following the zoom; the field downloaded as .rawfield and .vtu.
+// After each edit the page's coefficients equal a Solve over the wire with the same constraints
+// and constraint groups (1e-9 relative); the faces, vertices and points the page used are the
+// ones this test finds by casting the same screen rays itself.
 //   node studio_tools_test.mjs --web-dir client/web --daemon build/bin/fieldspaced --out DIR
 import { readFileSync, writeFileSync } from "node:fs";
 import { join } from "node:path";
@@ -311,6 +311,12 @@ await checkAgainstSolve("undo the stroke (one step)");
 await page.click("#redo");
 await until("the redone stroke", () => window.__studio.state().constraints.length === 1);
 s = await checkAgainstSolve("redo the stroke");
+
+// A reload reopens the session with the stroke (replayed as add_stroke).
+await page.reload();
+s = await checkAgainstSolve("reload");
+check(s.basisId === vectorBasis.id && s.constraints.length === 1 &&
+  JSON.stringify(s.constraints[0]) === JSON.stringify(stroke), "the reload brought the stroke back");
 
 // 8. The glyph sample follows the zoom: zooming in watches a denser sample of the faces in view,
 // about as dense on screen as before, and the updates carry the values of those faces.

@@ -299,14 +299,15 @@ async function uploadFile(file) {
   }
   const choice = $("build-field").value;
   const field = choice === "vector" ? { kind: FieldKind.VECTOR }
-    : choice === "tensor" ? { kind: FieldKind.TENSOR } : { kind: FieldKind.NFIELD, n: Number(choice) };
+    : choice === "tensor" ? { kind: FieldKind.TENSOR }
+    : { kind: FieldKind.NFIELD, n: Number(choice) };
   const dimension = Number($("build-d").value);
   let basis = null;
   try {
     for await (const progress of api.buildBasis({ meshId: mesh.id, field, dimension })) {
       showMessage(`Building a basis of ${file.name} (${mesh.numFaces} faces, d = ${dimension}): ` +
-        `${BuildPhase[progress.phase] ?? "queued"}, ${Math.round(100 * progress.overallFraction)}% ` +
-        "done.");
+        `${BuildPhase[progress.phase] ?? "queued"}, ` +
+        `${Math.round(100 * progress.overallFraction)}% done.`);
       if (progress.basis) basis = progress.basis;
     }
   } catch (e) {

@@ -140,7 +140,8 @@ export class View {
         path.add(new THREE.LineCurve3(new THREE.Vector3(...stroke.points[i - 1]),
           new THREE.Vector3(...stroke.points[i])));
       }
-      this.strokes.add(new THREE.Mesh(new THREE.TubeGeometry(path, 4 * stroke.points.length, size, 6),
+      this.strokes.add(new THREE.Mesh(
+        new THREE.TubeGeometry(path, 4 * stroke.points.length, size, 6),
         new THREE.MeshBasicMaterial({ color: markerColor(stroke) })));
     }
     if (preview && preview.length > 1) {
