@@ -2,11 +2,11 @@
 // dropping its file on the page and its basis built from the page (and a file that is not a mesh
 // refused with the daemon's message); boundary and feature alignment toggles on that open box (and
 // a refused one on a closed torus); curvature alignment of a 4-field; a singularity placed by
-// clicking near a vertex; a stroke drawn by pointer events, selected, deleted and undone, and back
-// after a reload; the glyph sample following the zoom; the field downloaded as .rawfield and .vtu.
-// After each edit the page's coefficients equal a Solve over the wire with the same constraints
-// and constraint groups (1e-9 relative); the faces, vertices and points the page used are the
-// ones this test finds by casting the same screen rays itself.
+// clicking near a vertex and dragged to another; a stroke drawn by pointer events, selected,
+// deleted and undone, and back after a reload; the glyph sample following the zoom; the field
+// downloaded as .rawfield and .vtu. After each edit the page's coefficients equal a Solve over
+// the wire with the same constraints and constraint groups (1e-9 relative); the faces, vertices
+// and points the page used are the ones this test finds by casting the same screen rays itself.
 //   node studio_tools_test.mjs --web-dir client/web --daemon build/bin/fieldspaced --out DIR
 import { readFileSync, writeFileSync } from "node:fs";
 import { join } from "node:path";
@@ -203,6 +203,29 @@ check(s.singularities === sing.singularities.length,
   `the page marks ${s.singularities} singularities, the daemon counts ${sing.singularities.length}`);
 await page.waitForTimeout(300);
 writeFileSync(join(args.out, "studio-singularity.png"), await page.screenshot());
+
+// Dragged by its marker to another vertex (one `move {id, group}` per vertex passed): there it is.
+const markerAt = project(camera, vertexAt(vertex));
+const away = findPoint(markerAt[0] + 70, markerAt[1] + 40);
+const awayCorners = [0, 1, 2].map((k) => geometry.faces[3 * away.hit.face + k]);
+const awayDistances = awayCorners.map((v) => Math.hypot(...vertexAt(v).map((p, k) =>
+  p - away.hit.point[k])));
+const target = awayCorners[awayDistances.indexOf(Math.min(...awayDistances))];
+await page.mouse.move(...toPage(markerAt[0], markerAt[1]));
+await page.mouse.down();
+await page.mouse.move(...toPage(away.x, away.y), { steps: 10 });
+await page.mouse.up();
+await until("the moved singularity", (v) => window.__studio.state().constraints
+  .some((c) => c.tool === "singularity" && c.vertex === v), target);
+s = await checkAgainstSolve("the singularity dragged to another vertex");
+sing = await client.singularities({ basisId: fourBasis.id, coefficients: s.coefficients });
+check(s.constraints.length === 1 && target !== vertex &&
+  sing.singularities.find((x) => x.vertex === target)?.index === 1,
+  `the singularity moved from vertex ${vertex} to vertex ${target}, where Singularities finds it`);
+await page.click("#undo");
+await until("the undone move", (v) => window.__studio.state().constraints
+  .some((c) => c.tool === "singularity" && c.vertex === v), vertex);
+s = await checkAgainstSolve("undo the move (one step)");
 await page.click("#undo");
 await until("the undone singularity", () => window.__studio.state().constraints.length === 0);
 await checkAgainstSolve("undo the singularity");

@@ -676,10 +676,13 @@ $("stage").addEventListener("pointerdown", (event) => {
     studio.selected = marker;
     drawMarkers();
     syncSelection();
-    // A tool's markers select only; a constraint's marker moves or turns.
-    gesture = { kind: c.tool !== undefined ? "select" : event.shiftKey ? "turn" : "move",
-      id: marker, x, y, started: false, face0: c.face, value0: c.value && [...c.value],
-      face: c.face, value: c.value && [...c.value] };
+    // A constraint's marker moves or turns, a placed singularity's moves to another vertex, a
+    // stroke's selects only.
+    gesture = c.tool === "singularity" ? { kind: "moveSingularity", id: marker, x, y,
+      started: false, before: { ...c }, after: { ...c } }
+      : { kind: c.tool !== undefined ? "select" : event.shiftKey ? "turn" : "move",
+        id: marker, x, y, started: false, face0: c.face, value0: c.value && [...c.value],
+        face: c.face, value: c.value && [...c.value] };
   } else if (tool === "stroke") {
     gesture = { kind: "stroke", x, y, started: false, points: [], last: null };
     strokePoint(x, y, hit);
@@ -716,6 +719,17 @@ canvas.addEventListener("pointermove", (event) => {
       const hit = view.pick(cx, cy);
       if (hit !== null) strokePoint(cx, cy, hit);
     }
+    return;
+  }
+  if (gesture.kind === "moveSingularity") {
+    // To the nearest corner of the face under the pointer: one `move {id, group}` per new vertex.
+    const hit = view.pick(x, y);
+    if (hit === null) return;
+    const vertex = nearestCorner(hit);
+    if (vertex === gesture.after.vertex) return;
+    gesture.started = true;
+    gesture.after = { ...gesture.after, vertex };
+    edit({ kind: "replace", id: gesture.id, constraint: { ...gesture.after } });
     return;
   }
   if (gesture.kind === "move") {
@@ -782,6 +796,9 @@ function endGesture(event) {
     const c = { ...g.constraint, value: g.value };
     studio.history.push({ do: [{ kind: "add", id: g.id, constraint: c }],
       undo: [{ kind: "remove", id: g.id }] });
+  } else if (g.kind === "moveSingularity") {
+    studio.history.push({ do: [{ kind: "replace", id: g.id, constraint: g.after }],
+      undo: [{ kind: "replace", id: g.id, constraint: g.before }] });
   } else if (g.kind !== "select") {
     studio.history.push({
       do: [{ kind: "move", id: g.id, face: g.face, value: g.value }],
@@ -806,6 +823,12 @@ function placeSingularity(hit) {
       { error: true });
     return;
   }
+  addItem({ tool: "singularity", vertex: nearestCorner(hit), index: Number($("sing-index").value),
+    ...newKind() });
+}
+
+// The corner of the hit face nearest the hit point.
+function nearestCorner(hit) {
   let vertex = -1;
   let best = Infinity;
   for (let k = 0; k < 3; k++) {
@@ -814,7 +837,7 @@ function placeSingularity(hit) {
     const d = Math.hypot(p[0] - hit.point[0], p[1] - hit.point[1], p[2] - hit.point[2]);
     if (d < best) [vertex, best] = [v, d];
   }
-  addItem({ tool: "singularity", vertex, index: Number($("sing-index").value), ...newKind() });
+  return vertex;
 }
 
 function syncSelection() {

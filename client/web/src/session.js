@@ -68,6 +68,9 @@ function editMessage(edit) {
     case "move":
       return { case: "move", value: { id: edit.id, face: edit.face, value: edit.value,
         encoding: FieldEncoding.AMBIENT } };
+    case "replace":  // a tool's group by a new one under the same id
+      return { case: "move", value: { id: edit.id,
+        group: { tool: groupMessage(edit.id, edit.constraint) } } };
     case "remove":
       return { case: "remove", value: { id: edit.id } };
     case "weights":
@@ -128,15 +131,16 @@ export class DesignSession {
     return this.ready && this.inFlight === null && this.queue.length === 0;
   }
 
-  /** Queues an edit ({kind: add|move|remove|weights|watch, ...}); see the coalescing rule above
-   *  (new watched faces after waiting ones replace them too). */
+  /** Queues an edit ({kind: add|move|replace|remove|weights|watch, ...}); see the coalescing rule
+   *  above (a replace of the tool that the last waiting edit replaces, and new watched faces after
+   *  waiting ones, replace that entry too). */
   edit(edit) {
     if (this.closed) return;
     applyEdit(this.desired, edit);
     const last = this.queue[this.queue.length - 1];
     if (last !== undefined && !last.replay && last.kind === edit.kind &&
-        ((edit.kind === "move" && last.id === edit.id) || edit.kind === "weights" ||
-         edit.kind === "watch")) {
+        (((edit.kind === "move" || edit.kind === "replace") && last.id === edit.id) ||
+         edit.kind === "weights" || edit.kind === "watch")) {
       if (edit.kind === "weights") Object.assign(last.weights, edit.weights);
       else Object.assign(last, edit);
     } else {
@@ -207,9 +211,11 @@ export class DesignSession {
 
 /** Applies an edit to a state { weights, constraints: Map id -> constraint }. */
 function applyEdit(state, edit) {
-  if (edit.kind === "add") state.constraints.set(edit.id, { ...edit.constraint });
-  else if (edit.kind === "remove") state.constraints.delete(edit.id);
-  else if (edit.kind === "move") {
+  if (edit.kind === "add" || edit.kind === "replace") {
+    state.constraints.set(edit.id, { ...edit.constraint });
+  } else if (edit.kind === "remove") {
+    state.constraints.delete(edit.id);
+  } else if (edit.kind === "move") {
     const c = state.constraints.get(edit.id);
     if (c !== undefined) Object.assign(c, { face: edit.face, value: [...edit.value] });
   } else if (edit.kind === "weights") Object.assign(state.weights, edit.weights);
