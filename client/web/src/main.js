@@ -1,11 +1,11 @@
 // fieldspace studio: the page (docs/studio.md). Lists the daemon's bases, shows a basis's mesh
 // and the designed field, and turns pointer gestures into design-session edits.
 import { Code, ConnectError, createClient } from "@connectrpc/connect";
+import { errorFromJson } from "@connectrpc/connect/protocol-connect";
 import { createConnectTransport } from "@connectrpc/connect-web";
 import {
   BasisState, BuildPhase, FieldEncoding, FieldKind, FieldSpace,
 } from "../gen/fieldspace/v1/fieldspace_pb.js";
-import { errorFromJson } from "@connectrpc/connect/protocol-connect";
 import { rawfieldBlob, vtuBlob } from "./export.js";
 import { constraintValue, faceFrames, fieldGlyphs, sampleFacesSpaced } from "./glyphs.js";
 import { DesignSession, History } from "./session.js";
@@ -434,9 +434,8 @@ function onUpdate(session, update, edit, roundTripMs) {
   // The update's own watched faces: a new sample may be on its way (a watch edit).
   const values = Float32Array.from(update.watched?.values ?? []);
   if (values.length) {
-    studio.watched = Int32Array.from(update.watched.faces);
-    const glyphs = fieldGlyphs(studio.field, studio.geometry.frames, studio.watched, values,
-      studio.sample.spacing);
+    const glyphs = fieldGlyphs(studio.field, studio.geometry.frames,
+      Int32Array.from(update.watched.faces), values, studio.sample.spacing);
     view.setGlyphs(glyphs.positions, glyphs.colors);
   }
   const changes = update.singularities;
