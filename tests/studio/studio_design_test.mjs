@@ -252,7 +252,8 @@ for (const { name, basis: other } of others) {
     check(sing.singularities.length > 0 && s.singularities === sing.singularities.length &&
       labels === s.singularities, `${name}: ${labels} singularities marked, the daemon's: ` +
       `${sing.singularities.length}`);
-    // The whole page, as docs/images/studio.png shows it.
+    // The whole page, as docs/images/studio.png shows it (the panel from its top).
+    await page.evaluate(() => document.querySelector("#panel").scrollTo(0, 0));
     await page.waitForTimeout(200);
     writeFileSync(join(args.out, "studio-page.png"), await page.screenshot());
   }

@@ -4,7 +4,9 @@
 // frames are relayed in order; when the stand-in drops the Design stream with UNAVAILABLE (a
 // draining replica), the gateway reopens it with the same key, replays the open (with the current
 // weights and watch) and the constraints in the order added, and sends the unanswered edit again.
-// Also the listen rules of the flags.
+// Tool groups (strokes, placed singularities, alignments) are replayed as they were last made.
+// A mesh POSTed to /upload reaches UploadMesh in bounded chunks with total_bytes. Also the listen
+// rules of the flags.
 //   node studio_gateway_test.mjs --web-dir client/web
 import { spawnSync } from "node:child_process";
 import { readFileSync, writeFileSync } from "node:fs";
@@ -31,6 +33,7 @@ const { default: WebSocket } = await load("ws");
 // The stand-in daemon.
 const calls = [];      // { method, key, auth }
 const streams = [];    // per Design stream: { key, requests: [DesignRequest] }
+const uploads = [];    // per UploadMesh call: { messages: [{ header, offset, data }] }
 let dropNext = false;  // fail the Design stream's next request with UNAVAILABLE
 const meta = (method, ctx) => calls.push({ method, key: ctx.requestHeader.get("x-fieldspace-key"),
   auth: ctx.requestHeader.get("authorization") });
@@ -45,8 +48,16 @@ const standIn = http2.createServer(connectNode.connectNodeAdapter({
     },
     async uploadMesh(requests, ctx) {
       meta("UploadMesh", ctx);
-      for await (const _ of requests) { /* drain */ }
-      return { id: "m-0000000000000001" };
+      const upload = { messages: [] };
+      uploads.push(upload);
+      for await (const r of requests) {
+        upload.messages.push({ header: r.header, offset: r.offset, data: Buffer.from(r.data) });
+        if (r.header?.name === "refuse.obj") {
+          throw new ConnectError("mesh: no faces", Code.InvalidArgument);
+        }
+      }
+      return { id: "m-0000000000000001", name: upload.messages[0]?.header?.name ?? "",
+        numFaces: 7 };
     },
     async *design(requests, ctx) {
       const stream = { key: ctx.requestHeader.get("x-fieldspace-key"),
@@ -116,24 +127,72 @@ await send({ case: "move", value: { id: 7, face: 9, value: [0, 0, 1], encoding: 
 await send({ case: "remove", value: { id: 4 } });
 await send({ case: "setWeights", value: { muB: 0.5 } });
 await send({ case: "watch", value: { faces: [8], encoding: ambient } });
+const facePoint = (face) => ({ at: { case: "facePoint", value: { face, barycentric: [1, 0, 0] } } });
+await send({ case: "addStroke", value: { id: 20, points: [facePoint(1), facePoint(2)] } });
+await send({ case: "placeSingularity", value: { id: 21, at: { case: "vertex", value: 5 },
+  index: 0.25, hard: true } });
+await send({ case: "alignBoundary", value: { id: 22, mode: pb.BoundaryAlignMode.BOUNDARY_ALIGN_NORMAL } });
+await send({ case: "alignFeatures", value: { id: 23, angleDegrees: 45 } });
+await send({ case: "remove", value: { id: 22 } });
+// The stroke replaced by a longer one (move with a group).
+await send({ case: "move", value: { id: 20, group: { tool: { case: "stroke", value: {
+  points: [facePoint(1), facePoint(2), facePoint(3)], weight: 2 } } } } });
 check(streams.length === 1 && streams[0].key === basisId && streams[0].auth === "Bearer t0ken",
   "the Design stream carries the basis id as key and the token");
-check(updates.map((u) => u.seq).join() === "0,1,2,3,4,5,6", "one update per frame, in order");
+check(updates.map((u) => u.seq).join() === "0,1,2,3,4,5,6,7,8,9,10,11,12",
+  "one update per frame, in order");
 
 dropNext = true;  // the stream's next request fails: as a draining replica answers
 const dropped = streams.length;
 const answer = await send({ case: "add", value: { id: 12, constraint: { face: 11, value: [1, 1, 0], encoding: ambient } } });
-check(answer.seq === 7n && events.some((e) => e.resumed === 1), "the failed edit is answered after a resume");
+check(answer.seq === 13n && events.some((e) => e.resumed === 1), "the failed edit is answered after a resume");
 const replay = streams[streams.length - 1].requests;
 const kinds = replay.map((r) => `${r.edit.case}:${r.edit.value.id ?? ""}`).join(" ");
 check(streams.length === dropped + 1 && streams[streams.length - 1].key === basisId,
   "the session was reopened on a new stream with the same key");
-check(kinds === "open: add:7 add:12", `the new stream replays the open and the constraints, then the edit (${kinds})`);
+check(kinds === "open: add:7 addStroke:20 placeSingularity:21 alignFeatures:23 add:12",
+  `the new stream replays the open, the constraints and tools in order, then the edit (${kinds})`);
 const open = replay[0].edit.value;
 check(open.weights.muS === 1 && open.weights.muC === 1 && open.weights.muB === 0.5 &&
   open.watchFaces.join() === "8", "the replayed open has the current weights and watch");
 const moved = replay[1].edit.value.constraint;
 check(moved.face === 9 && moved.value.join() === "0,0,1", "the replayed constraint is where it was moved");
+const stroke = replay[2].edit.value;
+check(stroke.id === 20 && stroke.points.length === 3 && stroke.weight === 2,
+  "the replayed stroke is the one that replaced it");
+const singularity = replay[3].edit.value;
+check(singularity.at.value === 5 && singularity.index === 0.25 && singularity.hard &&
+  replay[4].edit.value.angleDegrees === 45, "the replayed singularity and feature alignment are as made");
+
+// Uploads: POST /upload?name= with a body larger than two chunks; UploadMesh gets the header
+// (name, total_bytes = the body's length) first, then chunks of at most 1 MiB at consecutive
+// offsets that make up the body.
+const { UPLOAD_CHUNK_BYTES } = await import(pathToFileURL(join(webDir, "gateway", "gateway.mjs")));
+const body = Buffer.alloc(2 * UPLOAD_CHUNK_BYTES + 12345);
+for (let i = 0; i < body.length; i++) body[i] = (i * 7919) & 0xff;
+const uploaded = await fetch(`${gateway.url}upload?name=big.obj`, { method: "POST", body,
+  headers: { authorization: "Bearer t0ken" } });
+const info = await uploaded.json();
+const received = uploads.at(-1).messages;
+check(uploaded.status === 200 && info.id === "m-0000000000000001" && info.numFaces === 7,
+  `the upload answers the MeshInfo as JSON (${JSON.stringify(info)})`);
+check(received[0].header?.name === "big.obj" && received[0].header.totalBytes === BigInt(body.length) &&
+  received.slice(1).every((m) => m.header === undefined), "the first message carries the name and total_bytes");
+check(received.every((m) => m.data.length <= UPLOAD_CHUNK_BYTES) && received.length === 3 &&
+  received.every((m, i) => m.offset === BigInt(i * UPLOAD_CHUNK_BYTES)) &&
+  Buffer.concat(received.map((m) => m.data)).equals(body),
+  `${received.length} chunks of at most ${UPLOAD_CHUNK_BYTES} bytes at consecutive offsets make up the body`);
+check(calls.at(-1).method === "UploadMesh" && calls.at(-1).auth === "Bearer t0ken",
+  "the upload passes the token on");
+const refusedUpload = await fetch(`${gateway.url}upload?name=refuse.obj`, { method: "POST",
+  body: "v 0 0 0\n" });
+const refusal = await refusedUpload.json();
+check(refusedUpload.status === 400 && refusal.code === "invalid_argument" &&
+  refusal.message === "mesh: no faces", `a refused upload answers the daemon's error (${refusedUpload.status}, ` +
+  `${JSON.stringify(refusal)})`);
+const nameless = await fetch(`${gateway.url}upload`, { method: "POST", body: "x" });
+check(nameless.status === 400 && /name=/.test((await nameless.json()).message),
+  "an upload without ?name= is refused");
 
 // 3. A lost replica by stream reset (the router's RST_STREAM) counts, a server's INTERNAL does not.
 check(replicaLost(new ConnectError("http/2 stream closed with error code INTERNAL_ERROR (0x2)",

@@ -365,12 +365,21 @@ export function pageProbe(page, client, pb) {
   }
   async function checkAgainstSolve(step) {
     const s = await settled();
+    const kind = (c) => ({ hard: c.hard, ...(c.hard ? {} : { weight: c.weight }) });
     const solved = await client.solve({
       basisId: s.basisId,
       weights: { muS: s.weights.muS, muB: s.weights.muB, muC: s.weights.muC },
-      constraints: s.constraints.map((c) => ({ face: c.face, value: c.value,
-        encoding: pb.FieldEncoding.AMBIENT, hard: c.hard,
-        ...(c.hard ? {} : { weight: c.weight }) })),
+      constraints: s.constraints.filter((c) => c.tool === undefined).map((c) => ({ face: c.face,
+        value: c.value, encoding: pb.FieldEncoding.AMBIENT, ...kind(c) })),
+      // The page's tools as the constraint groups of the same design tools.
+      constraintGroups: s.constraints.filter((c) => c.tool !== undefined).map((c) => ({ tool:
+        c.tool === "stroke" ? { case: "stroke", value: { ...kind(c), points: c.points.map((p) =>
+          ({ at: { case: "facePoint", value: { face: p.face, barycentric: p.barycentric } } })) } }
+        : c.tool === "singularity" ? { case: "singularity", value: { ...kind(c),
+          at: { case: "vertex", value: c.vertex }, index: c.index } }
+        : c.tool === "boundary" ? { case: "alignBoundary", value: { ...kind(c),
+          mode: pb.BoundaryAlignMode[`BOUNDARY_ALIGN_${c.mode.toUpperCase()}`] } }
+        : { case: "alignFeatures", value: { ...kind(c), angleDegrees: c.angle } } })),
     });
     const error = relativeError(s.coefficients, solved.coefficients);
     check(s.coefficients.length === solved.coefficients.length && error <= 1e-9,

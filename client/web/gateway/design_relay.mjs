@@ -2,14 +2,21 @@
 // fieldspace.v1.DesignRequest (page -> gateway) and DesignUpdate (gateway -> page), relayed to one
 // gRPC Design stream on the daemon. Failover as in the other clients (docs/scale-out.md, Design
 // failover; client/python/fieldspace/design.py): the relay keeps what the daemon confirmed (the
-// open with its current weights and watch, the constraints by id in the order they were added),
+// open with its current weights and watch, the constraints and tool groups by id in the order they
+// were added),
 // and when the stream loses its replica it reopens the stream with the same routing key, replays
 // the open and the constraints, and sends the unanswered edits again.
 import { clone, create, fromBinary, toBinary } from "@bufbuild/protobuf";
 import { Code, ConnectError } from "@connectrpc/connect";
 import {
-  ConstraintSchema, DesignRequestSchema, DesignUpdateSchema, OpenDesignSchema, WeightsSchema,
+  DesignRequestSchema, DesignUpdateSchema, OpenDesignSchema, WeightsSchema,
 } from "../gen/fieldspace/v1/fieldspace_pb.js";
+
+// The edits that add something under an id (a constraint or a tool's group), and the add edit of
+// each ConstraintGroup case (what `move {id, group}` replaces a group with).
+const ADDS = new Set(["add", "addStroke", "placeSingularity", "alignBoundary", "alignFeatures"]);
+const ADD_OF_GROUP = { stroke: "addStroke", singularity: "placeSingularity",
+  alignBoundary: "alignBoundary", alignFeatures: "alignFeatures" };
 
 // Pauses (ms) before each reopening attempt; then the edit fails with the error that lost it.
 const RESUME_PAUSES_MS = [0, 100, 300, 600, 1000, 2000];
@@ -71,7 +78,9 @@ export class DesignRelay {
     this.log = log;
     this.pending = [];  // requests sent on the current stream and not yet answered, in order
     this.open = null;   // the confirmed OpenDesign, kept up to date with weights and watch
-    this.constraints = new Map();  // id -> confirmed Constraint, in the order added
+    // id -> the confirmed edit that adds it now ({ case, value } of a DesignRequest), in the order
+    // added: an add of a constraint (kept where moves took it) or of a tool's group.
+    this.constraints = new Map();
     this.resumes = 0;
     this.resuming = false;
     this.lost = null;  // the error that lost the stream while no edit was open: resume on the next
@@ -165,11 +174,18 @@ export class DesignRelay {
     const { case: kind, value } = request.edit;
     if (kind === "open") {
       this.open = clone(OpenDesignSchema, value);
-    } else if (kind === "add") {
-      this.constraints.set(value.id, clone(ConstraintSchema, value.constraint));
+    } else if (ADDS.has(kind)) {
+      this.constraints.set(value.id, clone(DesignRequestSchema, request).edit);
     } else if (kind === "move") {
-      const c = this.constraints.get(value.id);
-      if (c !== undefined) {
+      const added = this.constraints.get(value.id);
+      if (added !== undefined && value.group?.tool.case !== undefined) {
+        const tool = value.group.tool;
+        const edit = clone(DesignRequestSchema, create(DesignRequestSchema,
+          { edit: { case: ADD_OF_GROUP[tool.case], value: tool.value } })).edit;
+        edit.value.id = value.id;
+        this.constraints.set(value.id, edit);
+      } else if (added?.case === "add") {
+        const c = added.value.constraint;
         c.face = value.face;
         c.value = [...value.value];
         c.encoding = value.encoding;
@@ -202,9 +218,8 @@ export class DesignRelay {
       const call = this.call;
       try {
         const replay = [create(DesignRequestSchema, { edit: { case: "open", value: this.open } })];
-        for (const [id, constraint] of this.constraints) {
-          replay.push(create(DesignRequestSchema,
-            { edit: { case: "add", value: { id, constraint } } }));
+        for (const edit of this.constraints.values()) {
+          replay.push(create(DesignRequestSchema, { edit }));
         }
         for (const request of replay) {
           call.requests.push(request);

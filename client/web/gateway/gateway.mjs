@@ -9,10 +9,12 @@ import http from "node:http";
 import https from "node:https";
 import { dirname, join } from "node:path";
 import { fileURLToPath } from "node:url";
+import { toJson } from "@bufbuild/protobuf";
 import { Code, ConnectError } from "@connectrpc/connect";
 import { connectNodeAdapter } from "@connectrpc/connect-node";
+import { codeToHttpStatus, errorToJson } from "@connectrpc/connect/protocol-connect";
 import { WebSocketServer } from "ws";
-import { FieldSpace } from "../gen/fieldspace/v1/fieldspace_pb.js";
+import { FieldSpace, MeshInfoSchema } from "../gen/fieldspace/v1/fieldspace_pb.js";
 import { daemonClient } from "./daemon.mjs";
 import { CLOSE_STATUS_BASE, DesignRelay } from "./design_relay.mjs";
 
@@ -21,6 +23,11 @@ export const DESIGN_PATH = "/design";
 // The WebSocket subprotocol of design sessions; a token travels as a second offered subprotocol
 // "bearer.<base64url(token)>" (browsers cannot set headers on a WebSocket).
 export const DESIGN_PROTOCOL = "fieldspace.design.v1";
+// Mesh uploads from the page: POST UPLOAD_PATH?name=FILE with the file as the body, relayed to the
+// client-streaming UploadMesh in messages of at most UPLOAD_CHUNK_BYTES (browsers cannot stream a
+// request body to a Connect client-streaming call).
+export const UPLOAD_PATH = "/upload";
+export const UPLOAD_CHUNK_BYTES = 1 << 20;
 const STATIC_FILES = {
   "/": ["index.html", "text/html; charset=utf-8"],
   "/index.html": ["index.html", "text/html; charset=utf-8"],
@@ -107,9 +114,79 @@ export async function startGateway(options, { staticDir = join(here, "..", "dist
     }
   }
 
+  // A mesh file in the body of POST /upload?name=FILE (Content-Length required: it is the
+  // header's total_bytes), relayed as UploadMesh messages of at most UPLOAD_CHUNK_BYTES, each read
+  // from the socket only when the daemon takes the previous one (the body is never held whole).
+  // Answers the MeshInfo as JSON, or a Connect error JSON with its HTTP status.
+  const upload = async (req, res) => {
+    const answerError = (error) => {
+      const e = statusOnly(error);
+      res.writeHead(codeToHttpStatus(e.code), { "content-type": "application/json" });
+      res.end(JSON.stringify(errorToJson(e, undefined)));
+      req.resume();  // drain what the browser still sends
+    };
+    const total = Number(req.headers["content-length"]);
+    const name = new URL(req.url, "http://x").searchParams.get("name") ?? "";
+    try {
+      checkToken(req.headers.authorization);
+      if (!Number.isSafeInteger(total) || total <= 0) {
+        throw new ConnectError("an upload needs a non-empty body with Content-Length",
+          Code.InvalidArgument);
+      }
+      if (!name) throw new ConnectError("an upload needs ?name=FILE", Code.InvalidArgument);
+    } catch (e) {
+      answerError(e);
+      return;
+    }
+    async function* messages() {
+      let offset = 0;
+      let pending = [];
+      let size = 0;
+      const message = () => {
+        const data = Buffer.concat(pending, size);
+        const m = { offset: BigInt(offset), data,
+          ...(offset === 0 ? { header: { name, totalBytes: BigInt(total) } } : {}) };
+        offset += size;
+        pending = [];
+        size = 0;
+        return m;
+      };
+      for await (let piece of req) {
+        while (size + piece.length >= UPLOAD_CHUNK_BYTES) {
+          const take = UPLOAD_CHUNK_BYTES - size;
+          pending.push(piece.subarray(0, take));
+          size += take;
+          piece = piece.subarray(take);
+          yield message();
+        }
+        if (piece.length) {
+          pending.push(piece);
+          size += piece.length;
+        }
+      }
+      if (size > 0 || offset === 0) yield message();
+    }
+    try {
+      const abort = new AbortController();
+      req.once("close", () => {
+        if (!req.complete) abort.abort();  // the browser went away: the daemon drops the upload
+      });
+      const info = await daemon.uploadMesh(messages(),
+        { headers: daemonHeaders(req.headers.authorization), signal: abort.signal });
+      res.writeHead(200, { "content-type": "application/json", "cache-control": "no-store" });
+      res.end(JSON.stringify(toJson(MeshInfoSchema, info)));
+    } catch (e) {
+      answerError(e);
+    }
+  };
+
   const config = JSON.stringify({ tokenRequired: Boolean(options.token), daemon: options.daemon });
   const serveStatic = (req, res) => {
     const path = new URL(req.url, "http://x").pathname;
+    if (req.method === "POST" && path === UPLOAD_PATH) {
+      upload(req, res);
+      return;
+    }
     if (req.method === "GET" && path === "/config.json") {
       res.writeHead(200, { "content-type": "application/json", "cache-control": "no-store" });
       res.end(config);

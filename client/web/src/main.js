@@ -1,21 +1,30 @@
 // fieldspace studio: the page (docs/studio.md). Lists the daemon's bases, shows a basis's mesh
 // and the designed field, and turns pointer gestures into design-session edits.
 import { Code, ConnectError, createClient } from "@connectrpc/connect";
+import { errorFromJson } from "@connectrpc/connect/protocol-connect";
 import { createConnectTransport } from "@connectrpc/connect-web";
 import {
-  BasisState, BuildPhase, FieldKind, FieldSpace,
+  BasisState, BuildPhase, FieldEncoding, FieldKind, FieldSpace,
 } from "../gen/fieldspace/v1/fieldspace_pb.js";
-import { constraintValue, faceFrames, fieldGlyphs, sampleFaces } from "./glyphs.js";
+import { rawfieldBlob, vtuBlob } from "./export.js";
+import { constraintValue, faceFrames, fieldGlyphs, sampleFacesSpaced } from "./glyphs.js";
 import { DesignSession, History } from "./session.js";
 import { View } from "./view.js";
 
-const GLYPH_TARGET = 2500;  // sampled faces that carry a glyph
+// The glyph sample follows the view: one glyph per GLYPH_PX CSS pixels of the orbit target's
+// distance, among the faces in view, at most GLYPH_MAX of them.
+const GLYPH_PX = 22;
+const GLYPH_MAX = 4000;
+const RESAMPLE_MS = 250;    // after the camera stopped moving for this long
+const STROKE_STEP_PX = 8;   // a stroke keeps a picked point this far (on screen) from the last
+const STROKE_MAX_POINTS = 200;
 // Singularities cost the daemon a lift of the whole field per edit: on by default up to this size.
 const SINGULARITIES_MAX_FACES = 200000;
 const DRAG_START_PX = 4;    // a press moving less than this is a click
 const MARKER_PICK_PX = 12;  // a press this close to a constraint marker grabs it
 const STORE_PREFIX = "fieldspace.studio.v1.";
 const DEFAULT_WEIGHTS = { muS: 1, muB: 0, muC: 1 };
+const DEFAULT_MU_A = 1;  // the curvature alignment's weight
 
 const $ = (id) => document.getElementById(id);
 const view = new View($("stage"));
@@ -36,7 +45,8 @@ const studio = {
   basis: null,          // BasisInfo
   field: null,          // { kind: "vector" | "nfield" | "tensor", n }
   geometry: null,       // { meshId, positions, faces, frames }
-  sample: null,         // { faces, spacing }
+  sample: null,         // { faces, spacing }: the watched faces
+  curvature: false,     // the session has the curvature-alignment data term (2- and 4-fields)
   session: null,
   history: new History(),
   weights: { ...DEFAULT_WEIGHTS },
@@ -187,10 +197,11 @@ async function chooseBasis(id) {
     }
     if (mine !== chooseToken) return;
     view.setMesh(studio.geometry.positions, studio.geometry.faces);
-    studio.sample = sampleFaces(studio.geometry.frames, GLYPH_TARGET);
+    studio.sample = viewSample();
     $("show-singularities").checked = studio.geometry.faces.length / 3 <= SINGULARITIES_MAX_FACES;
   }
   restore(basis.id);
+  syncTools();
   showMessage("");
   openSession();
 }
@@ -204,8 +215,128 @@ async function loadGeometry(meshId) {
     positions.set(chunk.vertices, 3 * chunk.startVertex);
     faces.set(chunk.faces, 3 * chunk.startFace);
   }
-  return { meshId, positions, faces, frames: faceFrames(positions, faces) };
+  const frames = faceFrames(positions, faces);
+  let area = 0;
+  let volume = 0;  // 3 x the enclosed volume: its sign says whether the normals point outward
+  for (let f = 0; f < frames.areas.length; f++) {
+    area += frames.areas[f];
+    for (let k = 0; k < 3; k++) {
+      volume += frames.areas[f] * frames.centroids[3 * f + k] * frames.normals[3 * f + k];
+    }
+  }
+  // On a closed mesh the faces turned away from the eye are hidden: the sample leaves them out.
+  const { numBoundaryLoops } = await api.getMesh({ meshId });
+  return { meshId, positions, faces, frames, faceSize: Math.sqrt(area / frames.areas.length),
+    outward: numBoundaryLoops === 0 ? Math.sign(volume) : 0 };
 }
+
+// ---------------------------------------------------------------------------------------------
+// The glyph sample follows the view: after the camera stopped, the faces in view are sampled
+// again with a spacing of GLYPH_PX pixels (denser when zoomed in, even on screen) and the
+// session watches them instead (a `watch` edit: the next updates carry their values).
+
+function viewSample() {
+  const { frames, faceSize, outward } = studio.geometry;
+  const inView = view.inView();
+  const c = frames.centroids;
+  const n = frames.normals;
+  const [ex, ey, ez] = view.camera.position.toArray();
+  const keep = (f) => inView(c[3 * f], c[3 * f + 1], c[3 * f + 2]) && (outward === 0 ||
+    outward * (n[3 * f] * (c[3 * f] - ex) + n[3 * f + 1] * (c[3 * f + 1] - ey) +
+      n[3 * f + 2] * (c[3 * f + 2] - ez)) < 0);
+  let h = Math.max(GLYPH_PX * view.pixelSize(), faceSize);
+  let sample = sampleFacesSpaced(frames, h, keep);
+  while (sample.faces.length > GLYPH_MAX) {
+    h *= 1.05 * Math.sqrt(sample.faces.length / GLYPH_MAX);
+    sample = sampleFacesSpaced(frames, h, keep);
+  }
+  return sample;
+}
+
+let resampleTimer = null;
+view.controls.addEventListener("change", () => {
+  clearTimeout(resampleTimer);
+  resampleTimer = setTimeout(resample, RESAMPLE_MS);
+});
+
+function resample() {
+  if (!studio.geometry || !studio.session || gesture !== null) return;
+  const sample = viewSample();
+  const old = studio.sample.faces;
+  if (sample.faces.length === old.length && sample.faces.every((f, i) => f === old[i])) return;
+  studio.sample = sample;
+  edit({ kind: "watch", faces: sample.faces });
+  drawMarkers();  // markers are sized by the spacing
+}
+
+// ---------------------------------------------------------------------------------------------
+// A new mesh: a file dropped on the view (or chosen) is uploaded through the gateway (POST
+// /upload, relayed to UploadMesh in chunks), a basis of the kind in the New mesh box is built
+// with the daemon's progress, and opened.
+
+async function uploadFile(file) {
+  const what = `Uploading ${file.name}`;
+  showMessage(`${what} (${(file.size / 1e6).toFixed(1)} MB)...`);
+  let mesh;
+  try {
+    const response = await fetch(`upload?name=${encodeURIComponent(file.name)}`, {
+      method: "POST", body: file, headers: token ? { authorization: `Bearer ${token}` } : {} });
+    const text = await response.text();
+    const fallback = new ConnectError(`HTTP ${response.status}: ${text.slice(0, 200)}`,
+      Code.Unknown);
+    let json;
+    try {
+      json = JSON.parse(text);
+    } catch {
+      throw fallback;
+    }
+    if (!response.ok) throw errorFromJson(json, undefined, fallback);
+    mesh = json;
+  } catch (e) {
+    showMessage(describe(what, e), { error: true });
+    if (ConnectError.from(e).code === Code.Unauthenticated) askToken();
+    return;
+  }
+  const choice = $("build-field").value;
+  const field = choice === "vector" ? { kind: FieldKind.VECTOR }
+    : choice === "tensor" ? { kind: FieldKind.TENSOR }
+    : { kind: FieldKind.NFIELD, n: Number(choice) };
+  const dimension = Number($("build-d").value);
+  let basis = null;
+  try {
+    for await (const progress of api.buildBasis({ meshId: mesh.id, field, dimension })) {
+      showMessage(`Building a basis of ${file.name} (${mesh.numFaces} faces, d = ${dimension}): ` +
+        `${BuildPhase[progress.phase] ?? "queued"}, ` +
+        `${Math.round(100 * progress.overallFraction)}% done.`);
+      if (progress.basis) basis = progress.basis;
+    }
+  } catch (e) {
+    showMessage(describe(`Building a basis of ${file.name}`, e), { error: true });
+    return;
+  }
+  await refreshBases();
+  $("basis").value = basis.id;
+  await chooseBasis(basis.id);
+}
+
+$("stage").addEventListener("dragover", (event) => {
+  if (![...event.dataTransfer.types].includes("Files")) return;
+  event.preventDefault();
+  $("stage").classList.add("dropping");
+});
+$("stage").addEventListener("dragleave", () => $("stage").classList.remove("dropping"));
+$("stage").addEventListener("drop", (event) => {
+  $("stage").classList.remove("dropping");
+  const file = event.dataTransfer?.files[0];
+  if (!file) return;
+  event.preventDefault();
+  uploadFile(file);
+});
+$("mesh-file").addEventListener("change", () => {
+  const file = $("mesh-file").files[0];
+  if (file) uploadFile(file);
+  $("mesh-file").value = "";
+});
 
 // ---------------------------------------------------------------------------------------------
 // What the user made, kept per basis in localStorage: a reload resumes it.
@@ -225,6 +356,7 @@ function restore(basisId) {
   studio.constraints = new Map(saved?.constraints ?? []);
   studio.history = new History(saved?.history);
   studio.nextId = saved?.nextId ?? 1;
+  studio.curvature = Boolean(saved?.curvature) && curvatureAllowed();
   studio.selected = null;
   syncWeightSliders();
 }
@@ -235,7 +367,14 @@ function persist() {
     constraints: [...studio.constraints],
     history: studio.history,
     nextId: studio.nextId,
+    curvature: studio.curvature,
   }));
+}
+
+// The weights a session opens with: mu_a only with the curvature term (else INVALID_ARGUMENT).
+function openWeights() {
+  const { muS, muB, muC, muA } = studio.weights;
+  return studio.curvature ? { muS, muB, muC, muA: muA ?? DEFAULT_MU_A } : { muS, muB, muC };
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -247,9 +386,10 @@ function openSession() {
   const session = new DesignSession({
     url: designUrl,
     token,
-    open: { basisId: studio.basis.id, weights: studio.weights, watchFaces: studio.sample.faces,
-      singularities: studio.field.kind !== "tensor" && $("show-singularities").checked },
-    confirmed: { weights: studio.weights, constraints: studio.constraints },
+    open: { basisId: studio.basis.id, watchFaces: studio.sample.faces,
+      singularities: studio.field.kind !== "tensor" && $("show-singularities").checked,
+      curvature: studio.curvature },
+    confirmed: { weights: openWeights(), constraints: studio.constraints },
     handlers: {
       onUpdate: (update, edit, roundTripMs) => {
         if (session !== studio.session) return;
@@ -278,6 +418,9 @@ function openSession() {
 
 function onUpdate(session, update, edit, roundTripMs) {
   studio.edits += 1;
+  if (studio.error?.startsWith("The daemon refused") && !edit.replay && edit.kind !== "watch") {
+    showMessage("");  // the user went on, and the daemon took it
+  }
   studio.weights = { ...session.weights };
   studio.constraints = session.constraints;
   if (!made().constraints.has(studio.selected)) studio.selected = null;
@@ -288,10 +431,11 @@ function onUpdate(session, update, edit, roundTripMs) {
   $("timings").textContent = `${edit.kind}: edit ${fmt(t?.editMs)} ms · lift ${fmt(t?.liftMs)} ms` +
     ` · server ${fmt(t?.totalMs)} ms · round trip ${fmt(roundTripMs)} ms` +
     `${t?.refactorized ? " (refactorized)" : ""} · ${update.numConstraints} constraints`;
+  // The update's own watched faces: a new sample may be on its way (a watch edit).
   const values = Float32Array.from(update.watched?.values ?? []);
   if (values.length) {
-    const glyphs = fieldGlyphs(studio.field, studio.geometry.frames, studio.sample.faces, values,
-      studio.sample.spacing);
+    const glyphs = fieldGlyphs(studio.field, studio.geometry.frames,
+      Int32Array.from(update.watched.faces), values, studio.sample.spacing);
     view.setGlyphs(glyphs.positions, glyphs.colors);
   }
   const changes = update.singularities;
@@ -307,6 +451,7 @@ function onUpdate(session, update, edit, roundTripMs) {
   drawMarkers();
   syncWeightSliders();
   syncSelection();
+  syncAlignment();
 }
 
 function fmt(ms) {
@@ -318,11 +463,18 @@ function onEditRefused(session, code, message, edit) {
   studio.constraints = session.constraints;
   if (!made().constraints.has(studio.selected)) studio.selected = null;
   persist();
-  showMessage(`The daemon refused the edit '${edit.kind}' (${codeName(code)}): ${message}. ` +
+  showMessage(`The daemon refused the edit '${editName(edit)}' (${codeName(code)}): ${message}. ` +
     "The session goes on without it.", { error: true });
   drawMarkers();
   syncWeightSliders();
   syncSelection();
+  syncAlignment();
+}
+
+// An edit as the user knows it: "add stroke", "add singularity", "remove", ...
+function editName(edit) {
+  const tool = edit.constraint?.tool;
+  return tool ? `${edit.kind} ${TOOL_NAMES[tool]}` : edit.kind;
 }
 
 function onSessionClosed(code, message, edit) {
@@ -345,7 +497,7 @@ function onSessionClosed(code, message, edit) {
     return;
   }
   // The server refused an edit and ended the stream: reopen with what it had confirmed.
-  showMessage(`The daemon refused the edit '${edit.kind}' (${codeName(code)}): ${message}. ` +
+  showMessage(`The daemon refused the edit '${editName(edit)}' (${codeName(code)}): ${message}. ` +
     "The session was reopened without it.", { error: true });
   openSession();
 }
@@ -400,22 +552,104 @@ function made() {
   return studio.session?.desired ?? { weights: studio.weights, constraints: studio.constraints };
 }
 
-function drawMarkers() {
-  if (!studio.geometry) return;
-  view.setMarkers([...made().constraints].map(([id, c]) => ({
-    id, position: faceCentroid(c.face), direction: valueDirection(c.value), hard: c.hard,
-    selected: id === studio.selected })), studio.sample.spacing);
+const TOOL_NAMES = { stroke: "stroke", singularity: "singularity", boundary: "boundary alignment",
+  features: "feature alignment" };
+
+function vertexPosition(v) {
+  const p = studio.geometry.positions;
+  return [p[3 * v], p[3 * v + 1], p[3 * v + 2]];
 }
 
+// A point on face f at barycentric coordinates b.
+function facePoint(f, b) {
+  const [i, j, k] = [0, 1, 2].map((c) => vertexPosition(studio.geometry.faces[3 * f + c]));
+  return [0, 1, 2].map((a) => b[0] * i[a] + b[1] * j[a] + b[2] * k[a]);
+}
+
+// The barycentric coordinates of a point on face f (clamped to the face, summing to 1).
+function barycentric(f, point) {
+  const [a, b, c] = [0, 1, 2].map((k) => vertexPosition(studio.geometry.faces[3 * f + k]));
+  const sub = (u, v) => [u[0] - v[0], u[1] - v[1], u[2] - v[2]];
+  const dot = (u, v) => u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+  const e1 = sub(b, a), e2 = sub(c, a), q = sub(point, a);
+  const d11 = dot(e1, e1), d12 = dot(e1, e2), d22 = dot(e2, e2);
+  const q1 = dot(q, e1), q2 = dot(q, e2);
+  const det = d11 * d22 - d12 * d12;
+  const v = det > 0 ? (d22 * q1 - d12 * q2) / det : 1 / 3;
+  const w = det > 0 ? (d11 * q2 - d12 * q1) / det : 1 / 3;
+  const bary = [1 - v - w, v, w].map((x) => Math.max(0, x));
+  const sum = bary[0] + bary[1] + bary[2];
+  return bary.map((x) => x / sum);
+}
+
+// A stroke's points on screen and in space, lifted off the surface along the face normal.
+function strokePositions(c) {
+  const lift = 0.05 * studio.sample.spacing;
+  return c.points.map((p) => {
+    const q = facePoint(p.face, p.barycentric);
+    const n = faceNormal(p.face);
+    return [0, 1, 2].map((k) => q[k] + lift * n[k]);
+  });
+}
+
+function drawMarkers() {
+  if (!studio.geometry) return;
+  const markers = [];
+  const strokes = [];
+  for (const [id, c] of made().constraints) {
+    const selected = id === studio.selected;
+    if (c.tool === undefined) {
+      markers.push({ id, position: faceCentroid(c.face), direction: valueDirection(c.value),
+        hard: c.hard, selected });
+    } else if (c.tool === "singularity") {
+      markers.push({ id, position: vertexPosition(c.vertex), direction: null, hard: c.hard,
+        selected });
+    } else if (c.tool === "stroke") {
+      strokes.push({ id, points: strokePositions(c), hard: c.hard, selected });
+    }
+  }
+  view.setMarkers(markers, studio.sample.spacing);
+  view.setStrokes(strokes, 0.08 * studio.sample.spacing,
+    gesture?.kind === "stroke" ? gesture.points.map((p) => p.position) : null);
+}
+
+// The constraint, placed singularity or stroke drawn nearest to a canvas point (within
+// MARKER_PICK_PX), or null.
 function markerNear(x, y) {
   let best = null;
   let bestDistance = MARKER_PICK_PX;
-  for (const [id, c] of made().constraints) {
-    const [sx, sy] = view.screenOf(faceCentroid(c.face));
+  const consider = (id, point) => {
+    const [sx, sy] = view.screenOf(point);
     const d = Math.hypot(sx - x, sy - y);
     if (d <= bestDistance) [best, bestDistance] = [id, d];
+  };
+  for (const [id, c] of made().constraints) {
+    if (c.tool === undefined) consider(id, faceCentroid(c.face));
+    else if (c.tool === "singularity") consider(id, vertexPosition(c.vertex));
+    else if (c.tool === "stroke") for (const p of strokePositions(c)) consider(id, p);
   }
   return best;
+}
+
+// Hard and weight of what the user adds next (the Tool box).
+function newKind() {
+  const w = Number($("new-weight").value);
+  return { hard: $("new-hard").checked, weight: Number.isFinite(w) && w > 0 ? w : 1 };
+}
+
+function currentTool(event) {
+  if (event.altKey) return "stroke";
+  return document.querySelector("input[name=tool]:checked")?.value ?? "constraint";
+}
+
+// Adds a new item (a constraint or a tool) under a new id as one undoable action, selected.
+function addItem(constraint) {
+  const id = studio.nextId++;
+  studio.selected = id;
+  perform([{ kind: "add", id, constraint }], { do: [{ kind: "add", id, constraint }],
+    undo: [{ kind: "remove", id }] });
+  drawMarkers();
+  syncSelection();
 }
 
 let gesture = null;
@@ -430,7 +664,8 @@ const local = (event) => {
 $("stage").addEventListener("pointerdown", (event) => {
   if (event.button !== 0 || event.target !== canvas || !studio.session || !studio.geometry) return;
   const [x, y] = local(event);
-  const marker = markerNear(x, y);
+  const tool = currentTool(event);
+  const marker = tool === "stroke" ? null : markerNear(x, y);
   const hit = marker === null ? view.pick(x, y) : null;
   if (marker === null && hit === null) return;
   event.stopPropagation();
@@ -440,18 +675,62 @@ $("stage").addEventListener("pointerdown", (event) => {
     studio.selected = marker;
     drawMarkers();
     syncSelection();
-    gesture = { kind: event.shiftKey ? "turn" : "move", id: marker, x, y, started: false,
-      face0: c.face, value0: [...c.value], face: c.face, value: [...c.value] };
+    // A constraint's marker moves or turns, a placed singularity's moves to another vertex, a
+    // stroke's selects only.
+    gesture = c.tool === "singularity" ? { kind: "moveSingularity", id: marker, x, y,
+      started: false, before: { ...c }, after: { ...c } }
+      : { kind: c.tool !== undefined ? "select" : event.shiftKey ? "turn" : "move",
+        id: marker, x, y, started: false, face0: c.face, value0: c.value && [...c.value],
+        face: c.face, value: c.value && [...c.value] };
+  } else if (tool === "stroke") {
+    gesture = { kind: "stroke", x, y, started: false, points: [], last: null };
+    strokePoint(x, y, hit);
+  } else if (tool === "singularity") {
+    gesture = { kind: "singularity", x, y, started: false, hit };
   } else {
     gesture = { kind: "add", id: studio.nextId, x, y, started: false, face: hit.face,
       point: hit.point, value: null };
   }
 }, { capture: true });
 
+// Keeps a stroke's picked point when it is STROKE_STEP_PX from the last kept one on screen.
+function strokePoint(x, y, hit, last = false) {
+  const g = gesture;
+  if (g.last !== null && !last && Math.hypot(x - g.last[0], y - g.last[1]) < STROKE_STEP_PX) return;
+  if (g.last !== null && x === g.last[0] && y === g.last[1]) return;
+  g.points.push({ face: hit.face, barycentric: barycentric(hit.face, hit.point),
+    position: hit.point });
+  g.last = [x, y];
+  drawMarkers();
+}
+
 canvas.addEventListener("pointermove", (event) => {
   if (gesture === null) return;
   const [x, y] = local(event);
   if (!gesture.started && Math.hypot(x - gesture.x, y - gesture.y) < DRAG_START_PX) return;
+  if (gesture.kind === "select" || gesture.kind === "singularity") return;
+  if (gesture.kind === "stroke") {
+    // Every pointer position since the last event (the browser merges moves into one event per
+    // frame; a slow frame would leave gaps in the stroke).
+    gesture.started = true;
+    for (const e of event.getCoalescedEvents?.() ?? [event]) {
+      const [cx, cy] = local(e);
+      const hit = view.pick(cx, cy);
+      if (hit !== null) strokePoint(cx, cy, hit);
+    }
+    return;
+  }
+  if (gesture.kind === "moveSingularity") {
+    // To the nearest corner of the face under the pointer: one `move {id, group}` per new vertex.
+    const hit = view.pick(x, y);
+    if (hit === null) return;
+    const vertex = nearestCorner(hit);
+    if (vertex === gesture.after.vertex) return;
+    gesture.started = true;
+    gesture.after = { ...gesture.after, vertex };
+    edit({ kind: "replace", id: gesture.id, constraint: { ...gesture.after } });
+    return;
+  }
   if (gesture.kind === "move") {
     const hit = view.pick(x, y);
     if (hit === null || hit.face === gesture.face) return;
@@ -468,7 +747,7 @@ canvas.addEventListener("pointermove", (event) => {
   gesture.value = constraintValue(studio.field, d);
   if (gesture.kind === "add" && !gesture.started) {
     gesture.started = true;
-    gesture.constraint = { face: gesture.face, value: gesture.value, hard: false, weight: 1 };
+    gesture.constraint = { face: gesture.face, value: gesture.value, ...newKind() };
     studio.nextId += 1;
     studio.selected = gesture.id;
     edit({ kind: "add", id: gesture.id, constraint: { ...gesture.constraint } });
@@ -481,8 +760,29 @@ canvas.addEventListener("pointermove", (event) => {
 function endGesture(event) {
   if (gesture === null) return;
   const g = gesture;
+  if (g.kind === "stroke" && event.type === "pointerup") {
+    const [x, y] = local(event);
+    const hit = view.pick(x, y);
+    if (hit !== null) strokePoint(x, y, hit, true);
+  }
   gesture = null;
   if (canvas.hasPointerCapture(event.pointerId)) canvas.releasePointerCapture(event.pointerId);
+  if (g.kind === "stroke") {
+    drawMarkers();  // without the preview
+    if (event.type !== "pointerup") return;
+    if (g.points.length < 2) {
+      showMessage("A stroke needs a drag across the surface (at least two points).",
+        { error: true });
+      return;
+    }
+    addItem({ tool: "stroke", points: decimate(g.points).map(({ face, barycentric: b }) =>
+      ({ face, barycentric: b })), ...newKind() });
+    return;
+  }
+  if (g.kind === "singularity") {
+    if (!g.started && event.type === "pointerup") placeSingularity(g.hit);
+    return;
+  }
   if (!g.started) {
     if (g.kind === "add") {  // a click on the surface: nothing selected
       studio.selected = null;
@@ -495,7 +795,10 @@ function endGesture(event) {
     const c = { ...g.constraint, value: g.value };
     studio.history.push({ do: [{ kind: "add", id: g.id, constraint: c }],
       undo: [{ kind: "remove", id: g.id }] });
-  } else {
+  } else if (g.kind === "moveSingularity") {
+    studio.history.push({ do: [{ kind: "replace", id: g.id, constraint: g.after }],
+      undo: [{ kind: "replace", id: g.id, constraint: g.before }] });
+  } else if (g.kind !== "select") {
     studio.history.push({
       do: [{ kind: "move", id: g.id, face: g.face, value: g.value }],
       undo: [{ kind: "move", id: g.id, face: g.face0, value: g.value0 }] });
@@ -505,6 +808,37 @@ function endGesture(event) {
 canvas.addEventListener("pointerup", endGesture);
 canvas.addEventListener("pointercancel", endGesture);
 
+// At most STROKE_MAX_POINTS points, the first and the last kept.
+function decimate(points) {
+  if (points.length <= STROKE_MAX_POINTS) return points;
+  const step = (points.length - 1) / (STROKE_MAX_POINTS - 1);
+  return Array.from({ length: STROKE_MAX_POINTS }, (_, i) => points[Math.round(i * step)]);
+}
+
+// A singularity of the toolbar's index at the vertex of the clicked face nearest the click.
+function placeSingularity(hit) {
+  if (studio.field.kind === "tensor") {
+    showMessage("Singularities are placed in vector and n-field bases, not tensor bases.",
+      { error: true });
+    return;
+  }
+  addItem({ tool: "singularity", vertex: nearestCorner(hit), index: Number($("sing-index").value),
+    ...newKind() });
+}
+
+// The corner of the hit face nearest the hit point.
+function nearestCorner(hit) {
+  let vertex = -1;
+  let best = Infinity;
+  for (let k = 0; k < 3; k++) {
+    const v = studio.geometry.faces[3 * hit.face + k];
+    const p = vertexPosition(v);
+    const d = Math.hypot(p[0] - hit.point[0], p[1] - hit.point[1], p[2] - hit.point[2]);
+    if (d < best) [vertex, best] = [v, d];
+  }
+  return vertex;
+}
+
 function syncSelection() {
   const c = made().constraints.get(studio.selected);
   $("constraint").disabled = c === undefined;
@@ -512,7 +846,12 @@ function syncSelection() {
     $("constraint-info").textContent = "none: click a marker";
     return;
   }
-  $("constraint-info").textContent = `#${studio.selected} on face ${c.face}`;
+  $("constraint-info").textContent = c.tool === "stroke"
+    ? `#${studio.selected}: stroke of ${c.points.length} points`
+    : c.tool === "singularity"
+    ? `#${studio.selected}: singularity ${turns(c.index)} at vertex ${c.vertex}`
+    : c.tool !== undefined ? `#${studio.selected}: ${TOOL_NAMES[c.tool]}`
+    : `#${studio.selected} on face ${c.face}`;
   $("hard").checked = c.hard;
   // Not while the user types a weight: an update arriving meanwhile must not undo the typing.
   if (document.activeElement !== $("weight")) $("weight").value = String(c.weight);
@@ -548,9 +887,96 @@ function deleteSelected() {
 $("delete").addEventListener("click", deleteSelected);
 
 // ---------------------------------------------------------------------------------------------
+// Tools: the singularity index, boundary and feature alignment, curvature alignment.
+
+// The toolbar for the chosen basis: singularity indices k/n turns (k = -n..n, not 0; vectors
+// +-1), singularities and curvature only where the daemon takes them.
+function syncTools() {
+  const { kind, n } = studio.field;
+  const select = $("sing-index");
+  select.replaceChildren(...Array.from({ length: 2 * n }, (_, i) => (i < n ? i - n : i - n + 1))
+    .map((k) => new Option(turns(k / n), String(k / n))));
+  select.value = String(1 / n);
+  const singularity = document.querySelector("input[name=tool][value=singularity]");
+  singularity.disabled = kind === "tensor";
+  if (singularity.disabled && singularity.checked) {
+    document.querySelector("input[name=tool][value=constraint]").checked = true;
+  }
+  $("curvature").disabled = !curvatureAllowed();
+  $("curvature").checked = studio.curvature;
+  $("mu-a-row").hidden = !studio.curvature;
+  syncAlignment();
+}
+
+// An index in whole turns as the toolbar writes it: +1, -1/4, +3/4.
+function turns(index) {
+  const n = studio.field.n;
+  const k = Math.round(index * n);
+  return `${k > 0 ? "+" : ""}${k}${n === 1 ? "" : `/${n}`}`;
+}
+
+function curvatureAllowed() {
+  return studio.field?.kind === "nfield" && (studio.field.n === 2 || studio.field.n === 4);
+}
+
+// The tool of kind `tool` the user made (boundary, features: at most one each): [id, tool].
+function madeTool(tool) {
+  return [...made().constraints].find(([, c]) => c.tool === tool) ?? [null, null];
+}
+
+function syncAlignment() {
+  const [, boundary] = madeTool("boundary");
+  const [, features] = madeTool("features");
+  $("boundary").value = boundary?.mode ?? "";
+  $("features").checked = features !== null;
+  if (features !== null && document.activeElement !== $("feature-angle")) {
+    $("feature-angle").value = String(features.angle);
+  }
+}
+
+// Switches an alignment tool on (with `spec`), changes it, or off (spec null): one undoable action.
+function setAlignment(tool, spec) {
+  const [oldId, old] = madeTool(tool);
+  const id = oldId ?? studio.nextId++;
+  const next = spec === null ? null : { tool, ...spec, ...newKind() };
+  const forward = [...(old ? [{ kind: "remove", id }] : []),
+    ...(next ? [{ kind: "add", id, constraint: next }] : [])];
+  const back = [...(next ? [{ kind: "remove", id }] : []),
+    ...(old ? [{ kind: "add", id, constraint: { ...old } }] : [])];
+  if (forward.length) perform(forward, { do: forward, undo: back });
+}
+
+$("boundary").addEventListener("change", () => setAlignment("boundary",
+  $("boundary").value ? { mode: $("boundary").value } : null));
+const featureChange = () => {
+  const angle = Number($("feature-angle").value);
+  if (!(angle > 0 && angle < 180)) {
+    showMessage("The feature angle is in degrees, between 0 and 180.", { error: true });
+    return;
+  }
+  setAlignment("features", $("features").checked ? { angle } : null);
+};
+$("features").addEventListener("change", featureChange);
+$("feature-angle").addEventListener("change", () => {
+  if ($("features").checked) featureChange();
+});
+
+// The curvature term is part of the session's energy (OpenDesign.data): switching it reopens
+// the session with the same constraints.
+$("curvature").addEventListener("change", () => {
+  if (!studio.session || !curvatureAllowed()) return;
+  studio.curvature = $("curvature").checked;
+  $("mu-a-row").hidden = !studio.curvature;
+  persist();
+  studio.session.close();
+  openSession();
+});
+
+// ---------------------------------------------------------------------------------------------
 // Weights: log-scale sliders that re-solve while dragged.
 
-const SLIDERS = [["muS", "mu-s", false], ["muB", "mu-b", true], ["muC", "mu-c", false]];
+const SLIDERS = [["muS", "mu-s", false], ["muB", "mu-b", true], ["muC", "mu-c", false],
+  ["muA", "mu-a", false]];
 let sliderStart = null;  // the weights when a slider drag began
 
 function sliderWeight(input, zeroAtMin) {
@@ -561,7 +987,7 @@ function sliderWeight(input, zeroAtMin) {
 function syncWeightSliders() {
   for (const [name, id, zeroAtMin] of SLIDERS) {
     const input = $(id);
-    const w = made().weights[name] ?? DEFAULT_WEIGHTS[name];
+    const w = made().weights[name] ?? DEFAULT_WEIGHTS[name] ?? DEFAULT_MU_A;
     if (document.activeElement !== input || sliderStart === null) {
       input.value = String(w > 0 ? Math.log10(w) : zeroAtMin ? input.min : input.min);
     }
@@ -604,14 +1030,47 @@ function redo() {
 
 $("undo").addEventListener("click", undo);
 $("redo").addEventListener("click", redo);
-$("png").addEventListener("click", async () => {
-  const blob = await view.png();
+function download(blob, name) {
   const link = document.createElement("a");
   link.href = URL.createObjectURL(blob);
-  link.download = `fieldspace-${studio.basis?.id ?? "studio"}.png`;
+  link.download = name;
   link.click();
   setTimeout(() => URL.revokeObjectURL(link.href), 10000);
+}
+
+$("png").addEventListener("click", async () => {
+  download(await view.png(), `fieldspace-${studio.basis?.id ?? "studio"}.png`);
 });
+
+// The whole field: the session's coefficients lifted on every face by the daemon (Lift,
+// ambient), written here (export.js).
+async function downloadField(format) {
+  const coefficients = studio.session?.last?.coefficients;
+  if (!coefficients || !studio.geometry) {
+    showMessage("There is no field to download yet: choose a basis.", { error: true });
+    return;
+  }
+  const { basis, field, geometry } = studio;
+  const per = field.kind === "tensor" ? 6 : 3;
+  const values = new Float64Array(per * (geometry.faces.length / 3));
+  showMessage(`Lifting the field for the .${format} file...`);
+  try {
+    for await (const chunk of api.lift({ basisId: basis.id, coefficients: [...coefficients],
+      encoding: FieldEncoding.AMBIENT })) {
+      values.set(chunk.field.values, per * chunk.startFace);
+    }
+  } catch (e) {
+    showMessage(describe("Lifting the field", e), { error: true });
+    return;
+  }
+  const blob = format === "vtu"
+    ? vtuBlob(field, geometry.positions, geometry.faces, geometry.frames, values)
+    : rawfieldBlob(field, geometry.frames, values);
+  showMessage("");
+  download(blob, `fieldspace-${basis.id}.${format}`);
+}
+$("vtu").addEventListener("click", () => downloadField("vtu"));
+$("rawfield").addEventListener("click", () => downloadField("rawfield"));
 
 window.addEventListener("keydown", (event) => {
   if (event.target instanceof HTMLInputElement && event.target.type !== "range") return;
@@ -637,12 +1096,18 @@ window.__studio = {
     weights: { ...studio.weights },
     singularities: studio.singularities.size,
     sampleFaces: studio.sample?.faces.length ?? 0,
+    spacing: studio.sample?.spacing ?? 0,
+    curvature: studio.curvature,
     edits: studio.edits,
     timings: studio.lastTimings,
     error: studio.error,
     message: $("message").hidden ? "" : $("message").textContent,
   }),
   camera: () => view.cameraState(),
+  // The watched sample and the last update's watched faces and values.
+  sample: () => ({ faces: [...(studio.sample?.faces ?? [])], spacing: studio.sample?.spacing ?? 0,
+    watchedFaces: [...(studio.session?.last?.watched?.faces ?? [])],
+    watchedValues: [...(studio.session?.last?.watched?.values ?? [])] }),
   frameTimes: () => [...view.frameTimes],
   showGlyphs: (on) => view.setGlyphsVisible(on),
   edit,  // an edit as the gestures send them, for tests of refused edits

@@ -10,7 +10,7 @@
 // that edit.
 import { create, fromBinary, toBinary } from "@bufbuild/protobuf";
 import {
-  DesignRequestSchema, DesignUpdateSchema, FieldEncoding,
+  BoundaryAlignMode, DesignRequestSchema, DesignUpdateSchema, FieldEncoding,
 } from "../gen/fieldspace/v1/fieldspace_pb.js";
 
 // Close codes 4000 + gRPC code carry the error that ended a session (gateway/design_relay.mjs).
@@ -28,17 +28,56 @@ export function constraintMessage(c) {
   };
 }
 
+/**
+ * The ConstraintGroup oneof ({ case, value }) of a page tool (a constraint with `tool`): a stroke
+ * { points: [{ face, barycentric }] }, a placed singularity { vertex, index (whole turns) }, a
+ * boundary alignment { mode: "tangent" | "normal" } or a feature alignment { angle (degrees) };
+ * each with hard and weight. The daemon turns it into constraints (docs/api.md, Design sessions).
+ */
+export function groupMessage(id, c) {
+  const common = { id, hard: c.hard, ...(c.hard ? {} : { weight: c.weight }) };
+  switch (c.tool) {
+    case "stroke":
+      return { case: "stroke", value: { ...common, points: c.points.map((p) => ({
+        at: { case: "facePoint", value: { face: p.face, barycentric: p.barycentric } } })) } };
+    case "singularity":
+      return { case: "singularity", value: { ...common, at: { case: "vertex", value: c.vertex },
+        index: c.index } };
+    case "boundary":
+      return { case: "alignBoundary", value: { ...common, mode: c.mode === "normal"
+        ? BoundaryAlignMode.BOUNDARY_ALIGN_NORMAL : BoundaryAlignMode.BOUNDARY_ALIGN_TANGENT } };
+    case "features":
+      return { case: "alignFeatures", value: { ...common, angleDegrees: c.angle } };
+    default:
+      throw new Error(`unknown tool ${c.tool}`);
+  }
+}
+
+// The DesignRequest edit that adds a tool, by the ConstraintGroup case.
+const ADD_TOOL = { stroke: "addStroke", singularity: "placeSingularity",
+  alignBoundary: "alignBoundary", alignFeatures: "alignFeatures" };
+
 function editMessage(edit) {
   switch (edit.kind) {
     case "add":
+      if (edit.constraint.tool !== undefined) {
+        const group = groupMessage(edit.id, edit.constraint);
+        return { case: ADD_TOOL[group.case], value: group.value };
+      }
       return { case: "add", value: { id: edit.id, constraint: constraintMessage(edit.constraint) } };
     case "move":
       return { case: "move", value: { id: edit.id, face: edit.face, value: edit.value,
         encoding: FieldEncoding.AMBIENT } };
+    case "replace":  // a tool's group by a new one under the same id
+      return { case: "move", value: { id: edit.id,
+        group: { tool: groupMessage(edit.id, edit.constraint) } } };
     case "remove":
       return { case: "remove", value: { id: edit.id } };
     case "weights":
       return { case: "setWeights", value: { ...edit.weights } };
+    case "watch":
+      return { case: "watch", value: { faces: Array.from(edit.faces),
+        encoding: FieldEncoding.AMBIENT } };
     default:
       throw new Error(`unknown edit ${edit.kind}`);
   }
@@ -47,7 +86,8 @@ function editMessage(edit) {
 export class DesignSession {
   /**
    * url: the gateway's ws(s) URL of design sessions; token: "" or the studio's token;
-   * open: { basisId, weights {muS, muB, muC}, watchFaces, singularities };
+   * open: { basisId, weights {muS, muB, muC[, muA]}, watchFaces, singularities, curvature }
+   * (curvature: the session's energy has the curvature-alignment data term, weight muA);
    * confirmed: { weights, constraints: Map id -> constraint } to replay after the open;
    * handlers: onUpdate(update, edit, roundTripMs), onRefused(code, message, edit) (the daemon
    * refused that edit; the session goes on without it), onReady(), onClosed(code, message, edit),
@@ -75,7 +115,8 @@ export class DesignSession {
         case: "open",
         value: { basisId: open.basisId, weights: { ...this.weights },
           watchFaces: Array.from(open.watchFaces), watchEncoding: FieldEncoding.AMBIENT,
-          singularities: open.singularities },
+          singularities: open.singularities,
+          ...(open.curvature ? { data: { target: { case: "curvature", value: {} } } } : {}) },
       });
       for (const [id, constraint] of this.constraints) {
         this.queue.push({ kind: "add", id, constraint, replay: true });
@@ -90,13 +131,16 @@ export class DesignSession {
     return this.ready && this.inFlight === null && this.queue.length === 0;
   }
 
-  /** Queues an edit ({kind: add|move|remove|weights, ...}); see the coalescing rule above. */
+  /** Queues an edit ({kind: add|move|replace|remove|weights|watch, ...}); see the coalescing rule
+   *  above (a replace of the tool that the last waiting edit replaces, and new watched faces after
+   *  waiting ones, replace that entry too). */
   edit(edit) {
     if (this.closed) return;
     applyEdit(this.desired, edit);
     const last = this.queue[this.queue.length - 1];
     if (last !== undefined && !last.replay && last.kind === edit.kind &&
-        ((edit.kind === "move" && last.id === edit.id) || edit.kind === "weights")) {
+        (((edit.kind === "move" || edit.kind === "replace") && last.id === edit.id) ||
+         edit.kind === "weights" || edit.kind === "watch")) {
       if (edit.kind === "weights") Object.assign(last.weights, edit.weights);
       else Object.assign(last, edit);
     } else {
@@ -167,9 +211,11 @@ export class DesignSession {
 
 /** Applies an edit to a state { weights, constraints: Map id -> constraint }. */
 function applyEdit(state, edit) {
-  if (edit.kind === "add") state.constraints.set(edit.id, { ...edit.constraint });
-  else if (edit.kind === "remove") state.constraints.delete(edit.id);
-  else if (edit.kind === "move") {
+  if (edit.kind === "add" || edit.kind === "replace") {
+    state.constraints.set(edit.id, { ...edit.constraint });
+  } else if (edit.kind === "remove") {
+    state.constraints.delete(edit.id);
+  } else if (edit.kind === "move") {
     const c = state.constraints.get(edit.id);
     if (c !== undefined) Object.assign(c, { face: edit.face, value: [...edit.value] });
   } else if (edit.kind === "weights") Object.assign(state.weights, edit.weights);

@@ -34,6 +34,8 @@ export class View {
     this.glyphs = null;
     this.markers = new THREE.Group();
     this.scene.add(this.markers);
+    this.strokes = new THREE.Group();
+    this.scene.add(this.strokes);
     this.singularities = null;
     this.labels = document.createElement("div");
     this.labels.className = "labels";
@@ -104,21 +106,50 @@ export class View {
     this.renderer.render(this.scene, this.camera);
   }
 
-  /** Constraint markers: [{ id, position, direction (unit, ambient), hard, selected }]. */
+  /** Constraint markers: [{ id, position, direction (unit, ambient), hard, selected }]; a marker
+   *  without direction (a placed singularity) is a diamond. */
   setMarkers(markers, size) {
     for (const child of [...this.markers.children]) {
       this.markers.remove(child);
       child.geometry?.dispose();
     }
     for (const m of markers) {
-      const color = m.selected ? 0x1565c0 : m.hard ? 0xc62828 : 0xef6c00;
-      const dot = new THREE.Mesh(new THREE.SphereGeometry(0.3 * size, 12, 8),
-        new THREE.MeshBasicMaterial({ color }));
+      const color = markerColor(m);
+      const dot = new THREE.Mesh(m.direction ? new THREE.SphereGeometry(0.3 * size, 12, 8)
+        : new THREE.OctahedronGeometry(0.45 * size), new THREE.MeshBasicMaterial({ color }));
       dot.position.set(...m.position);
       this.markers.add(dot);
+      if (!m.direction) continue;
       const arrow = new THREE.ArrowHelper(new THREE.Vector3(...m.direction),
         new THREE.Vector3(...m.position), 2 * size, color, 0.6 * size, 0.35 * size);
       this.markers.add(arrow);
+    }
+    this.requestRender();
+  }
+
+  /** Strokes: [{ points: [[x, y, z], ...], hard, selected }], drawn as tubes of radius `size`
+   *  in the markers' colours; `preview`: the points of a stroke being drawn (a line), or null. */
+  setStrokes(strokes, size, preview = null) {
+    for (const child of [...this.strokes.children]) {
+      this.strokes.remove(child);
+      child.geometry.dispose();
+    }
+    for (const stroke of strokes) {
+      const path = new THREE.CurvePath();
+      for (let i = 1; i < stroke.points.length; i++) {
+        path.add(new THREE.LineCurve3(new THREE.Vector3(...stroke.points[i - 1]),
+          new THREE.Vector3(...stroke.points[i])));
+      }
+      this.strokes.add(new THREE.Mesh(
+        new THREE.TubeGeometry(path, 4 * stroke.points.length, size, 6),
+        new THREE.MeshBasicMaterial({ color: markerColor(stroke) })));
+    }
+    if (preview && preview.length > 1) {
+      const line = new THREE.Line(new THREE.BufferGeometry().setFromPoints(
+        preview.map((p) => new THREE.Vector3(...p))), new THREE.LineBasicMaterial({
+        color: 0x6a1b9a, depthTest: false }));
+      line.frustumCulled = false;
+      this.strokes.add(line);
     }
     this.requestRender();
   }
@@ -169,6 +200,22 @@ export class View {
       new THREE.Vector3(...normal), new THREE.Vector3(...point));
     const hit = this.raycaster.ray.intersectPlane(plane, new THREE.Vector3());
     return hit ? hit.toArray() : null;
+  }
+
+  /** The ambient length of one CSS pixel at the distance of the orbit's target. */
+  pixelSize() {
+    const distance = this.camera.position.distanceTo(this.controls.target);
+    const height = this.renderer.domElement.clientHeight || 1;
+    return (2 * distance * Math.tan(THREE.MathUtils.degToRad(this.camera.fov) / 2)) / height;
+  }
+
+  /** A test (x, y, z) -> whether the point is inside the camera's view frustum. */
+  inView() {
+    this.camera.updateMatrixWorld();
+    const frustum = new THREE.Frustum().setFromProjectionMatrix(new THREE.Matrix4()
+      .multiplyMatrices(this.camera.projectionMatrix, this.camera.matrixWorldInverse));
+    const p = new THREE.Vector3();
+    return (x, y, z) => frustum.containsPoint(p.set(x, y, z));
   }
 
   /** Canvas CSS pixel position of an ambient point. */
@@ -229,6 +276,10 @@ export class View {
     this.renderer.render(this.scene, this.camera);
     return new Promise((resolve) => this.renderer.domElement.toBlob(resolve, "image/png"));
   }
+}
+
+function markerColor(m) {
+  return m.selected ? 0x1565c0 : m.hard ? 0xc62828 : 0xef6c00;
 }
 
 // A white disc on transparent ground: the shape of a point sprite.
