@@ -413,36 +413,44 @@ absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& 
   tbb::task_arena arena(threads);
   absl::StatusOr<Basis> result;
   arena.execute([&] {
-    // The kernel of S is computed beside the local fields: most of it is one multigrid Poisson
-    // solve (mostly on one thread), and the local fields keep the other threads busy meanwhile.
-    // (It cannot stop early when the local fields fail; it does when the build is cancelled.)
-    absl::StatusOr<Eigen::MatrixXd> kernel = Eigen::MatrixXd();
-    tbb::task_group kernel_task;
-    if (options.kernel_columns) {
-      kernel_task.run([&] {
-        KernelFieldOptions kernel_options;
-        kernel_options.cancel = options.cancel;
-        kernel = ComputeKernelFields(mesh, op, kernel_options);
-      });
-    }
-    result = Build(mesh, op, options, m, ticker);
-    const auto local_done = std::chrono::steady_clock::now();
-    if (options.kernel_columns) {
-      ticker.SetPhase(BasisPhase::kAssembly, 0.0);
-      ticker.ReportNow();
-    }
-    kernel_task.wait();
-    if (result.ok() && options.kernel_columns) {
-      absl::Status s = kernel.ok() ? AppendKernelColumns(*kernel, &*result) : kernel.status();
-      if (!s.ok()) result = s;
-      if (result.ok()) result->timings.kernel_seconds = SecondsSince(local_done);
-    }
+    result = BuildBesideKernel(
+        mesh, op, options, [&] { return Build(mesh, op, options, m, ticker); },
+        [&] {
+          if (!options.kernel_columns) return;
+          ticker.SetPhase(BasisPhase::kAssembly, 0.0);
+          ticker.ReportNow();
+        });
   });
   if (ticker.cancelled()) return ProgressTicker::CancelledError();
   if (!result.ok()) return result;
   ticker.SetPhase(BasisPhase::kAssembly, 1.0);
   ticker.ReportNow();
   result->timings.total_seconds = SecondsSince(t_start);
+  return result;
+}
+
+absl::StatusOr<Basis> BuildBesideKernel(const TriangleMesh& mesh, const FieldOperator& op,
+                                        const BasisOptions& options,
+                                        absl::FunctionRef<absl::StatusOr<Basis>()> build_local,
+                                        absl::FunctionRef<void()> local_done) {
+  absl::StatusOr<Eigen::MatrixXd> kernel = Eigen::MatrixXd();
+  tbb::task_group kernel_task;
+  if (options.kernel_columns) {
+    kernel_task.run([&] {
+      KernelFieldOptions kernel_options;
+      kernel_options.cancel = options.cancel;
+      kernel = ComputeKernelFields(mesh, op, kernel_options);
+    });
+  }
+  absl::StatusOr<Basis> result = build_local();
+  const auto local_end = std::chrono::steady_clock::now();
+  local_done();
+  kernel_task.wait();
+  if (!result.ok() || !options.kernel_columns) return result;
+  if (IsCancelled(options.cancel)) return ProgressTicker::CancelledError();
+  if (!kernel.ok()) return kernel.status();
+  RETURN_IF_ERROR(AppendKernelColumns(*kernel, &*result));
+  result->timings.kernel_seconds = SecondsSince(local_end);
   return result;
 }
 

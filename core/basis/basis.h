@@ -9,6 +9,7 @@
 
 #include "Eigen/Core"
 #include "Eigen/SparseCore"
+#include "absl/functional/function_ref.h"
 #include "absl/status/statusor.h"
 #include "core/common/cancel.h"
 #include "core/mesh/triangle_mesh.h"
@@ -183,6 +184,17 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse);
 // float; exact zeros are not stored), with local eigenvalue 0. InvalidArgument when the row
 // counts differ, ResourceExhausted past 2^31 - 1 nonzeros.
 absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis);
+
+// Runs `build_local` (the local fields) and, when options.kernel_columns, the kernel of S
+// (ComputeKernelFields) beside it on another task: most of the kernel is one multigrid Poisson
+// solve, mostly on one thread, and the local fields keep the other threads busy meanwhile. Then
+// `local_done` runs (before the wait for the kernel), the kernel is appended as columns
+// (AppendKernelColumns) and timings.kernel_seconds is the time after the local fields. The
+// kernel does not stop early when the local fields fail; it does when the build is cancelled.
+absl::StatusOr<Basis> BuildBesideKernel(const TriangleMesh& mesh, const FieldOperator& op,
+                                        const BasisOptions& options,
+                                        absl::FunctionRef<absl::StatusOr<Basis>()> build_local,
+                                        absl::FunctionRef<void()> local_done);
 
 // One level of a multilevel basis: `dimension` local fields of the paper's construction with
 // overlap factor `sigma`, clamped (BasisOptions::clamped_local_fields) or not.

@@ -15,10 +15,8 @@
 #include "core/basis/progress.h"
 #include "core/common/status_macros.h"
 #include "core/common/timing.h"
-#include "core/operators/kernel_fields.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
-#include "tbb/task_group.h"
 
 namespace fieldspace {
 namespace {
@@ -188,16 +186,6 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
       options.progress(phase, start + share * fraction);
     };
   }
-  // The kernel of S beside the levels, as in BuildBasis.
-  absl::StatusOr<Eigen::MatrixXd> kernel = Eigen::MatrixXd();
-  tbb::task_group kernel_task;
-  if (options.kernel_columns) {
-    kernel_task.run([&] {
-      KernelFieldOptions kernel_options;
-      kernel_options.cancel = options.cancel;
-      kernel = ComputeKernelFields(mesh, op, kernel_options);
-    });
-  }
   const auto started = std::chrono::steady_clock::now();
   BasisTimings timings;  // of all levels
   const auto build_levels = [&]() -> absl::StatusOr<Basis> {
@@ -219,22 +207,13 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
       }
       start += share;
     }
+    stacked->timings = timings;
     return *std::move(stacked);
   };
-  absl::StatusOr<Basis> stacked = build_levels();
-  const auto levels_done = std::chrono::steady_clock::now();
-  if (stacked.ok()) {
-    timings.total_seconds = SecondsSince(started);
-    stacked->timings = timings;
-  }
-  kernel_task.wait();
-  if (!stacked.ok() || !options.kernel_columns) return stacked;
-  if (IsCancelled(options.cancel)) return ProgressTicker::CancelledError();
-  if (!kernel.ok()) return kernel.status();
-  RETURN_IF_ERROR(AppendKernelColumns(*kernel, &*stacked));
-  stacked->timings.kernel_seconds = SecondsSince(levels_done);
-  stacked->timings.total_seconds += stacked->timings.kernel_seconds;
-  if (options.progress) options.progress(BasisPhase::kAssembly, 1.0);
+  absl::StatusOr<Basis> stacked = BuildBesideKernel(mesh, op, options, build_levels, [] {});
+  if (!stacked.ok()) return stacked;
+  stacked->timings.total_seconds = SecondsSince(started);
+  if (options.kernel_columns && options.progress) options.progress(BasisPhase::kAssembly, 1.0);
   return stacked;
 }
 
