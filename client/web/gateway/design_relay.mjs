@@ -22,7 +22,7 @@ export const CLOSE_STATUS_BASE = 4000;
 export function replicaLost(error) {
   const e = ConnectError.from(error);
   if (e.code === Code.Unavailable) return true;
-  return e.code === Code.Internal && /RST_STREAM|stream closed with error code/.test(e.rawMessage);
+  return e.code === Code.Internal && /RST_STREAM|stream closed with error code/i.test(e.rawMessage);
 }
 
 // The requests of one gRPC stream: pushed by the relay, pulled by the client (an async generator,
