@@ -6,7 +6,9 @@
 // it goes (pick, wait behind the edit in flight, the daemon's edit and lift, gateway and transport);
 // bytes per update (the WebSocket frames, as Chromium saw them); the page's frame times; the time
 // from opening the page to its first drawn field. At the end the session's coefficients must equal
-// a one-shot Solve of the final constraints.
+// a one-shot Solve of the final constraints. Chromium dispatches pointer moves with the next
+// animation frame and Playwright's mouse.move resolves once the page took the move, so the drag
+// advances at most one step per frame of the page (seconds under software GL on 1.4M faces).
 //
 //   node bench/studio_latency.mjs --mesh ../shared/meshes/armadillo_loop2_1384k.ply
 //       [--daemon-bin build/bin/fieldspaced | --daemon HOST:PORT] [--store DIR] [--dim 2000]
@@ -186,18 +188,18 @@ const path = Array.from({ length: steps }, (_, i) => {
 const framesBefore = frames.length;
 await page.evaluate(() => {
   // The bench's own view of the input and of the frames: each pointer move's event time, and
-  // requestAnimationFrame's timestamps while the drag lasts.
+  // the timestamps of the frames the page asked for (its requestAnimationFrame callbacks; a
+  // loop of our own would make Chromium produce frames the page does not need).
   const record = { moves: [], frames: [], on: true };
   window.__bench = record;
   window.addEventListener("pointermove", (e) => {
     if (record.on) record.moves.push({ timeStamp: e.timeStamp, dispatched: performance.now() });
   }, { capture: true });
-  const tick = (t) => {
-    if (!record.on) return;
-    record.frames.push(t);
-    requestAnimationFrame(tick);
-  };
-  requestAnimationFrame(tick);
+  const raf = window.requestAnimationFrame.bind(window);
+  window.requestAnimationFrame = (callback) => raf((t) => {
+    if (record.on && record.frames.at(-1) !== t) record.frames.push(t);
+    callback(t);
+  });
 });
 {
   const [x, y] = toPage(...marker);
@@ -208,6 +210,7 @@ await page.evaluate(() => {
     const wait = t0 + i * intervalMs - performance.now();
     if (wait > 0) await new Promise((r) => setTimeout(r, wait));
     await page.mouse.move(...path[i]);
+    if ((i + 1) % 50 === 0) log(`${i + 1} steps, ${((performance.now() - t0) / 1000).toFixed(1)} s`);
   }
   await page.mouse.up();
 }
@@ -309,7 +312,7 @@ console.log([
   `bytes per update: ${Math.round(result.bytesPerUpdate.page.mean ?? 0)} (page), ` +
     `${Math.round(result.bytesPerUpdate.websocket.mean ?? 0)} (WebSocket frames, ` +
     `${result.bytesPerUpdate.websocket.n})`,
-  line("frame interval (rAF, ms)", result.frameMs.rafInterval),
+  line("frame interval (page, ms)", result.frameMs.rafInterval),
   line("render call (ms)", result.frameMs.render),
   `first field drawn: ${ms(result.firstFieldMs.fromChoosingTheBasis)} ms after choosing the ` +
     `basis; ${ms(result.firstFieldMs.fromNavigationOnReload)} ms from navigation on a reload`,
