@@ -7,9 +7,10 @@ import { FieldSpace } from "../gen/fieldspace/v1/fieldspace_pb.js";
 
 // FieldSpace with every answer kept as the bytes the daemon sent: read as a message without fields
 // (google.protobuf.Empty), each field stays an unknown field and is written back unchanged. The
-// gateway relays binary calls and design sessions with it, where parsing a large answer and
-// serializing it again costs protobuf-es ~0.5 ms per kB (a 1.4M-face mesh's geometry: 12 s
-// instead of 1; a design update of 2000 coefficients and 2500 faces: 25 ms).
+// gateway relays binary calls and design sessions with it: parsing a large answer and serializing
+// it again with protobuf-es took ~6 ms per design update of 2000 coefficients and 2500 faces, and
+// the geometry of a 1.4M-face mesh 11.9 s through the gateway instead of 5.2 s (bench/RESULTS.md,
+// "Studio").
 export const RAW_FIELDSPACE = (() => {
   const methods = FieldSpace.methods.map((m) => ({ ...m, output: EmptySchema }));
   return { ...FieldSpace, methods, method: Object.fromEntries(methods.map((m) => [m.localName, m])) };
