@@ -1,9 +1,9 @@
 // The studio behind the scale-out router: deploy/local-fleet.sh starts 2 fieldspaced replicas on a
 // shared store behind nginx (docs/scale-out.md, "A local fleet"), the gateway calls the router.
-// The page opens a session and adds two constraints; the replica that serves the session (the one
-// nginx hashed the basis id to) is SIGKILLed; the next edit resumes the session on the other
-// replica through the gateway's replay, and the page's coefficients equal a Solve of the same
-// constraints. Exit 77 without nginx or Chromium.
+// The page opens a session and adds two constraints (and an add the daemon refuses); the replica
+// that serves the session (the one nginx hashed the basis id to) is SIGKILLed; the next edit
+// resumes the session on the other replica through the gateway's replay, and the page's
+// coefficients equal a Solve of the same constraints. Exit 77 without nginx or Chromium.
 //   node studio_fleet_test.mjs --web-dir client/web --daemon build/bin/fieldspaced
 import { spawn } from "node:child_process";
 import { existsSync, readFileSync } from "node:fs";
@@ -79,8 +79,14 @@ await page.evaluate(() => window.__studio.edit({ kind: "add", id: 1,
   constraint: { face: 10, value: [0, 0, 1], hard: false, weight: 2 } }));
 await page.evaluate(() => window.__studio.edit({ kind: "add", id: 2,
   constraint: { face: 700, value: [1, 0, 0], hard: true, weight: 1 } }));
-const before = await checkAgainstSolve("two constraints through the router");
-check(before.constraints.length === 2, "the session has the two constraints");
+await checkAgainstSolve("two constraints through the router");
+// An edit the daemon refuses (constraint id 2 exists) must not be replayed after the failover.
+await page.evaluate(() => window.__studio.edit({ kind: "add", id: 2,
+  constraint: { face: 5, value: [0, 0, 1], hard: false, weight: 7 } }));
+await waitForMessage(/daemon refused the edit .add. \(already exists\)/);
+const before = await checkAgainstSolve("after the refused edit");
+check(before.constraints.length === 2 && before.constraints.find((c) => c.id === 2)?.hard,
+  "the session has the two constraints, the second one hard as added");
 
 // The page read the basis (GetBasis, keyed by its id) just before opening the session with the
 // same key: nginx's consistent hash sent both to the replica that serves the session.
