@@ -12,6 +12,8 @@ import {
   ConstraintSchema, DesignRequestSchema, DesignUpdateSchema, OpenDesignSchema, WeightsSchema,
 } from "../gen/fieldspace/v1/fieldspace_pb.js";
 
+// DesignUpdate.error's field number: updates arrive as raw bytes (RAW_FIELDSPACE), so a refused
+// edit shows as this unknown field.
 const UPDATE_ERROR = DesignUpdateSchema.field.error.number;
 
 // Pauses (ms) before each reopening attempt; then the edit fails with the error that lost it.
