@@ -7,6 +7,7 @@
 // and when the stream loses its replica it reopens the stream with the same routing key, replays
 // the open and the constraints, and sends the unanswered edits again.
 import { clone, create, fromBinary, toBinary } from "@bufbuild/protobuf";
+import { EmptySchema } from "@bufbuild/protobuf/wkt";
 import { Code, ConnectError } from "@connectrpc/connect";
 import {
   DesignRequestSchema, DesignUpdateSchema, OpenDesignSchema, WeightsSchema,
@@ -17,6 +18,9 @@ import {
 const ADDS = new Set(["add", "addStroke", "placeSingularity", "alignBoundary", "alignFeatures"]);
 const ADD_OF_GROUP = { stroke: "addStroke", singularity: "placeSingularity",
   alignBoundary: "alignBoundary", alignFeatures: "alignFeatures" };
+// DesignUpdate.error's field number: updates arrive as raw bytes (RAW_FIELDSPACE), so a refused
+// edit shows as this unknown field.
+const UPDATE_ERROR = DesignUpdateSchema.field.error.number;
 
 // Pauses (ms) before each reopening attempt; then the edit fails with the error that lost it.
 const RESUME_PAUSES_MS = [0, 100, 300, 600, 1000, 2000];
@@ -29,7 +33,7 @@ export const CLOSE_STATUS_BASE = 4000;
 export function replicaLost(error) {
   const e = ConnectError.from(error);
   if (e.code === Code.Unavailable) return true;
-  return e.code === Code.Internal && /RST_STREAM|stream closed with error code/.test(e.rawMessage);
+  return e.code === Code.Internal && /RST_STREAM|stream closed with error code/i.test(e.rawMessage);
 }
 
 // The requests of one gRPC stream: pushed by the relay, pulled by the client (an async generator,
@@ -67,7 +71,8 @@ class Queue {
 export class DesignRelay {
   /**
    * @param socket  an open `ws` WebSocket
-   * @param client  a connect client of fieldspace.v1.FieldSpace (gRPC to the daemon)
+   * @param client  a connect client of daemon.mjs's RAW_FIELDSPACE (gRPC to the daemon): the
+   *                daemon's DesignUpdates go to the page as the bytes it sent
    * @param headers metadata for the daemon (authorization), without the routing key
    * @param log     function(string) for the gateway's log
    */
@@ -163,9 +168,11 @@ export class DesignRelay {
 
   answer(update) {
     const request = this.pending.shift();
-    if (request !== undefined) this.remember(request);
+    // A refused edit (DesignUpdate.error) left the session as it was: nothing to replay.
+    const refused = update.$unknown?.some((field) => field.no === UPDATE_ERROR) ?? false;
+    if (request !== undefined && !refused) this.remember(request);
     if (this.socket.readyState === this.socket.OPEN) {
-      this.socket.send(toBinary(DesignUpdateSchema, update), { binary: true });
+      this.socket.send(toBinary(EmptySchema, update), { binary: true });
     }
   }
 

@@ -15,7 +15,7 @@ import { connectNodeAdapter } from "@connectrpc/connect-node";
 import { codeToHttpStatus, errorToJson } from "@connectrpc/connect/protocol-connect";
 import { WebSocketServer } from "ws";
 import { FieldSpace, MeshInfoSchema } from "../gen/fieldspace/v1/fieldspace_pb.js";
-import { daemonClient } from "./daemon.mjs";
+import { RAW_FIELDSPACE, daemonClient } from "./daemon.mjs";
 import { CLOSE_STATUS_BASE, DesignRelay } from "./design_relay.mjs";
 
 const here = dirname(fileURLToPath(import.meta.url));
@@ -64,6 +64,8 @@ function routingKey(request) {
 export async function startGateway(options, { staticDir = join(here, "..", "dist"),
   log = (line) => console.error(`fieldspace-studio: ${line}`) } = {}) {
   const daemon = daemonClient(options.daemon, { ca: options.daemonCa });
+  // Binary calls and design sessions: the daemon's answers relayed as its bytes (daemon.mjs).
+  const rawDaemon = daemonClient(options.daemon, { ca: options.daemonCa, service: RAW_FIELDSPACE });
 
   // The daemon's metadata for a browser request with `authorization` header `auth`.
   const daemonHeaders = (auth) => {
@@ -80,9 +82,14 @@ export async function startGateway(options, { staticDir = join(here, "..", "dist
   };
 
   // Every method of the service, relayed as is (Design too, for HTTP/2 gRPC clients).
-  const relay = {};
-  for (const method of FieldSpace.methods) {
-    const call = daemon[method.localName];
+  const relayOf = (client) => {
+    const relay = {};
+    for (const method of FieldSpace.methods) {
+      relay[method.localName] = relayMethod(method, client[method.localName]);
+    }
+    return relay;
+  };
+  const relayMethod = (method, call) => {
     const headersFor = (ctx, key) => {
       const auth = ctx.requestHeader.get("authorization");
       checkToken(auth);
@@ -92,27 +99,25 @@ export async function startGateway(options, { staticDir = join(here, "..", "dist
     };
     switch (method.methodKind) {
       case "unary":
-        relay[method.localName] = async (request, ctx) => {
+        return async (request, ctx) => {
           try {
             return await call(request, headersFor(ctx, routingKey(request)));
           } catch (e) {
             throw statusOnly(e);
           }
         };
-        break;
       case "server_streaming":
-        relay[method.localName] = async function* (request, ctx) {
+        return async function* (request, ctx) {
           try {
             yield* call(request, headersFor(ctx, routingKey(request)));
           } catch (e) {
             throw statusOnly(e);
           }
         };
-        break;
       default:  // UploadMesh (no key: the server computes the mesh id) and Design, for gRPC clients
-        relay[method.localName] = (requests, ctx) => call(requests, headersFor(ctx, ""));
+        return (requests, ctx) => call(requests, headersFor(ctx, ""));
     }
-  }
+  };
 
   // A mesh file in the body of POST /upload?name=FILE (Content-Length required: it is the
   // header's total_bytes), relayed as UploadMesh messages of at most UPLOAD_CHUNK_BYTES, each read
@@ -209,11 +214,16 @@ export async function startGateway(options, { staticDir = join(here, "..", "dist
     res.writeHead(200, { "content-type": entry[1], "cache-control": "no-cache" });
     res.end(body);
   };
-  const handler = connectNodeAdapter({
-    routes: (router) => router.service(FieldSpace, relay),
+  const adapter = (service, client) => connectNodeAdapter({
+    routes: (router) => router.service(service, relayOf(client)),
     fallback: serveStatic,
     readMaxBytes: 64 << 20,
   });
+  // JSON answers need the messages parsed; binary ones (the page's) are relayed as bytes.
+  const jsonHandler = adapter(FieldSpace, daemon);
+  const rawHandler = adapter(RAW_FIELDSPACE, rawDaemon);
+  const handler = (req, res) =>
+    (/json/i.test(req.headers["content-type"] ?? "") ? jsonHandler : rawHandler)(req, res);
 
   const server = options.tls
     ? https.createServer({ cert: options.tls.cert, key: options.tls.key,
@@ -241,7 +251,7 @@ export async function startGateway(options, { staticDir = join(here, "..", "dist
       socket.close(CLOSE_STATUS_BASE + e.code, e.rawMessage);
       return;
     }
-    new DesignRelay(socket, daemon, daemonHeaders(auth), log);
+    new DesignRelay(socket, rawDaemon, daemonHeaders(auth), log);
   });
 
   await new Promise((resolve, reject) => {

@@ -25,6 +25,9 @@ const MARKER_PICK_PX = 12;  // a press this close to a constraint marker grabs i
 const STORE_PREFIX = "fieldspace.studio.v1.";
 const DEFAULT_WEIGHTS = { muS: 1, muB: 0, muC: 1 };
 const DEFAULT_MU_A = 1;  // the curvature alignment's weight
+// A User Timing mark: the end of the first frame that drew a field (docs/studio.md, "Performance").
+const FIRST_FIELD_MARK = "studio:first-field-drawn";
+let firstFieldDrawn = false;
 
 const $ = (id) => document.getElementById(id);
 const view = new View($("stage"));
@@ -437,6 +440,11 @@ function onUpdate(session, update, edit, roundTripMs) {
     const glyphs = fieldGlyphs(studio.field, studio.geometry.frames,
       Int32Array.from(update.watched.faces), values, studio.sample.spacing);
     view.setGlyphs(glyphs.positions, glyphs.colors);
+    // After the frame that draws them (view's render was requested first): the page's first field.
+    if (!firstFieldDrawn) {
+      firstFieldDrawn = true;
+      requestAnimationFrame(() => performance.mark(FIRST_FIELD_MARK));
+    }
   }
   const changes = update.singularities;
   if (changes) {
@@ -1109,6 +1117,7 @@ window.__studio = {
     watchedFaces: [...(studio.session?.last?.watched?.faces ?? [])],
     watchedValues: [...(studio.session?.last?.watched?.values ?? [])] }),
   frameTimes: () => [...view.frameTimes],
+  updateLog: () => studio.session?.updateLog ?? [],
   showGlyphs: (on) => view.setGlyphsVisible(on),
   edit,  // an edit as the gestures send them, for tests of refused edits
 };

@@ -16,6 +16,8 @@ import {
 // Close codes 4000 + gRPC code carry the error that ended a session (gateway/design_relay.mjs).
 const CLOSE_STATUS_BASE = 4000;
 export const DESIGN_PROTOCOL = "fieldspace.design.v1";
+// Answered edits kept in DesignSession.updateLog (the latest ones; docs/studio.md, "Performance").
+const UPDATE_LOG_LENGTH = 2000;
 
 /** The Constraint message of a page constraint { face, value (ambient), hard, weight }. */
 export function constraintMessage(c) {
@@ -106,6 +108,10 @@ export class DesignSession {
     this.closed = false;
     this.seq = 0;
     this.last = null;
+    // Per answered edit: { kind, made: [when each edit it carries was made], sent, decoded, bytes,
+    // timings } (performance.now() ms; `made` has several times when moves were coalesced).
+    this.updateLog = [];
+    this.made = new Map();  // queued edit -> the times its coalesced edits were made
     const protocols = [DESIGN_PROTOCOL];
     if (token) protocols.push(`bearer.${base64url(token)}`);
     this.socket = new WebSocket(url, protocols);
@@ -136,6 +142,7 @@ export class DesignSession {
    *  waiting ones, replace that entry too). */
   edit(edit) {
     if (this.closed) return;
+    const made = performance.now();
     applyEdit(this.desired, edit);
     const last = this.queue[this.queue.length - 1];
     if (last !== undefined && !last.replay && last.kind === edit.kind &&
@@ -143,8 +150,10 @@ export class DesignSession {
          edit.kind === "weights" || edit.kind === "watch")) {
       if (edit.kind === "weights") Object.assign(last.weights, edit.weights);
       else Object.assign(last, edit);
+      this.made.get(last)?.push(made);
     } else {
       this.queue.push(edit);
+      this.made.set(edit, [made]);
     }
     this.pump();
   }
@@ -157,7 +166,9 @@ export class DesignSession {
 
   send(edit, message) {
     const request = create(DesignRequestSchema, { seq: BigInt(this.seq++), edit: message });
-    this.inFlight = { edit, sent: performance.now() };
+    const made = this.made.get(edit) ?? [];
+    this.made.delete(edit);
+    this.inFlight = { edit, sent: performance.now(), made };
     this.socket.send(toBinary(DesignRequestSchema, request));
   }
 
@@ -167,9 +178,14 @@ export class DesignSession {
       return;
     }
     const update = fromBinary(DesignUpdateSchema, new Uint8Array(data));
-    const { edit, sent } = this.inFlight;
-    const roundTripMs = performance.now() - sent;
+    const { edit, sent, made } = this.inFlight;
+    const decoded = performance.now();
+    const roundTripMs = decoded - sent;
     this.inFlight = null;
+    this.updateLog.push({ kind: edit.kind, made, sent, decoded, bytes: data.byteLength,
+      timings: update.timings ? { editMs: update.timings.editMs, liftMs: update.timings.liftMs,
+        totalMs: update.timings.totalMs } : null });
+    if (this.updateLog.length > UPDATE_LOG_LENGTH) this.updateLog.shift();
     if (update.error !== undefined) {
       // The daemon refused this edit and the session goes on as it was: what the user made is
       // the confirmed state with the edits still queued.
@@ -186,8 +202,10 @@ export class DesignSession {
       this.ready = true;
       this.handlers.onReady?.();
     }
-    this.handlers.onUpdate(update, edit, roundTripMs);
+    // The next edit goes out before the page draws this update, so that the daemon works on it
+    // meanwhile.
     this.pump();
+    this.handlers.onUpdate(update, edit, roundTripMs);
   }
 
   confirm(edit) {

@@ -1,0 +1,328 @@
+// The studio's latency on a large mesh (issue 19's bench; docs/studio.md, "Performance"): the page
+// in a headless Chromium against fieldspaced through the gateway, one constraint added by a short
+// drag, then that constraint's marker dragged through N scripted pointer moves (real pointer events
+// from Playwright's mouse). Reports, per pointer move, the time from the pointer event to the new
+// field values decoded in the page (the page's own update log: DesignSession.updateLog), and where
+// it goes (pick, wait behind the edit in flight, the daemon's edit and lift, gateway and transport);
+// bytes per update (the WebSocket frames, as Chromium saw them); the page's frame times; the time
+// from opening the page to its first drawn field. At the end the session's coefficients must equal
+// a one-shot Solve of the final constraints. Chromium dispatches pointer moves with the next
+// animation frame and Playwright's mouse.move resolves once the page took the move, so the drag
+// advances at most one step per frame of the page (seconds under software GL on 1.4M faces).
+//
+//   node bench/studio_latency.mjs --mesh ../shared/meshes/armadillo_loop2_1384k.ply
+//       [--daemon-bin build/bin/fieldspaced | --daemon HOST:PORT] [--store DIR] [--dim 2000]
+//       [--steps 300] [--interval-ms 16] [--radius-px 40] [--web-dir client/web] [--json FILE]
+//
+// Without --daemon it starts fieldspaced on a free port with --store DIR (default: a temporary
+// one); the mesh (by file name and face count) and a vector basis of dimension --dim already in the
+// store are reused, so reruns with the same --store skip the upload and the build.
+import { readFileSync, writeFileSync } from "node:fs";
+import { cpus, loadavg } from "node:os";
+import { basename, dirname, extname, join, resolve } from "node:path";
+import { fileURLToPath } from "node:url";
+import {
+  castRay, cameraRay, check, chooseBasis, cleanup, faceCentroid, launchChromium, pageProbe,
+  parseArgs, project, startDaemon, startGateway, webModules,
+} from "../tests/studio/studio_lib.mjs";
+
+const root = resolve(dirname(fileURLToPath(import.meta.url)), "..");
+const args = {
+  "web-dir": join(root, "client", "web"),
+  "daemon-bin": join(root, "build", "bin", "fieldspaced"),
+  dim: "2000", steps: "300", "interval-ms": "16", "radius-px": "40",
+  ...parseArgs(process.argv.slice(2)),
+};
+if (!args.mesh) {
+  console.error("usage: node bench/studio_latency.mjs --mesh FILE [--daemon HOST:PORT | " +
+    "--daemon-bin PATH] [--store DIR] [--dim D] [--steps N] [--interval-ms MS] [--radius-px R] " +
+    "[--web-dir DIR] [--json FILE]");
+  process.exit(2);
+}
+const dimension = Number(args.dim);
+const steps = Number(args.steps);
+const intervalMs = Number(args["interval-ms"]);
+const radiusPx = Number(args["radius-px"]);
+const log = (text) => console.error(`[bench] ${text}`);
+const load = { start: loadavg() };
+
+const { chromium, daemonClient, pb } = await webModules(args["web-dir"]);
+let address = args.daemon;
+if (!address) {
+  address = (await startDaemon(args["daemon-bin"], { store: args.store ?? null })).address;
+}
+const client = daemonClient(address);
+
+// --- The mesh and the basis, reused when the store has them. ---------------------------------
+
+async function uploadFile(path) {
+  const data = readFileSync(path);
+  const format = { ".obj": pb.MeshFormat.OBJ, ".off": pb.MeshFormat.OFF,
+    ".ply": pb.MeshFormat.PLY }[extname(path).toLowerCase()] ?? pb.MeshFormat.UNSPECIFIED;
+  const chunk = 1 << 20;
+  return client.uploadMesh((async function* () {
+    for (let offset = 0; offset < data.length || offset === 0; offset += chunk) {
+      yield { ...(offset === 0 ? { header: { name: basename(path), format,
+        totalBytes: BigInt(data.length) } } : {}),
+      offset: BigInt(offset), data: data.subarray(offset, offset + chunk) };
+    }
+  })());
+}
+
+let mesh = (await client.listMeshes({})).meshes.find((m) => m.name === basename(args.mesh));
+if (mesh === undefined) {
+  log(`uploading ${args.mesh}`);
+  mesh = await uploadFile(args.mesh);
+}
+log(`mesh ${mesh.id}: ${mesh.numFaces} faces`);
+let basis = (await client.listBases({ meshId: mesh.id })).bases.find((b) =>
+  b.field?.kind === pb.FieldKind.VECTOR && b.dimension === dimension &&
+  b.state === pb.BasisState.READY);
+let buildSeconds = null;
+if (basis === undefined) {
+  log(`building a vector basis, d = ${dimension}`);
+  const t0 = performance.now();
+  let reported = -1;
+  for await (const progress of client.buildBasis({ meshId: mesh.id,
+    field: { kind: pb.FieldKind.VECTOR }, dimension })) {
+    const percent = Math.floor(100 * progress.overallFraction);
+    if (percent >= reported + 10) {
+      reported = percent;
+      log(`build ${percent}%`);
+    }
+    if (progress.basis) basis = progress.basis;
+  }
+  buildSeconds = (performance.now() - t0) / 1000;
+}
+check(basis?.state === pb.BasisState.READY, `basis ${basis?.id} (d = ${dimension}) ready`);
+
+// --- The page: first open, then a reload (the page reopens the remembered basis itself). ------
+
+const gateway = await startGateway(args["web-dir"], ["--daemon", address]);
+const browser = await launchChromium(chromium);
+const page = await browser.newPage({ viewport: { width: 1100, height: 760 } });
+page.on("pageerror", (e) => console.error(`page error: ${e.message}`));
+page.on("console", (m) => m.type() === "error" && console.error(`page console: ${m.text()}`));
+// The design WebSocket's frames as Chromium received them (the gateway's DesignUpdates).
+const frames = [];
+page.on("websocket", (ws) => {
+  if (!ws.url().endsWith("/design")) return;
+  ws.on("framereceived", ({ payload }) => {
+    if (typeof payload !== "string") frames.push(payload.length);
+  });
+});
+const probe = pageProbe(page, client, pb);
+const markTime = () => page.evaluate(() =>
+  performance.getEntriesByName("studio:first-field-drawn")[0]?.startTime ?? null);
+
+await page.goto(gateway.url);
+await page.waitForFunction(() => window.__studio !== undefined);
+const chosenAt = await page.evaluate(() => performance.now());
+await chooseBasis(page, basis.id);
+await probe.settled(300000);
+await probe.until("the first field drawn", () =>
+  performance.getEntriesByName("studio:first-field-drawn").length > 0, null, 60000);
+const firstOpen = { fromChoiceMs: (await markTime()) - chosenAt };
+log(`first open: the field drawn ${firstOpen.fromChoiceMs.toFixed(0)} ms after choosing the basis`);
+await page.reload();
+await probe.settled(300000);
+await probe.until("the first field drawn", () =>
+  performance.getEntriesByName("studio:first-field-drawn").length > 0, null, 60000);
+// performance.now() counts from the navigation's start.
+const reload = { fromNavigationMs: await markTime() };
+log(`reload: the field drawn ${reload.fromNavigationMs.toFixed(0)} ms after navigation`);
+
+// --- Add a constraint: press on the surface near the view's centre, drag 20 px, release. -------
+
+const geometry = { vertices: [], faces: [] };
+for await (const chunk of client.getMeshGeometry({ meshId: mesh.id })) {
+  for (const v of chunk.vertices) geometry.vertices.push(v);
+  for (const f of chunk.faces) geometry.faces.push(f);
+}
+const canvasBox = await page.locator("#stage canvas").boundingBox();
+const camera = await page.evaluate(() => window.__studio.camera());
+// A ray cast here over every face (not the page's BVH): slow on 1.38M faces, so a few only.
+const hitAt = (x, y) => castRay(cameraRay(camera, x, y), geometry.vertices, geometry.faces);
+let press = null;
+for (let r = 0; press === null && r < 300; r += 10) {
+  for (let a = 0; a < 8 && press === null; a++) {
+    const x = camera.width / 2 + r * Math.cos((a * Math.PI) / 4);
+    const y = camera.height / 2 + r * Math.sin((a * Math.PI) / 4);
+    // The circle the marker is dragged around must lie on the mesh too.
+    const onMesh = [0, 1, 2, 3].every((k) => hitAt(x - radiusPx + radiusPx * Math.cos(k * Math.PI / 2),
+      y + radiusPx * Math.sin(k * Math.PI / 2)) !== null);
+    const hit = onMesh ? hitAt(x, y) : null;
+    if (hit !== null) press = { x, y, hit };
+  }
+}
+check(press !== null, "a screen point on the mesh with the drag circle on the mesh");
+const toPage = (x, y) => [canvasBox.x + x, canvasBox.y + y];
+{
+  const [x, y] = toPage(press.x, press.y);
+  await page.mouse.move(x, y);
+  await page.mouse.down();
+  await page.mouse.move(x + 10, y, { steps: 2 });
+  await page.mouse.move(x + 20, y, { steps: 2 });
+  await page.mouse.up();
+}
+let state = await probe.checkAgainstSolve("the constraint added by a drag");
+// Faces are about a pixel wide here: the page's pick (float32) may take a neighbour of the face
+// cast here; its centroid must be within 2 px of the press.
+const pressed = project(camera, faceCentroid(geometry.vertices, geometry.faces,
+  state.constraints[0]?.face ?? 0));
+check(state.constraints.length === 1 &&
+  Math.hypot(pressed[0] - press.x, pressed[1] - press.y) <= 2,
+  `the constraint is on the pressed face (${state.constraints[0]?.face}, cast here ` +
+  `${press.hit.face})`);
+
+// --- The drag: press on the marker, move it around a circle through it, N steps. --------------
+
+const marker = project(camera, faceCentroid(geometry.vertices, geometry.faces,
+  state.constraints[0].face));
+const center = [marker[0] - radiusPx, marker[1]];
+const turns = 2;
+const path = Array.from({ length: steps }, (_, i) => {
+  const angle = (2 * Math.PI * turns * (i + 1)) / steps;
+  return toPage(center[0] + radiusPx * Math.cos(angle), center[1] + radiusPx * Math.sin(angle));
+});
+const framesBefore = frames.length;
+await page.evaluate(() => {
+  // The bench's own view of the input and of the frames: each pointer move's event time, and
+  // the timestamps of the frames the page asked for (its requestAnimationFrame callbacks; a
+  // loop of our own would make Chromium produce frames the page does not need).
+  const record = { moves: [], frames: [], on: true };
+  window.__bench = record;
+  window.addEventListener("pointermove", (e) => {
+    if (record.on) record.moves.push({ timeStamp: e.timeStamp, dispatched: performance.now() });
+  }, { capture: true });
+  const raf = window.requestAnimationFrame.bind(window);
+  window.requestAnimationFrame = (callback) => raf((t) => {
+    if (record.on && record.frames.at(-1) !== t) record.frames.push(t);
+    callback(t);
+  });
+});
+{
+  const [x, y] = toPage(...marker);
+  await page.mouse.move(x, y);
+  await page.mouse.down();
+  const t0 = performance.now();
+  for (let i = 0; i < steps; i++) {
+    const wait = t0 + i * intervalMs - performance.now();
+    if (wait > 0) await new Promise((r) => setTimeout(r, wait));
+    await page.mouse.move(...path[i]);
+    if ((i + 1) % 50 === 0) log(`${i + 1} steps, ${((performance.now() - t0) / 1000).toFixed(1)} s`);
+  }
+  await page.mouse.up();
+}
+state = await probe.checkAgainstSolve(`after ${steps} drag steps`);
+const record = await page.evaluate(() => {
+  window.__bench.on = false;
+  return { moves: window.__bench.moves, frames: window.__bench.frames,
+    renderMs: window.__studio.frameTimes(), updates: window.__studio.updateLog() };
+});
+const dragFrames = frames.slice(framesBefore);
+await browser.close();
+
+// --- Figures. --------------------------------------------------------------------------------
+
+function stats(values) {
+  const v = [...values].sort((a, b) => a - b);
+  const at = (q) => v.length ? v[Math.min(v.length - 1, Math.ceil(q * v.length) - 1)] : null;
+  const mean = v.length ? v.reduce((s, x) => s + x, 0) / v.length : null;
+  return { n: v.length, mean, p50: at(0.5), p90: at(0.9), p99: at(0.99), max: v.at(-1) ?? null };
+}
+const moves = record.moves;
+const updates = record.updates.filter((u) => u.kind === "move" && moves.length &&
+  u.sent >= moves[0].dispatched);
+// The pointer event behind each edit: the last one dispatched before the edit was made.
+function eventOf(made) {
+  let lo = 0, hi = moves.length - 1, found = null;
+  while (lo <= hi) {
+    const mid = (lo + hi) >> 1;
+    if (moves[mid].dispatched <= made) [found, lo] = [moves[mid], mid + 1];
+    else hi = mid - 1;
+  }
+  return found;
+}
+const latency = [], fromDispatch = [], delivery = [], pick = [], queued = [];
+for (const u of updates) {
+  for (const made of u.made) {
+    const event = eventOf(made);
+    if (event === null) continue;
+    latency.push(u.decoded - event.timeStamp);
+    fromDispatch.push(u.decoded - event.dispatched);
+    delivery.push(event.dispatched - event.timeStamp);
+    pick.push(made - event.dispatched);
+    queued.push(u.sent - made);
+  }
+}
+const server = updates.filter((u) => u.timings);
+const intervals = record.frames.slice(1).map((t, i) => t - record.frames[i]);
+const result = {
+  bench: "studio_latency",
+  mesh: basename(args.mesh), faces: mesh.numFaces, basis: basis.id, dimension,
+  columns: basis.columns, basisBuildSeconds: buildSeconds,
+  steps, intervalMs, radiusPx,
+  pointerMoves: moves.length,
+  editsMade: latency.length,
+  updates: updates.length,
+  // The pointer event (its timeStamp: when the browser took the input) -> the field values
+  // decoded in the page.
+  latencyMs: stats(latency),
+  // The same from the moment the page's handlers got the event.
+  latencyFromDispatchMs: stats(fromDispatch),
+  breakdownMs: {
+    // Chromium dispatches pointer moves with the next animation frame: here the frame time.
+    delivery: stats(delivery),
+    pick: stats(pick),                 // handlers: the page's pick, the edit made
+    waitInPage: stats(queued),         // edit made -> sent (behind the edit in flight)
+    roundTrip: stats(updates.map((u) => u.decoded - u.sent)),
+    serverEdit: stats(server.map((u) => u.timings.editMs)),
+    serverLift: stats(server.map((u) => u.timings.liftMs)),
+    serverTotal: stats(server.map((u) => u.timings.totalMs)),
+    gatewayAndTransport: stats(server.map((u) => u.decoded - u.sent - u.timings.totalMs)),
+  },
+  bytesPerUpdate: { page: stats(updates.map((u) => u.bytes)), websocket: stats(dragFrames) },
+  frameMs: { rafInterval: stats(intervals), render: stats(record.renderMs) },
+  firstFieldMs: { fromChoosingTheBasis: firstOpen.fromChoiceMs,
+    fromNavigationOnReload: reload.fromNavigationMs },
+  solveCheck: "coefficients equal a one-shot Solve to 1e-9 relative",
+  machine: { cpus: cpus().length, model: cpus()[0]?.model ?? "", node: process.version },
+  loadAverage: { start: load.start, end: loadavg() },
+};
+const ms = (x) => (x === null ? "-" : x.toFixed(x < 10 ? 2 : 1));
+const line = (name, s) => `${name.padEnd(30)} p50 ${ms(s.p50)}  p90 ${ms(s.p90)}  p99 ${ms(s.p99)}` +
+  `  max ${ms(s.max)}  (n ${s.n})`;
+const b = result.breakdownMs;
+console.log([
+  `studio latency: ${result.mesh} (${result.faces} faces), vector d = ${dimension}, ` +
+    `${steps} drag steps every ${intervalMs} ms`,
+  `${moves.length} pointer moves, ${latency.length} edits, ${updates.length} updates ` +
+    "(moves made while an edit was in flight are coalesced)",
+  line("pointer event -> decoded (ms)", result.latencyMs),
+  line("  delivery to the page (ms)", b.delivery),
+  line("  dispatched -> decoded (ms)", result.latencyFromDispatchMs),
+  line("    pick (ms)", b.pick),
+  line("    wait in the page (ms)", b.waitInPage),
+  line("    round trip (ms)", b.roundTrip),
+  line("      server edit (ms)", b.serverEdit),
+  line("      server lift (ms)", b.serverLift),
+  line("      server total (ms)", b.serverTotal),
+  line("      gateway + transport (ms)", b.gatewayAndTransport),
+  `bytes per update: ${Math.round(result.bytesPerUpdate.page.mean ?? 0)} (page), ` +
+    `${Math.round(result.bytesPerUpdate.websocket.mean ?? 0)} (WebSocket frames, ` +
+    `${result.bytesPerUpdate.websocket.n})`,
+  line("frame interval (page, ms)", result.frameMs.rafInterval),
+  line("render call (ms)", result.frameMs.render),
+  `first field drawn: ${ms(result.firstFieldMs.fromChoosingTheBasis)} ms after choosing the ` +
+    `basis; ${ms(result.firstFieldMs.fromNavigationOnReload)} ms from navigation on a reload`,
+  ...[["pointer event", result.latencyMs], ["dispatched", result.latencyFromDispatchMs]].map(
+    ([from, s]) => `targets from ${from}: p50 <= 10 ms ${s.p50 <= 10 ? "met" : "MISSED"}, ` +
+      `p99 <= 30 ms ${s.p99 <= 30 ? "met" : "MISSED"}`),
+  `load average ${load.start.map((x) => x.toFixed(2)).join(" ")} -> ` +
+    `${result.loadAverage.end.map((x) => x.toFixed(2)).join(" ")}`,
+].join("\n"));
+if (args.json) writeFileSync(args.json, `${JSON.stringify(result, null, 2)}\n`);
+else console.log(JSON.stringify(result));
+cleanup();
+process.exit(0);
