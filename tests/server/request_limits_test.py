@@ -99,7 +99,8 @@ def main():
             for i, chunk in enumerate(chunks):
                 header = pb.UploadMeshHeader(name="slow.obj", format=pb.MESH_FORMAT_OBJ) \
                     if i == 0 else None
-                yield pb.UploadMeshRequest(header=header, offset=offset, data=chunk)
+                yield pb.UploadMeshRequest(header=header, offset=offset, data=chunk,
+                                           last=i == len(chunks) - 1)
                 offset += len(chunk)
                 time.sleep(IDLE_SECONDS * 0.6)
 
