@@ -86,9 +86,11 @@ def main():
         limit = BUDGET_MB + idle
         log("idle footprint %.0f MiB; the peak must stay under %.0f MiB" % (idle, limit))
 
+        began = time.monotonic()
+
         def checkpoint(what):
             peak = vm_mib(pid)
-            log("  %s: peak %.0f MiB" % (what, peak))
+            log("  %s: peak %.0f MiB (at %.0f s)" % (what, peak, time.monotonic() - began))
             if not d.alive():
                 raise AssertionError("the daemon died during %s" % what)
             if peak > limit:
