@@ -1,7 +1,8 @@
 """Peak RSS of basis builds in fieldspaced (issue 22, item 2: calibrating the build estimate).
 
-Usage: bench/build_memory.py DAEMON PYTHON_DIR SUBDIVISIONS FIELD:D:M:QUALITY...
-builds each basis on an icosphere of SUBDIVISIONS (5: 20,480 faces) in one daemon (2 threads,
+Usage: bench/build_memory.py DAEMON PYTHON_DIR SUBDIVISIONS|MESH_FILE FIELD:D:M:QUALITY...
+builds each basis on an icosphere of SUBDIVISIONS (5: 20,480 faces), or on a mesh file, in one
+daemon (2 threads,
 a budget of 100 GB), resetting VmHWM (/proc/PID/clear_refs) before each and deleting it after;
 prints the VmRSS before (base) and the VmHWM during each build. M = 0: the default.
 """
@@ -30,10 +31,12 @@ def reset(pid):
 work = tempfile.mkdtemp()
 d = Daemon(sys.argv[1], work + "/store", threads=2, extra=["--memory-budget-mb", "100000"]).start()
 c = fs.Client(d.address)
-text, _ = icosphere_obj(int(sys.argv[3]))
-V, F = obj_arrays(text)
-mesh = c.upload(V, F)
-print("faces", len(F), "idle", hwm(d.proc.pid))
+if sys.argv[3].isdigit():
+    V, F = obj_arrays(icosphere_obj(int(sys.argv[3]))[0])
+    mesh = c.upload(V, F)
+else:
+    mesh = c.upload(sys.argv[3])  # a mesh file
+print("faces", mesh.num_faces, "idle", hwm(d.proc.pid))
 for spec in sys.argv[4:]:
     field, dim, m, q = spec.split(":")
     reset(d.proc.pid); base = hwm(d.proc.pid)

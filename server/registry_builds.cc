@@ -22,14 +22,15 @@ namespace {
 // What building the served basis's reduced system (ServedBasis) adds to EstimateBuildPeakBytes,
 // which counts 8 d^2 bytes for the reduced matrices: the product pass's dense band accumulators,
 // 3 x 8 d bytes per output column and thread up to ReducedSystemOptions::accumulator_budget_bytes
-// (768 MiB: d = 4096 on 2 threads fills it), and, with more than 8 fields per region, the larger
-// reduced entries and factor of the regions' wider column blocks: 16 d^2 more, an envelope of the
-// peaks measured at d = 4096 and 8192, m = 16..64 (bench/RESULTS.md, Session 16).
+// (768 MiB: d = 4096 on 2 threads fills it), and, with more than 8 fields per region, what the
+// regions' wider column blocks add: 20 d^2 more, an envelope of the peaks measured at d = 4096 and
+// 8192, m = 16..64, on 20k to 269k faces (within 11% on bunny_70k at m = 64; bench/RESULTS.md,
+// Session 16).
 int64_t ReducedAssemblyBytes(int64_t d, int32_t fields_per_region, int32_t threads) {
   const int64_t resolved = threads > 0 ? threads : tbb::this_task_arena::max_concurrency();
   const int64_t accumulators =
       std::min<int64_t>(ReducedSystemOptions().accumulator_budget_bytes, 24 * resolved * d * d);
-  return accumulators + (fields_per_region > 8 ? 16 * d * d : 0);
+  return accumulators + (fields_per_region > 8 ? 20 * d * d : 0);
 }
 
 }  // namespace
