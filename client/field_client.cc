@@ -172,13 +172,15 @@ absl::StatusOr<v1::MeshInfo> FieldClient::Upload(
   *request.mutable_header() = header;
   uint64_t offset = 0;
   bool more = true;
-  for (bool first = true; more; first = false) {
+  // The last message is marked (it may be empty): the server stores nothing without the mark or
+  // an announced size, so a stream cut short is never taken for a whole one.
+  while (more) {
     std::string data;
     more = next_chunk(&data);
-    if (data.empty() && !first) break;
     request.set_offset(offset);
     offset += data.size();
     request.set_data(std::move(data));
+    request.set_last(!more);
     if (!writer->Write(request)) break;  // the server ended the call: Finish tells why
     request.clear_header();
   }

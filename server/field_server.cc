@@ -6,6 +6,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -23,6 +24,7 @@
 #include "grpc/health/v1/health.pb.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
+#include "grpcpp/resource_quota.h"
 #include "grpcpp/security/server_credentials.h"
 #include "grpcpp/server.h"
 #include "grpcpp/server_builder.h"
@@ -96,6 +98,10 @@ bool IsLoopbackListenAddress(const std::string& listen) {
     return IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127;
   }
   return false;
+}
+
+int64_t TransportQuotaBytes(int64_t memory_budget_mb) {
+  return std::max<int64_t>((memory_budget_mb << 20) / 4, int64_t{32} << 20);
 }
 
 absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServerOptions& options) {
@@ -199,6 +205,12 @@ absl::StatusOr<std::unique_ptr<FieldServer>> FieldServer::Start(const FieldServe
     interceptors.push_back(NewWatchCounterFactory(watches));
     builder.experimental().SetInterceptorCreators(std::move(interceptors));
   }
+  // The transport's memory (its read buffers and the request messages it assembles before a
+  // handler runs, and so before any admission) comes from a resource quota of
+  // TransportQuotaBytes; when it runs short, gRPC shrinks its windows and stops reading.
+  grpc::ResourceQuota transport_quota("fieldspaced transport");
+  transport_quota.Resize(static_cast<size_t>(TransportQuotaBytes(options.memory_budget_mb)));
+  builder.SetResourceQuota(transport_quota);
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_mb << 20));
   builder.SetMaxSendMessageSize(static_cast<int>(options.max_message_mb << 20));
   s->server_ = builder.BuildAndStart();

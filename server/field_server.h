@@ -53,6 +53,11 @@ struct FieldServerOptions {
   Lease::Options lease;   // shared store: build lease heartbeat and staleness
 };
 
+// The gRPC transport's share of --memory-budget-mb (a resource quota: its read buffers and the
+// request messages it holds before a handler runs): a quarter, at least 32 MiB. The registry
+// admits the rest.
+int64_t TransportQuotaBytes(int64_t memory_budget_mb);
+
 // The daemon: store + registry + compute pool + gRPC server with FieldSpace, server reflection and
 // grpc.health.v1.Health.
 class FieldServer {

@@ -10,6 +10,7 @@
 #include "core/common/status_macros.h"
 #include "core/mesh/mesh_io.h"
 #include "server/data_root.h"
+#include "server/mesh_intake.h"
 #include "server/record_convert.h"
 
 namespace fieldspace::server {
@@ -48,16 +49,17 @@ absl::Status LoadMesh(const HandlerContext& ctx, const v1::LoadMeshRequest& requ
                       v1::MeshInfo* response) {
   RETURN_IF_ERROR(NeedsRegistry(ctx));
   ASSIGN_OR_RETURN(ReadableFile file, OpenDataFile(ctx.options->data_root, request.path()));
-  // The same size limit as an upload, and the same memory: the bytes and the parsed arrays.
+  // The same size limit as an upload, and the same memory: the bytes, the parsed arrays and
+  // their validation (MeshIntake).
   MeshReadOptions read;
   read.max_file_bytes = ctx.options->max_upload_bytes;
-  ASSIGN_OR_RETURN(WorkGrant grant,
-                   ctx.AdmitWork(2 * std::min(file.size, read.max_file_bytes), "this LoadMesh"));
+  const int64_t text_bytes = std::min(file.size, read.max_file_bytes);
+  MeshIntake intake(ctx.registry, "this LoadMesh");
+  RETURN_IF_ERROR(intake.HoldAtLeast(text_bytes));
+  intake.AdmitArraysOf(&read, text_bytes);
   ASSIGN_OR_RETURN(MeshReadResult parsed, ReadMeshFile(std::move(file), request.path(), read));
   const std::string name = request.name().empty() ? request.path() : request.name();
-  ASSIGN_OR_RETURN(MeshRecord record,
-                   ctx.registry->AddMesh(std::move(parsed.arrays), name,
-                                         static_cast<int32_t>(parsed.polygons_triangulated)));
+  ASSIGN_OR_RETURN(MeshRecord record, intake.Add(std::move(parsed), name));
   MeshInfoFromRecord(record, ctx.registry->IsMeshLoaded(record.id), response);
   return absl::OkStatus();
 }

@@ -1,6 +1,7 @@
 // Registry: basis builds (ids, starting, running, cancelling). The rest of the registry is in
 // registry.cc.
 
+#include <algorithm>
 #include <chrono>
 #include <iostream>
 #include <thread>
@@ -9,11 +10,30 @@
 #include "absl/strings/str_cat.h"
 #include "core/basis/basis_io.h"
 #include "core/common/status_macros.h"
+#include "core/subspace/reduced_system.h"
 #include "server/hash.h"
 #include "server/registry.h"
 #include "server/shown_text.h"
+#include "tbb/task_arena.h"
 
 namespace fieldspace::server {
+namespace {
+
+// What building the served basis's reduced system (ServedBasis) adds to EstimateBuildPeakBytes,
+// which counts 8 d^2 bytes for the reduced matrices: the product pass's dense band accumulators,
+// 3 x 8 d bytes per output column and thread up to ReducedSystemOptions::accumulator_budget_bytes
+// (768 MiB: d = 4096 on 2 threads fills it), and, with more than 8 fields per region, what the
+// regions' wider column blocks add: 20 d^2 more, an envelope of the peaks measured at d = 4096 and
+// 8192, m = 16..64, on 20k to 269k faces (within 11% on bunny_70k at m = 64; bench/RESULTS.md,
+// Session 16).
+int64_t ReducedAssemblyBytes(int64_t d, int32_t fields_per_region, int32_t threads) {
+  const int64_t resolved = threads > 0 ? threads : tbb::this_task_arena::max_concurrency();
+  const int64_t accumulators =
+      std::min<int64_t>(ReducedSystemOptions().accumulator_budget_bytes, 24 * resolved * d * d);
+  return accumulators + (fields_per_region > 8 ? 20 * d * d : 0);
+}
+
+}  // namespace
 
 std::string Registry::BasisIdFor(const BasisKey& key) {
   Hasher hasher;
@@ -115,11 +135,13 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
   }
   ASSIGN_OR_RETURN(
       WorkGrant grant,
-      AdmitWorkLocked(EstimateBuildPeakBytes(
-                          mesh.num_faces, key.field, key.dimension, key.sigma, key.kernel_columns,
-                          key.coarse_dimension > 0 || key.quality != BasisQuality::kPaper,
-                          key.quality == BasisQuality::kSmooth, options_.build_threads),
-                      "this basis build"));
+      AdmitWorkLocked(
+          EstimateBuildPeakBytes(mesh.num_faces, key.field, key.dimension, key.sigma,
+                                 key.kernel_columns,
+                                 key.coarse_dimension > 0 || key.quality != BasisQuality::kPaper,
+                                 key.quality == BasisQuality::kSmooth, options_.build_threads) +
+              ReducedAssemblyBytes(key.dimension, key.fields_per_region, options_.build_threads),
+          "this basis build"));
   auto job = std::make_shared<BuildJob>(pending);
   const bool submitted = pool_->Submit(
       ComputePool::Lane::kBuild, [this, job, request = std::move(request),

@@ -13,6 +13,7 @@
 #include "core/common/status_macros.h"
 #include "core/mesh/mesh_io.h"
 #include "grpcpp/alarm.h"
+#include "server/mesh_intake.h"
 #include "server/proto_convert.h"
 #include "server/reactors.h"
 #include "server/record_convert.h"
@@ -34,7 +35,10 @@ constexpr uint32_t kMessageCompressedFlag = 0x80000000u;
 // UploadMesh: accumulates in-order chunks, then parses and registers on the pool. Raw: a message
 // that does not parse ends the upload with INVALID_ARGUMENT (a typed stream would see it as the
 // end of the upload and store what came before). Only a clean half-close after well-formed
-// messages commits: a cancelled call, a reset stream or a closed connection stores nothing (End).
+// messages commits: a cancelled call, a reset stream or a closed connection stores nothing (End),
+// and neither does one whose size was never announced and whose last message was not marked
+// `last` (gRPC drops a truncated final message silently, so nothing else tells it from a whole
+// upload).
 //
 // An upload idle for options().upload_idle_timeout (no message, before the client has closed its
 // side) is ended with DEADLINE_EXCEEDED: its memory reservation is released and nothing is stored.
@@ -202,7 +206,11 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, pu
       if (header_.total_bytes() > 0) data_.reserve(std::min(header_.total_bytes(), kMaxReserve));
     } else if (request_.has_header()) {
       return absl::InvalidArgumentError("only the first UploadMeshRequest may carry a header");
+    } else if (saw_last_) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "message ", messages_, " of the UploadMesh stream follows the one marked last"));
     }
+    saw_last_ = request_.last();
     if (request_.offset() != data_.size()) {
       return absl::InvalidArgumentError(
           absl::StrCat("out-of-order chunk: offset ", request_.offset(), ", expected ",
@@ -238,6 +246,14 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, pu
       FinishOnce(absl::InvalidArgumentError("empty upload: no header was sent"));
       return;
     }
+    if (header_.total_bytes() == 0 && header_.format() != v1::MESH_FORMAT_RAW && !saw_last_) {
+      FinishOnce(absl::InvalidArgumentError(absl::StrCat(
+          "the upload ended after ", data_.size(),
+          " bytes without a message marked last, and its header announced no total_bytes: an "
+          "upload cut short looks the same, so nothing was stored (announce total_bytes or mark "
+          "the last message)")));
+      return;
+    }
     if (header_.total_bytes() > 0 && header_.total_bytes() != data_.size()) {
       FinishOnce(absl::InvalidArgumentError(absl::StrCat("upload ended after ", data_.size(),
                                                          " bytes; the header announced ",
@@ -270,6 +286,9 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, pu
   }
 
   absl::Status Register() {
+    // The received bytes' grant goes on to cover their parse and validation.
+    MeshIntake intake(service_->registry(), "this upload", std::move(grant_));
+    const int64_t text_bytes = static_cast<int64_t>(data_.capacity());
     MeshReadResult parsed;
     if (header_.format() == v1::MESH_FORMAT_RAW) {
       const int64_t nv = header_.num_vertices(), nf = header_.num_faces();
@@ -278,6 +297,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, pu
                                                        nv, " vertices and ", nf, " faces need ",
                                                        24 * nv + 12 * nf));
       }
+      RETURN_IF_ERROR(intake.HoldAtLeast(text_bytes + 24 * nv + 12 * nf));
       parsed.arrays.vertices.resize(nv, 3);
       parsed.arrays.faces.resize(nf, 3);
       std::memcpy(parsed.arrays.vertices.data(), data_.data(), 24 * nv);
@@ -286,14 +306,14 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, pu
       const MeshFormat format = header_.format() == v1::MESH_FORMAT_OBJ   ? MeshFormat::kObj
                                 : header_.format() == v1::MESH_FORMAT_OFF ? MeshFormat::kOff
                                                                           : MeshFormat::kPly;
-      ASSIGN_OR_RETURN(parsed, ReadMesh(data_, format));
+      MeshReadOptions read;
+      intake.AdmitArraysOf(&read, text_bytes);
+      ASSIGN_OR_RETURN(parsed, ReadMesh(data_, format, read));
     }
     std::string().swap(data_);  // the parsed arrays replace the bytes
     // The last point where a cancelled upload can be dropped.
     if (cancelled_.load()) return Aborted();
-    ASSIGN_OR_RETURN(MeshRecord record, service_->registry()->AddMesh(
-                                            std::move(parsed.arrays), header_.name(),
-                                            static_cast<int32_t>(parsed.polygons_triangulated)));
+    ASSIGN_OR_RETURN(MeshRecord record, intake.Add(std::move(parsed), header_.name()));
     v1::MeshInfo info;
     MeshInfoFromRecord(record, service_->registry()->IsMeshLoaded(record.id), &info);
     return SerializeToBuffer(info, response_);
@@ -307,6 +327,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer>, pu
   v1::UploadMeshRequest request_;
   v1::UploadMeshHeader header_;
   bool have_header_ = false;
+  bool saw_last_ = false;  // a message marked last has come
   std::string data_;
   WorkGrant grant_;  // the upload's admitted memory (Admit)
   std::atomic<bool> cancelled_{false};

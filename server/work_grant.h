@@ -5,6 +5,7 @@
 // session), admitted against the daemon's memory budget (--memory-budget-mb) together with the
 // loaded meshes and bases, and counted while its WorkGrant lives.
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <utility>
@@ -47,6 +48,12 @@ class WorkGrant {
     if (account_ == nullptr) account_ = more.account_;
     bytes_ += std::exchange(more.bytes_, 0);
     more.account_ = nullptr;
+  }
+  // Gives back what exceeds `bytes` (no-op if it holds no more).
+  void ShrinkTo(int64_t bytes) {
+    if (account_ == nullptr || bytes >= bytes_) return;
+    account_->ReleaseWork(bytes_ - std::max<int64_t>(bytes, 0));
+    bytes_ = std::max<int64_t>(bytes, 0);
   }
 
  private:

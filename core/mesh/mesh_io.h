@@ -2,6 +2,7 @@
 #define FIELDSPACE_CORE_MESH_MESH_IO_H_
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -40,12 +41,27 @@ struct MeshReadOptions {
   int64_t max_faces = int64_t{1} << 27;
   // ReadMeshFile only: larger files are ResourceExhausted (checked while reading).
   int64_t max_file_bytes = int64_t{1} << 33;
+  // Called before the reader allocates or grows its vertex and triangle arrays, with the bytes
+  // they will then hold together (their capacity: up to twice their contents while they grow);
+  // a non-OK status ends the read with that status before the allocation. For admitting the
+  // parse's memory against a budget (a polygon of n corners becomes n - 2 triangles of 12 bytes,
+  // so the arrays may outgrow the text several times). Unset: no check.
+  std::function<absl::Status(int64_t bytes)> reserve_memory;
 };
 
 struct MeshReadResult {
   MeshArrays arrays;
   int64_t polygons_triangulated = 0;  // input polygons with > 3 corners that were fanned
 };
+
+// An upper bound of the bytes TriangleMesh::Create holds at its peak for arrays of `num_vertices`
+// vertices and `num_faces` faces, the arrays included (for admitting a read mesh against a memory
+// budget): the per-face geometry, the half-edge buckets and the edge tables live at once, about
+// 190 bytes a face, plus the vertex remapping. Measured 210 bytes a face (vertices at #F / 2) for a
+// 4M-face upload to the daemon, its store write included (bench/RESULTS.md, Session 16).
+inline int64_t CreateMeshPeakBytes(int64_t num_vertices, int64_t num_faces) {
+  return 200 * num_faces + 64 * num_vertices;
+}
 
 // Format from a file name's extension (.obj, .off, .ply, case-insensitive). InvalidArgument for
 // any other extension.

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <string>
 #include <system_error>
@@ -139,6 +140,24 @@ struct LineCursor {
 // Message for a failed LineCursor::Number() call reading `what`.
 std::string NumberProblem(Num st, LineCursor& cur, absl::string_view what);
 
+// The bytes of the arrays a reader fills, reported to MeshReadOptions::reserve_memory before each
+// allocation that grows them (so that a caller can refuse it before it is made).
+class ArrayMemory {
+ public:
+  explicit ArrayMemory(const MeshReadOptions& options) : reserve_(options.reserve_memory) {}
+
+  // One of the arrays goes from `old_bytes` to `new_bytes` (the reader allocates after an OK).
+  absl::Status Resize(int64_t old_bytes, int64_t new_bytes) {
+    total_ += new_bytes - old_bytes;
+    if (new_bytes <= old_bytes || !reserve_) return absl::OkStatus();
+    return reserve_(total_);
+  }
+
+ private:
+  const std::function<absl::Status(int64_t)>& reserve_;
+  int64_t total_ = 0;
+};
+
 // Appends rows to a row-major #rows x 3 Eigen matrix, growing it geometrically. Rows are written
 // straight into the matrix the result returns: Eigen's conservativeResize on the row count of a
 // row-major matrix is a realloc, so neither growth nor the final trim copies through a second
@@ -148,25 +167,44 @@ class RowBuffer {
  public:
   using Scalar = typename Matrix::Scalar;
 
-  void Reserve(int64_t rows) {
-    if (rows > matrix_.rows()) matrix_.conservativeResize(rows, 3);
+  explicit RowBuffer(ArrayMemory& memory) : memory_(memory) {}
+
+  absl::Status Reserve(int64_t rows) {
+    if (rows > matrix_.rows()) return Grow(rows);
+    return absl::OkStatus();
   }
-  void Append(Scalar a, Scalar b, Scalar c) {
-    if (size_ == matrix_.rows()) matrix_.conservativeResize(std::max<int64_t>(64, 2 * size_), 3);
+  absl::Status Append(Scalar a, Scalar b, Scalar c) {
+    if (size_ == matrix_.rows()) {
+      if (absl::Status st = Grow(std::max<int64_t>(64, 2 * size_)); !st.ok()) return st;
+    }
     Scalar* row = matrix_.data() + 3 * size_;
     row[0] = a;
     row[1] = b;
     row[2] = c;
     ++size_;
+    return absl::OkStatus();
   }
   int64_t size() const { return size_; }
   Matrix Take() {
-    if (matrix_.rows() != size_) matrix_.conservativeResize(size_, 3);
+    if (matrix_.rows() != size_) {
+      memory_.Resize(RowBytes(matrix_.rows()), RowBytes(size_)).IgnoreError();  // a shrink
+      matrix_.conservativeResize(size_, 3);
+    }
     size_ = 0;
     return std::move(matrix_);
   }
 
  private:
+  static int64_t RowBytes(int64_t rows) { return rows * 3 * int64_t{sizeof(Scalar)}; }
+  absl::Status Grow(int64_t rows) {
+    if (absl::Status st = memory_.Resize(RowBytes(matrix_.rows()), RowBytes(rows)); !st.ok()) {
+      return st;
+    }
+    matrix_.conservativeResize(rows, 3);
+    return absl::OkStatus();
+  }
+
+  ArrayMemory& memory_;
   Matrix matrix_;
   int64_t size_ = 0;
 };
@@ -175,10 +213,10 @@ class RowBuffer {
 // treats polygons the same way.
 class TriangleSink {
  public:
-  TriangleSink(const MeshReadOptions& options, absl::string_view label)
-      : options_(options), label_(label) {}
+  TriangleSink(const MeshReadOptions& options, absl::string_view label, ArrayMemory& memory)
+      : options_(options), label_(label), faces_(memory) {}
 
-  void Reserve(int64_t triangles) { faces_.Reserve(triangles); }
+  absl::Status Reserve(int64_t triangles) { return faces_.Reserve(triangles); }
 
   // Adds a face given by its (already validated, zero-based) corners. `where` starts its error
   // messages ("OBJ line 12", "PLY: face 7").
@@ -196,15 +234,18 @@ class TriangleSink {
     if (faces_.size() + (n - 2) > options_.max_faces) {
       return TooManyFaces(label_, options_.max_faces);
     }
-    for (int64_t k = 1; k + 1 < n; ++k) faces_.Append(corners[0], corners[k], corners[k + 1]);
+    for (int64_t k = 1; k + 1 < n; ++k) {
+      if (absl::Status st = faces_.Append(corners[0], corners[k], corners[k + 1]); !st.ok()) {
+        return st;
+      }
+    }
     return absl::OkStatus();
   }
 
   // The common case without building a location string.
   absl::Status AddTriangle(int32_t a, int32_t b, int32_t c) {
     if (faces_.size() >= options_.max_faces) return TooManyFaces(label_, options_.max_faces);
-    faces_.Append(a, b, c);
-    return absl::OkStatus();
+    return faces_.Append(a, b, c);
   }
 
   int64_t polygons() const { return polygons_; }

@@ -55,8 +55,9 @@ Num ParseObjCorner(LineCursor& cur, int64_t* v) {
 
 absl::StatusOr<MeshReadResult> ParseObj(absl::string_view data, const MeshReadOptions& options,
                                         absl::string_view label) {
-  RowBuffer<VertexMatrix> vertices;
-  TriangleSink sink(options, label);
+  ArrayMemory memory(options);
+  RowBuffer<VertexMatrix> vertices(memory);
+  TriangleSink sink(options, label, memory);
   std::vector<int32_t> corners;
   LineReader lines(data);
   absl::string_view line;
@@ -76,7 +77,7 @@ absl::StatusOr<MeshReadResult> ParseObj(absl::string_view data, const MeshReadOp
           return LineError(label, lines.line_number(), NumberProblem(st, cur, "vertex coordinate"));
         }
       }
-      vertices.Append(xyz[0], xyz[1], xyz[2]);
+      RETURN_IF_ERROR(vertices.Append(xyz[0], xyz[1], xyz[2]));
     } else if (kw == "f") {
       corners.clear();
       while (!cur.AtEnd() && *cur.p != '#') {

@@ -84,6 +84,8 @@ absl::StatusOr<MeshReadResult> ParseOff(absl::string_view data, const MeshReadOp
 
   MeshReadResult result;
   VertexMatrix& V = result.arrays.vertices;
+  ArrayMemory memory(options);
+  RETURN_IF_ERROR(memory.Resize(0, num_vertices * 3 * int64_t{sizeof(double)}));
   V.resize(num_vertices, 3);
   for (int64_t i = 0; i < num_vertices; ++i) {
     if (!NextOffLine(lines, &line)) {
@@ -96,8 +98,8 @@ absl::StatusOr<MeshReadResult> ParseOff(absl::string_view data, const MeshReadOp
       }
     }
   }
-  TriangleSink sink(options, label);
-  sink.Reserve(num_faces);
+  TriangleSink sink(options, label, memory);
+  RETURN_IF_ERROR(sink.Reserve(num_faces));
   std::vector<int32_t> corners;
   for (int64_t f = 0; f < num_faces; ++f) {
     if (!NextOffLine(lines, &line)) {

@@ -596,9 +596,11 @@ absl::StatusOr<MeshReadResult> ParsePly(absl::string_view data, const MeshReadOp
   RETURN_IF_ERROR(CheckPlySizes(header, static_cast<int64_t>(body.size()), label));
 
   MeshReadResult result;
+  ArrayMemory memory(options);
+  RETURN_IF_ERROR(memory.Resize(0, num_vertices * 3 * int64_t{sizeof(double)}));
   result.arrays.vertices.resize(num_vertices, 3);
-  TriangleSink sink(options, label);
-  sink.Reserve(num_faces);
+  TriangleSink sink(options, label, memory);
+  RETURN_IF_ERROR(sink.Reserve(num_faces));
   if (header.encoding == PlyEncoding::kAscii) {
     RETURN_IF_ERROR(ReadPlyAscii(header, body, label, sink, result.arrays.vertices));
   } else {

@@ -11,8 +11,9 @@ ended in each way a client can end it without finishing it:
 - a message whose gRPC compressed flag is set on a call that negotiated no compression;
 - a truncated last message followed by END_STREAM. gRPC (1.51) drops the partial message without
   telling the server, so the stream looks cleanly half-closed: with total_bytes announced the server
-  refuses it (INVALID_ARGUMENT); without, nothing can tell it from a complete upload, and the test
-  asserts only that what is stored is the complete messages' bytes, never the truncated one.
+  refuses it as short; without, the message marked `last` never arrived, and the server refuses an
+  unannounced upload that half-closes unmarked (INVALID_ARGUMENT both ways, nothing stored). A
+  stream that half-closes after complete but unmarked messages is refused the same way.
 After each: ListMeshes unchanged, the client saw an error, and a complete upload then works.
 A Design stream whose last edit is truncated answers only the complete edits (no edit is made of a
 partial message) and the session's next stream works.
@@ -135,8 +136,8 @@ def main():
     part2 = "".join(lines[cut:]).encode()
     assert len(part1) + len(part2) < 60000  # within HTTP/2's initial flow-control window
 
-    def message(offset, data, total=0, with_header=True):
-        request = pb.UploadMeshRequest(offset=offset, data=data)
+    def message(offset, data, total=0, with_header=True, last=False):
+        request = pb.UploadMeshRequest(offset=offset, data=data, last=last)
         if with_header:
             request.header.CopyFrom(pb.UploadMeshHeader(name="aborted.obj",
                                                         format=pb.MESH_FORMAT_OBJ,
@@ -144,7 +145,7 @@ def main():
         return request.SerializeToString()
 
     m1 = grpc_frame(message(0, part1))
-    m2 = grpc_frame(message(len(part1), part2, with_header=False))
+    m2 = grpc_frame(message(len(part1), part2, with_header=False, last=True))
     failures = []
 
     daemons = []
@@ -169,12 +170,22 @@ def main():
 
         # The prefix on its own is a valid mesh: a server that committed it would list it.
         prefix_only = RawCall(d.address, UPLOAD)
-        prefix_only.send(m1, end_stream=True)
+        prefix_only.send(grpc_frame(message(0, part1, last=True)), end_stream=True)
         status, msg, _ = prefix_only.wait_end()
         check(status == 0, "the first message alone is a valid upload: %s %s" % (status, msg))
         prefix_id = mesh_ids()
         client.delete_mesh(prefix_id[0])
         prefix_only.close()
+
+        # The same message unmarked, then END_STREAM: nothing says the upload is whole.
+        before = mesh_ids()
+        call = RawCall(d.address, UPLOAD)
+        call.send(m1, end_stream=True)
+        status, msg, _ = call.wait_end()
+        call.close()
+        check(status == grpc.StatusCode.INVALID_ARGUMENT.value[0] and "marked last" in msg,
+              "unannounced, unmarked half-close: grpc-status %s (%s)" % (status, msg))
+        expect_nothing_stored("unannounced, unmarked half-close", before)
 
         for round_ in range(3):
             # grpcio cancels mid-stream (the API's own abort).
@@ -246,19 +257,18 @@ def main():
                                 (round_, status, msg))
             expect_nothing_stored("truncated, announced %d" % round_, before)
 
-            # Unannounced: never the truncated message's bytes (gRPC drops them unseen).
-            call = RawCall(d.address, UPLOAD)
-            call.send(m1)
-            call.send(m2[:len(m2) // 2], end_stream=True)
-            status, msg, _ = call.wait_end()
-            call.close()
-            after = mesh_ids()
-            stored = sorted(set(after) - set(before))
-            check(stored in ([], prefix_id), "truncated, unannounced: stored %s, not the complete "
-                  "messages' mesh %s (status %s %s)" % (stored, prefix_id, status, msg))
-            for mesh_id in stored:
-                client.delete_mesh(mesh_id)
-            log("truncated, unannounced: grpc-status %s, stored %s" % (status, stored))
+            # Unannounced: the truncated message was the one marked last; gRPC drops it unseen,
+            # so the server sees an unmarked half-close and refuses it.
+            for cut in (len(m2) // 2, len(m2) - 1, 3):
+                call = RawCall(d.address, UPLOAD)
+                call.send(m1)
+                call.send(m2[:cut], end_stream=True)
+                status, msg, _ = call.wait_end()
+                call.close()
+                if status != grpc.StatusCode.INVALID_ARGUMENT.value[0]:
+                    failures.append("truncated at %d, unannounced %d: grpc-status %s (%s)" %
+                                    (cut, round_, status, msg))
+                expect_nothing_stored("truncated at %d, unannounced %d" % (cut, round_), before)
 
         # The daemon serves on: a complete upload over raw frames and over grpcio.
         before = mesh_ids()

@@ -288,7 +288,7 @@ def main():
                                              "fieldspace.v1.MeshInfo")
         ico = ico_text.encode()
         msgs = [UploadReq(header={"name": "ico.obj"}, offset=0, data=ico[:1000]),
-                UploadReq(offset=1000, data=ico[1000:])]
+                UploadReq(offset=1000, data=ico[1000:], last=True)]
         info = upload(iter(msgs), timeout=30)
         check(info.num_faces == 320, "upload via grpcio")
         try:

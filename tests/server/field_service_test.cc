@@ -90,6 +90,7 @@ std::vector<v1::UploadMeshRequest> Chunked(const std::string& bytes, v1::UploadM
     r.set_offset(offset);
     r.set_data(bytes.substr(offset, chunk));
     offset += r.data().size();
+    r.set_last(offset >= bytes.size());
     out.push_back(std::move(r));
   } while (offset < bytes.size());
   return out;
@@ -359,6 +360,24 @@ TEST_F(ServiceTest, UploadErrors) {
   // One message above the 4 MiB message limit: gRPC refuses it.
   EXPECT_EQ(code(Chunked(std::string(5 << 20, ' '), obj_header, 5 << 20)),
             grpc::StatusCode::RESOURCE_EXHAUSTED);
+  // An upload that announces no size must mark its last message: unmarked it stores nothing,
+  // and nothing may follow the marked one.
+  const std::string triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+  std::vector<v1::UploadMeshRequest> marked = Chunked(triangle, obj_header, 10);
+  ASSERT_GT(marked.size(), 2u);
+  auto unmarked = marked;
+  unmarked.back().set_last(false);
+  Uploaded refused = Upload(stub(), unmarked);
+  EXPECT_EQ(refused.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(refused.status.error_message(), HasSubstr("without a message marked last"));
+  auto early = marked;
+  early[1].set_last(true);
+  Uploaded after_last = Upload(stub(), early);
+  EXPECT_EQ(after_last.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(after_last.status.error_message(), HasSubstr("follows the one marked last"));
+  Uploaded whole = Upload(stub(), marked);
+  ASSERT_TRUE(whole.status.ok()) << whole.status.error_message();
+  EXPECT_EQ(whole.info.num_faces(), 1);
   // Unknown format, malformed text, invalid geometry.
   v1::UploadMeshHeader unnamed;
   unnamed.set_name("mesh.stl");

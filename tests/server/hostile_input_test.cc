@@ -426,6 +426,7 @@ TEST_F(HostileInputTest, UploadWithAnUnparseableMessageStoresNothing) {
     }
     request.set_offset(offset);
     request.set_data(part);
+    request.set_last(&part == &parts.back());
     offset += part.size();
     messages.push_back(request.SerializeAsString());
   }

@@ -99,7 +99,8 @@ def main():
             for i, chunk in enumerate(chunks):
                 header = pb.UploadMeshHeader(name="slow.obj", format=pb.MESH_FORMAT_OBJ) \
                     if i == 0 else None
-                yield pb.UploadMeshRequest(header=header, offset=offset, data=chunk)
+                yield pb.UploadMeshRequest(header=header, offset=offset, data=chunk,
+                                           last=i == len(chunks) - 1)
                 offset += len(chunk)
                 time.sleep(IDLE_SECONDS * 0.6)
 
@@ -115,12 +116,12 @@ def main():
         streams = []
         for seed in (1, 2):
             request = pb.BuildBasisRequest(mesh_id=big.id, field=pb.FieldType(
-                kind=pb.FIELD_KIND_VECTOR), dimension=3000, seed=seed)
+                kind=pb.FIELD_KIND_VECTOR), dimension=1500, seed=seed)
             stream = client._stub.BuildBasis(request, timeout=300)
             first = next(stream)
             streams.append((request, stream, first))
         try:
-            client.build(big.id, "vector", 3000, seed=3, progress=False)
+            client.build(big.id, "vector", 1500, seed=3, progress=False)
             raise AssertionError("a third build was accepted with --max-queued-builds 2")
         except fs.ResourceExhausted as e:
             check("--max-queued-builds" in str(e), "third build: %s" % e)
@@ -133,7 +134,7 @@ def main():
         for _, stream, _ in streams:
             for _ in stream:
                 pass
-        built = client.build(big.id, "vector", 3000, seed=3, progress=False)
+        built = client.build(big.id, "vector", 1500, seed=3, progress=False)
         check(built.startswith("b-"), "build after the queue drained: %r" % built)
         log("ok: builds accepted again once the queue drained")
         check(d.stop() == 0, "daemon did not exit 0 on SIGTERM")

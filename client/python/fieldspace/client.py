@@ -263,6 +263,8 @@ class Client:
 
     def _upload(self, what, header, pieces, timeout):
         def requests():
+            # The last message is marked (an empty one after the data): the server stores
+            # nothing without the mark or an announced size, so a cut-off upload never counts.
             offset = 0
             first = True
             for data in pieces:
@@ -270,8 +272,8 @@ class Client:
                                            data=data)
                 first = False
                 offset += len(data)
-            if first:
-                yield pb.UploadMeshRequest(header=header)
+            yield pb.UploadMeshRequest(header=header if first else None, offset=offset,
+                                       last=True)
         return MeshInfo.from_proto(self._unary(what, self._stub.UploadMesh, requests(), timeout))
 
     def load(self, path, name="", timeout=_DEFAULT):

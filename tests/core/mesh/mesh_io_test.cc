@@ -988,5 +988,70 @@ TEST(MeshTextTest, ObjVariantsHaveTheirStatements) {
       off, StartsWith(absl::StrCat("OFF\n", a.vertices.rows() + 3, " ", a.faces.rows(), " 0\n")));
 }
 
+// MeshReadOptions::reserve_memory sees the arrays' bytes before each allocation: their final
+// capacity covers what the read returns, a polygon fan's triangles outgrow its text, and a refusal
+// ends the read with the callback's status, in every format.
+TEST(MeshReadMemoryTest, ReserveMemoryCoversTheArraysAndCanRefuseThem) {
+  // One 1000-gon over 1000 vertices: 998 triangles.
+  std::string fan;
+  for (int i = 0; i < 1000; ++i)
+    absl::StrAppend(&fan, "v ", std::cos(i * 0.00628), " ", std::sin(i * 0.00628), " 0\n");
+  absl::StrAppend(&fan, "f");
+  for (int i = 1; i <= 1000; ++i) absl::StrAppend(&fan, " ", i);
+  absl::StrAppend(&fan, "\n");
+  int64_t last = 0, calls = 0;
+  MeshReadOptions options;
+  options.reserve_memory = [&](int64_t bytes) {
+    EXPECT_GT(bytes, last);  // called only when the arrays grow
+    last = bytes;
+    ++calls;
+    return absl::OkStatus();
+  };
+  absl::StatusOr<MeshReadResult> read = ReadMesh(fan, MeshFormat::kObj, options);
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(read->arrays.faces.rows(), 998);
+  EXPECT_GE(last, 24 * 1000 + 12 * 998);
+  EXPECT_LE(last, 2 * (24 * 1000 + 12 * 998) + 2 * 12 * 64);
+  EXPECT_GT(calls, 2);
+
+  const MeshArrays a = testing::CatalogueArrays("Torus");
+  std::string ply = absl::StrCat("ply\nformat ascii 1.0\nelement vertex ", a.vertices.rows(),
+                                 "\nproperty double x\nproperty double y\nproperty double z\n"
+                                 "element face ",
+                                 a.faces.rows(),
+                                 "\nproperty list uchar int vertex_indices\n"
+                                 "end_header\n");
+  for (int64_t v = 0; v < a.vertices.rows(); ++v) {
+    absl::StrAppend(&ply, a.vertices(v, 0), " ", a.vertices(v, 1), " ", a.vertices(v, 2), "\n");
+  }
+  for (int64_t f = 0; f < a.faces.rows(); ++f) {
+    absl::StrAppend(&ply, "3 ", a.faces(f, 0), " ", a.faces(f, 1), " ", a.faces(f, 2), "\n");
+  }
+  for (const char* format : {"obj", "off", "ply"}) {
+    const std::string text = std::string(format) == "ply" ? ply : testing::MeshText(a, format, {});
+    const MeshFormat f = *MeshFormatFromPath(absl::StrCat("x.", format));
+    MeshReadOptions refuse;
+    int64_t asked = 0;
+    refuse.reserve_memory = [&](int64_t bytes) {
+      asked = bytes;
+      return bytes > 1000 ? absl::ResourceExhaustedError("over the test's budget")
+                          : absl::OkStatus();
+    };
+    absl::StatusOr<MeshReadResult> refused = ReadMesh(text, f, refuse);
+    EXPECT_EQ(refused.status().code(), absl::StatusCode::kResourceExhausted) << format;
+    EXPECT_EQ(refused.status().message(), "over the test's budget") << format;
+    EXPECT_GT(asked, 1000) << format;
+    MeshReadOptions count;
+    int64_t held = 0;
+    count.reserve_memory = [&](int64_t bytes) {
+      held = bytes;
+      return absl::OkStatus();
+    };
+    absl::StatusOr<MeshReadResult> whole = ReadMesh(text, f, count);
+    ASSERT_TRUE(whole.ok()) << format << ": " << whole.status();
+    EXPECT_GE(held, 24 * whole->arrays.vertices.rows() + 12 * whole->arrays.faces.rows()) << format;
+  }
+}
+
 }  // namespace
 }  // namespace fieldspace
