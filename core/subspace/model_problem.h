@@ -104,8 +104,9 @@ absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& sy
 
 // An upper estimate of the bytes SolveReducedModelProblem allocates for `soft` soft and `hard`
 // hard constraints on `system` (with `threads` threads summing the soft terms): the copies of the
-// reduced matrix, the per-thread sums on its pattern, one or two factorizations and the hard
-// constraints' Schur complement; the constraints themselves as ModelProblem holds them. For
+// reduced matrix, the per-thread sums on its pattern and batch scratch space, the per-face sums,
+// one or two factorizations and the hard constraints' Schur complement; the constraints
+// themselves as ModelProblem holds them. For
 // admission against a memory budget before any of it is allocated.
 int64_t SolveWorkingBytes(const ReducedSystem& system, int64_t soft, int64_t hard, bool scale_free,
                           int32_t threads);
