@@ -68,11 +68,11 @@ SoftFaceSums SumSoftConstraintsPerFace(const std::vector<FieldConstraint>& const
   for (int32_t f = 0; f < num_faces; ++f) {
     if (slot[f] >= 0) sums.faces.push_back(f);
   }
-  // Faces whose rows start at the same basis column (the first local field over them) lie in
-  // one region and share most of their elimination-tree reach: neighbours in this order go into
-  // one BatchFaceStiffness call.
+  // Faces whose first rows span the same basis columns (the local fields over them) lie in one
+  // region and share most of their elimination-tree reach: sorted by the first and last such
+  // column, neighbours in this order go into one BatchFaceStiffness call.
   struct Keyed {
-    int64_t first, last;  // the first and last basis column nonzero at the face's first DOF
+    int64_t first, last;  // the first and last basis column stored in the face's first row
     int32_t face;
     bool operator<(const Keyed& o) const {
       return std::tie(first, last, face) < std::tie(o.first, o.last, o.face);
