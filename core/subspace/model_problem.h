@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "Eigen/SparseCore"
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "core/subspace/problem.h"
@@ -68,26 +69,44 @@ struct ReducedSolution {
   double regularization = 0;  // the diagonal shift the factorization needed
 };
 
+// The reduced energy matrix with the soft constraints' terms, and the right-hand side (eq. 10):
+//   A = U^T (mu_s S + mu_b B) U + mu_c sum_soft (w_i / g_i) U_i^T U_i   (d x d, symmetric PSD,
+//       on the system's shared pattern, both triangles stored),
+//   b = mu_c sum_soft (w_i / g_i) U_i^T c_i   (d)
+// (U_i: the rows of U at face f(i); g_i = 1, or with problem.scale_free the FaceStiffness of the
+// face under the energy alone, and mu_b times the total area). Hard constraints are left out. The
+// soft constraints are summed per face first, so the cost grows with the number of distinct
+// faces, not of constraints. Errors as SolveReducedModelProblem's before its factorization.
+struct ReducedAssembly {
+  Eigen::SparseMatrix<double> A;
+  Eigen::VectorXd b;
+};
+absl::StatusOr<ReducedAssembly> AssembleReducedModelProblem(
+    const ReducedSystem& system, const ModelProblem& problem,
+    const ReducedSolveOptions& options = {});
+
 // Solves the reduced problem (eq. 10, 11) from scratch: factorizes
 //   U^T (mu_s S + mu_b B) U + mu_c sum_soft w_i U_i^T U_i   (U_i: the rows of U at face f(i))
 // (with problem.biharmonic = kMixed and mu_b > 0 that matrix preconditions conjugate gradients on
 // the same matrix with U^T B U replaced by K Mr^-1 K, in the null space of the hard constraints)
 // (with problem.scale_free: mu_b times the total area and w_i / g_i, g_i = FaceStiffness of the
 // face from a factorization of the energy alone) and imposes the hard constraints U_h x = c_h with
-// a Schur complement on that factorization. Use DesignSession for repeated solves with changing
-// constraints. Weights: see ValidateWeights (mu_c = 0 disables the soft constraints). Errors:
-// InvalidArgument for invalid weights or constraints (bad face id, wrong value size, non-finite
-// value, non-positive soft weight); FailedPrecondition when the hard constraints are linearly
-// dependent in the subspace (e.g. the same face twice, or more constraint DOFs than d) or the
-// system cannot be factorized; Cancelled (options.cancel).
+// a Schur complement on that factorization (AssembleReducedModelProblem forms the matrix: its cost
+// grows with the distinct soft-constrained faces, not with the constraints). Use DesignSession for
+// repeated solves with changing constraints. Weights: see ValidateWeights (mu_c = 0 disables the
+// soft constraints). Errors: InvalidArgument for invalid weights or constraints (bad face id, wrong
+// value size, non-finite value, non-positive soft weight); FailedPrecondition when the hard
+// constraints are linearly dependent in the subspace (e.g. the same face twice, or more constraint
+// DOFs than d) or the system cannot be factorized; Cancelled (options.cancel).
 absl::StatusOr<ReducedSolution> SolveReducedModelProblem(const ReducedSystem& system,
                                                          const ModelProblem& problem,
                                                          const ReducedSolveOptions& options = {});
 
 // An upper estimate of the bytes SolveReducedModelProblem allocates for `soft` soft and `hard`
 // hard constraints on `system` (with `threads` threads summing the soft terms): the copies of the
-// reduced matrix, the per-thread sums on its pattern, one or two factorizations and the hard
-// constraints' Schur complement; the constraints themselves as ModelProblem holds them. For
+// reduced matrix, the per-thread sums on its pattern and batch scratch space, the per-face sums,
+// one or two factorizations and the hard constraints' Schur complement; the constraints
+// themselves as ModelProblem holds them. For
 // admission against a memory budget before any of it is allocated.
 int64_t SolveWorkingBytes(const ReducedSystem& system, int64_t soft, int64_t hard, bool scale_free,
                           int32_t threads);

@@ -8,6 +8,7 @@
 
 #include "Eigen/Dense"
 #include "core/subspace/full_space_solver.h"
+#include "core/subspace/kkt_solver.h"
 #include "core/subspace/projection.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -220,6 +221,120 @@ TEST(ModelProblemTest, MixedBiharmonicMatchesDenseKktAndNeverExceedsTheExactForm
       ExpectHardConstraintsHold(*basis, problem, reduced->coefficients);
     }
   }
+}
+
+// Soft constraints piled onto a few faces (each face 1-9 times, random weights and values), hard
+// constraints on other faces and on one of the soft-constrained faces.
+ModelProblem RepeatedFacesProblem(int32_t num_faces, int32_t p, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  ModelProblem problem;
+  problem.weights = {.mu_s = 0.7, .mu_b = 0.05, .mu_c = 4.0};
+  const auto value = [&] {
+    Eigen::VectorXd v(p);
+    for (int c = 0; c < p; ++c) v[c] = u(rng);
+    return v;
+  };
+  for (int i = 0; i < 60; ++i) {
+    const int32_t face = static_cast<int32_t>(rng() % 12) * 7;  // faces 0, 7, ..., 77
+    problem.constraints.push_back({face, value(), 0.1 + 2 * std::abs(u(rng))});
+  }
+  for (const int32_t face : {3, 50, 7}) {
+    problem.constraints.push_back({face, value(), 1.0, ConstraintKind::kHard});
+  }
+  return problem;
+}
+
+// The assembly sums the soft constraints per face first; the reference adds one term per
+// constraint, as the solver did before, each with its own FaceStiffness call.
+TEST(ModelProblemTest, AssemblyPerFaceEqualsOneTermPerConstraint) {
+  const TriangleMesh mesh = Icosphere(2);
+  int seed = 40;
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(3), FieldType::Tensor()}) {
+    const FieldOperator op = MustBuildOperator(mesh, type);
+    auto sys = ReducedSystem::Build(RandomBasis(type, op.dofs(), 90, 30, ++seed), op);
+    ASSERT_TRUE(sys.ok()) << sys.status();
+    const ReducedSystem& system = **sys;
+    const int p = type.dofs_per_face();
+    const int64_t d = system.dimension();
+    for (const bool scale_free : {false, true}) {
+      ModelProblem problem = RepeatedFacesProblem(mesh.num_faces(), p, ++seed);
+      problem.scale_free = scale_free;
+      const EnergyWeights w = EffectiveEnergyWeights(system, problem.weights, scale_free);
+      const Eigen::SparseMatrix<double> energy =
+          w.mu_s * system.stiffness() + w.mu_b * system.bilaplacian();
+      double tau = 0;
+      auto factor = FactorizeRegularized(system.pattern_symbolic(),
+                                         ShiftKernelColumns(system, energy), {}, &tau);
+      ASSERT_TRUE(factor.ok()) << factor.status();
+      Eigen::MatrixXd A_ref(energy);
+      Eigen::VectorXd b_ref = Eigen::VectorXd::Zero(d);
+      for (const FieldConstraint& c : problem.constraints) {
+        if (c.hard()) continue;
+        const std::vector<SparseRow> rows = BasisRowsOfFace(system, c.face);
+        double g = 1;
+        if (scale_free) {
+          auto stiffness = FaceStiffness(system, *factor, rows);
+          ASSERT_TRUE(stiffness.ok()) << stiffness.status();
+          g = *stiffness;
+        }
+        Eigen::MatrixXd Uf = Eigen::MatrixXd::Zero(p, d);
+        for (int comp = 0; comp < p; ++comp) {
+          for (size_t q = 0; q < rows[comp].cols.size(); ++q) {
+            Uf(comp, rows[comp].cols[q]) = rows[comp].vals[q];
+          }
+        }
+        A_ref += w.mu_c * c.weight / g * Uf.transpose() * Uf;
+        b_ref += w.mu_c * c.weight / g * Uf.transpose() * c.value;
+      }
+      auto assembly = AssembleReducedModelProblem(system, problem);
+      ASSERT_TRUE(assembly.ok()) << assembly.status();
+      EXPECT_TRUE(system.pattern_symbolic()->SamePattern(assembly->A));
+      const Eigen::MatrixXd A(assembly->A);
+      const std::string what = type.ToString() + (scale_free ? " scale-free" : " raw");
+      EXPECT_LT((A - A_ref).norm(), 1e-12 * A_ref.norm()) << what;
+      EXPECT_LT((assembly->b - b_ref).norm(), 1e-12 * b_ref.norm()) << what;
+      // The soft terms are there: the hard constraints alone would leave b = 0.
+      EXPECT_GT((A - Eigen::MatrixXd(energy)).norm(), 1e-3 * A_ref.norm()) << what;
+      EXPECT_GT(b_ref.norm(), 0) << what;
+      if (!scale_free) {
+        // The whole solve against the dense KKT system, one term per constraint.
+        auto reduced = SolveReducedModelProblem(system, problem);
+        ASSERT_TRUE(reduced.ok()) << reduced.status();
+        EXPECT_LT(RelativeDifference(reduced->coefficients,
+                                     DenseReducedSolution(op, system.basis(), problem)),
+                  1e-8)
+            << what;
+        ExpectHardConstraintsHold(system.basis(), problem, reduced->coefficients);
+      }
+    }
+  }
+}
+
+// A face where no basis field is nonzero: scale-free weights cannot be normalized there
+// (FailedPrecondition naming the face, whichever batch of faces it falls in); raw weights can.
+TEST(ModelProblemTest, ScaleFreeConstraintOnAFaceWithoutSupportIsFailedPrecondition) {
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  std::shared_ptr<Basis> basis = RandomBasis(FieldType::Vector(), op.dofs(), 90, 30, 7);
+  constexpr int32_t kBare = 123;
+  for (int64_t row = 2 * kBare; row < 2 * kBare + 2; ++row) {
+    for (Eigen::SparseMatrix<float, Eigen::RowMajor>::InnerIterator it(basis->U, row); it; ++it) {
+      it.valueRef() = 0;
+    }
+  }
+  auto sys = ReducedSystem::Build(basis, op);
+  ASSERT_TRUE(sys.ok()) << sys.status();
+  ModelProblem problem = RepeatedFacesProblem(mesh.num_faces(), 2, 3);
+  problem.constraints.push_back({kBare, Eigen::Vector2d(1, 0), 2.0});
+  problem.scale_free = false;
+  EXPECT_TRUE(SolveReducedModelProblem(**sys, problem).ok());
+  problem.scale_free = true;
+  const absl::Status status = SolveReducedModelProblem(**sys, problem).status();
+  EXPECT_THAT(status, StatusIs(absl::StatusCode::kFailedPrecondition));
+  EXPECT_THAT(std::string(status.message()), ::testing::HasSubstr("face 123"));
+  problem.constraints.pop_back();
+  EXPECT_TRUE(SolveReducedModelProblem(**sys, problem).ok());
 }
 
 TEST(ModelProblemTest, MixedBiharmonicStopsAtTheIterationLimit) {
