@@ -199,12 +199,8 @@ await page.evaluate((gestureEvent) => {
   // The bench's own view of the input and of the frames: each pointer event's time, and
   // the timestamps of the frames the page asked for (its requestAnimationFrame callbacks; a
   // loop of our own would make Chromium produce frames the page does not need).
-  const record = { moves: [], frames: [], longTasks: [], on: true };
+  const record = { moves: [], frames: [], on: true };
   window.__bench = record;
-  // The page's main thread busy for 50 ms or more at a time (Long Tasks API).
-  new PerformanceObserver((list) => {
-    if (record.on) for (const t of list.getEntries()) record.longTasks.push(t.duration);
-  }).observe({ type: "longtask" });
   window.addEventListener(gestureEvent, (e) => {
     if (record.on) record.moves.push({ timeStamp: e.timeStamp, dispatched: performance.now() });
   }, { capture: true });
@@ -234,7 +230,6 @@ state = await probe.checkAgainstSolve(`after ${steps} drag steps`);
 const record = await page.evaluate(() => {
   window.__bench.on = false;
   return { moves: window.__bench.moves, frames: window.__bench.frames,
-    longTasks: window.__bench.longTasks,
     renderMs: window.__studio.frameTimes(), updates: window.__studio.updateLog() };
 });
 const dragFrames = frames.slice(framesBefore);
@@ -303,7 +298,6 @@ const result = {
   // The page's handler of an update (glyphs, markers, panels; not the frame, which is requested).
   handleUpdateMs: stats(updates.filter((u) => u.handled !== null).map((u) => u.handled - u.decoded)),
   frameMs: { rafInterval: stats(intervals), render: stats(record.renderMs) },
-  longTasksMs: stats(record.longTasks),
   firstFieldMs: { fromChoosingTheBasis: firstOpen.fromChoiceMs,
     fromNavigationOnReload: reload.fromNavigationMs },
   solveCheck: "coefficients equal a one-shot Solve to 1e-9 relative",
@@ -335,7 +329,6 @@ console.log([
   line("frame interval (page, ms)", result.frameMs.rafInterval),
   line("render call (ms)", result.frameMs.render),
   line("update handler (ms)", result.handleUpdateMs),
-  line("long tasks (>= 50 ms)", result.longTasksMs),
   `first field drawn: ${ms(result.firstFieldMs.fromChoosingTheBasis)} ms after choosing the ` +
     `basis; ${ms(result.firstFieldMs.fromNavigationOnReload)} ms from navigation on a reload`,
   ...[["pointer event", result.latencyMs], ["dispatched", result.latencyFromDispatchMs]].map(
