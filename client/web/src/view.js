@@ -286,15 +286,18 @@ export class View {
    */
   draw() {
     const r = this.renderer;
+    if (this.mesh === null) {
+      r.render(this.scene, this.camera);
+      return;
+    }
     const size = r.getDrawingBufferSize(new THREE.Vector2());
     this.camera.updateMatrixWorld();
-    const key = this.mesh === null ? null : [...this.camera.matrixWorld.elements,
-      ...this.camera.projectionMatrix.elements, size.x, size.y, this.mesh.id].join();
-    if (key === null || key !== this.meshKey) {
+    const key = [...this.camera.matrixWorld.elements, ...this.camera.projectionMatrix.elements,
+      size.x, size.y, this.mesh.id].join();
+    if (key !== this.meshKey) {
       this.overlay.visible = false;
       r.render(this.scene, this.camera);
       this.overlay.visible = true;
-      if (key === null) return;
       if (this.meshImage?.image.width !== size.x || this.meshImage?.image.height !== size.y) {
         this.meshImage?.dispose();
         this.meshImage = new THREE.FramebufferTexture(size.x, size.y);
