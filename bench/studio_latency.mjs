@@ -1,14 +1,17 @@
 // The studio's latency on a large mesh (issue 19's bench; docs/studio.md, "Performance"): the page
 // in a headless Chromium against fieldspaced through the gateway, one constraint added by a short
-// drag, then that constraint's marker dragged through N scripted pointer moves (real pointer events
-// from Playwright's mouse). Reports, per pointer move, the time from the pointer event to the new
-// field values decoded in the page (the page's own update log: DesignSession.updateLog), and where
-// it goes (pick, wait behind the edit in flight, the daemon's edit and lift, gateway and transport);
-// bytes per update (the WebSocket frames, as Chromium saw them); the page's frame times; the time
-// from opening the page to its first drawn field. At the end the session's coefficients must equal
-// a one-shot Solve of the final constraints. Chromium dispatches pointer moves with the next
-// animation frame and Playwright's mouse.move resolves once the page took the move, so the drag
-// advances at most one step per frame of the page (seconds under software GL on 1.4M faces).
+// drag, then that constraint's marker dragged through N scripted pointer moves: real mouse input,
+// sent through the DevTools protocol (Input.dispatchMouseEvent) every --interval-ms without
+// waiting for each to be acknowledged. Playwright's mouse.move waits for the acknowledgement, which
+// Chromium sends after the next animation frame: the drag would advance one step per frame of the
+// page (seconds under software GL on 1.4M faces), which no user's mouse does. Reports, per pointer
+// event the page's gestures follow (pointerrawupdate in Chromium, dispatched as the input arrives;
+// pointermove waits for the next frame), the time from the event to the new field values decoded
+// in the page (the page's own update log: DesignSession.updateLog), and where it goes (pick, wait
+// behind the edit in flight, the daemon's edit and lift, gateway and transport); bytes per update
+// (the WebSocket frames, as Chromium saw them); the page's frame times; the time from opening the
+// page to its first drawn field. At the end the session's coefficients must equal a one-shot Solve
+// of the final constraints.
 //
 //   node bench/studio_latency.mjs --mesh ../shared/meshes/armadillo_loop2_1384k.ply
 //       [--daemon-bin build/bin/fieldspaced | --daemon HOST:PORT] [--store DIR] [--dim 2000]
@@ -157,13 +160,18 @@ for (let r = 0; press === null && r < 300; r += 10) {
 }
 check(press !== null, "a screen point on the mesh with the drag circle on the mesh");
 const toPage = (x, y) => [canvasBox.x + x, canvasBox.y + y];
+// Mouse input as the browser gets it from a device (see the top): `buttons` says the left button
+// is held. The returned promise is the acknowledgement.
+const cdp = await page.context().newCDPSession(page);
+const mouse = (type, [x, y], held) => cdp.send("Input.dispatchMouseEvent", { type, x, y,
+  button: type === "mouseMoved" ? "none" : "left", buttons: held ? 1 : 0,
+  ...(type === "mouseMoved" ? {} : { clickCount: 1 }) });
 {
   const [x, y] = toPage(press.x, press.y);
-  await page.mouse.move(x, y);
-  await page.mouse.down();
-  await page.mouse.move(x + 10, y, { steps: 2 });
-  await page.mouse.move(x + 20, y, { steps: 2 });
-  await page.mouse.up();
+  await mouse("mouseMoved", [x, y], false);
+  await mouse("mousePressed", [x, y], true);
+  await Promise.all([5, 10, 15, 20].map((dx) => mouse("mouseMoved", [x + dx, y], true)));
+  await mouse("mouseReleased", [x + 20, y], false);
 }
 let state = await probe.checkAgainstSolve("the constraint added by a drag");
 // Faces are about a pixel wide here: the page's pick (float32) may take a neighbour of the face
@@ -186,13 +194,14 @@ const path = Array.from({ length: steps }, (_, i) => {
   return toPage(center[0] + radiusPx * Math.cos(angle), center[1] + radiusPx * Math.sin(angle));
 });
 const framesBefore = frames.length;
-await page.evaluate(() => {
-  // The bench's own view of the input and of the frames: each pointer move's event time, and
+const gestureEvent = await page.evaluate(() => window.__studio.gestureEvent);
+await page.evaluate((gestureEvent) => {
+  // The bench's own view of the input and of the frames: each pointer event's time, and
   // the timestamps of the frames the page asked for (its requestAnimationFrame callbacks; a
   // loop of our own would make Chromium produce frames the page does not need).
   const record = { moves: [], frames: [], on: true };
   window.__bench = record;
-  window.addEventListener("pointermove", (e) => {
+  window.addEventListener(gestureEvent, (e) => {
     if (record.on) record.moves.push({ timeStamp: e.timeStamp, dispatched: performance.now() });
   }, { capture: true });
   const raf = window.requestAnimationFrame.bind(window);
@@ -200,19 +209,22 @@ await page.evaluate(() => {
     if (record.on && record.frames.at(-1) !== t) record.frames.push(t);
     callback(t);
   });
-});
+}, gestureEvent);
 {
-  const [x, y] = toPage(...marker);
-  await page.mouse.move(x, y);
-  await page.mouse.down();
+  const start = toPage(...marker);
+  await mouse("mouseMoved", start, false);
+  await mouse("mousePressed", start, true);
   const t0 = performance.now();
+  const acknowledged = [];
   for (let i = 0; i < steps; i++) {
     const wait = t0 + i * intervalMs - performance.now();
     if (wait > 0) await new Promise((r) => setTimeout(r, wait));
-    await page.mouse.move(...path[i]);
-    if ((i + 1) % 50 === 0) log(`${i + 1} steps, ${((performance.now() - t0) / 1000).toFixed(1)} s`);
+    acknowledged.push(mouse("mouseMoved", path[i], true));
   }
-  await page.mouse.up();
+  log(`${steps} moves sent in ${((performance.now() - t0) / 1000).toFixed(1)} s`);
+  await Promise.all(acknowledged);
+  log(`acknowledged after ${((performance.now() - t0) / 1000).toFixed(1)} s`);
+  await mouse("mouseReleased", path.at(-1), false);
 }
 state = await probe.checkAgainstSolve(`after ${steps} drag steps`);
 const record = await page.evaluate(() => {
@@ -262,7 +274,7 @@ const result = {
   bench: "studio_latency",
   mesh: basename(args.mesh), faces: mesh.numFaces, basis: basis.id, dimension,
   columns: basis.columns, basisBuildSeconds: buildSeconds,
-  steps, intervalMs, radiusPx,
+  steps, intervalMs, radiusPx, gestureEvent,
   pointerMoves: moves.length,
   editsMade: latency.length,
   updates: updates.length,
@@ -272,7 +284,7 @@ const result = {
   // The same from the moment the page's handlers got the event.
   latencyFromDispatchMs: stats(fromDispatch),
   breakdownMs: {
-    // Chromium dispatches pointer moves with the next animation frame: here the frame time.
+    // pointerrawupdate: as the input arrives (pointermove: with the next animation frame).
     delivery: stats(delivery),
     pick: stats(pick),                 // handlers: the page's pick, the edit made
     waitInPage: stats(queued),         // edit made -> sent (behind the edit in flight)
@@ -283,6 +295,8 @@ const result = {
     gatewayAndTransport: stats(server.map((u) => u.decoded - u.sent - u.timings.totalMs)),
   },
   bytesPerUpdate: { page: stats(updates.map((u) => u.bytes)), websocket: stats(dragFrames) },
+  // The page's handler of an update (glyphs, markers, panels; not the frame, which is requested).
+  handleUpdateMs: stats(updates.filter((u) => u.handled !== null).map((u) => u.handled - u.decoded)),
   frameMs: { rafInterval: stats(intervals), render: stats(record.renderMs) },
   firstFieldMs: { fromChoosingTheBasis: firstOpen.fromChoiceMs,
     fromNavigationOnReload: reload.fromNavigationMs },
@@ -297,7 +311,7 @@ const b = result.breakdownMs;
 console.log([
   `studio latency: ${result.mesh} (${result.faces} faces), vector d = ${dimension}, ` +
     `${steps} drag steps every ${intervalMs} ms`,
-  `${moves.length} pointer moves, ${latency.length} edits, ${updates.length} updates ` +
+  `${moves.length} ${gestureEvent} events, ${latency.length} edits, ${updates.length} updates ` +
     "(moves made while an edit was in flight are coalesced)",
   line("pointer event -> decoded (ms)", result.latencyMs),
   line("  delivery to the page (ms)", b.delivery),
@@ -314,6 +328,7 @@ console.log([
     `${result.bytesPerUpdate.websocket.n})`,
   line("frame interval (page, ms)", result.frameMs.rafInterval),
   line("render call (ms)", result.frameMs.render),
+  line("update handler (ms)", result.handleUpdateMs),
   `first field drawn: ${ms(result.firstFieldMs.fromChoosingTheBasis)} ms after choosing the ` +
     `basis; ${ms(result.firstFieldMs.fromNavigationOnReload)} ms from navigation on a reload`,
   ...[["pointer event", result.latencyMs], ["dispatched", result.latencyFromDispatchMs]].map(

@@ -712,14 +712,19 @@ function strokePoint(x, y, hit, last = false) {
   drawMarkers();
 }
 
-canvas.addEventListener("pointermove", (event) => {
+// Gestures follow `pointerrawupdate` where the browser has it (Chromium, in a secure context such
+// as https or http://127.0.0.1): it is dispatched as the input arrives, while `pointermove` waits
+// for the next animation frame, which on a large mesh under a software or slow GPU can take
+// seconds. Elsewhere, `pointermove`. One of the two only: each would make the same edit.
+const GESTURE_MOVE = "onpointerrawupdate" in window ? "pointerrawupdate" : "pointermove";
+canvas.addEventListener(GESTURE_MOVE, (event) => {
   if (gesture === null) return;
   const [x, y] = local(event);
   if (!gesture.started && Math.hypot(x - gesture.x, y - gesture.y) < DRAG_START_PX) return;
   if (gesture.kind === "select" || gesture.kind === "singularity") return;
   if (gesture.kind === "stroke") {
-    // Every pointer position since the last event (the browser merges moves into one event per
-    // frame; a slow frame would leave gaps in the stroke).
+    // Every pointer position since the last event (the browser merges moves into one event
+    // while the page is busy, and pointermove into one per frame: gaps in the stroke otherwise).
     gesture.started = true;
     for (const e of event.getCoalescedEvents?.() ?? [event]) {
       const [cx, cy] = local(e);
@@ -1117,6 +1122,7 @@ window.__studio = {
     watchedFaces: [...(studio.session?.last?.watched?.faces ?? [])],
     watchedValues: [...(studio.session?.last?.watched?.values ?? [])] }),
   frameTimes: () => [...view.frameTimes],
+  gestureEvent: GESTURE_MOVE,  // the pointer event gestures follow
   updateLog: () => studio.session?.updateLog ?? [],
   showGlyphs: (on) => view.setGlyphsVisible(on),
   edit,  // an edit as the gestures send them, for tests of refused edits

@@ -108,8 +108,9 @@ export class DesignSession {
     this.closed = false;
     this.seq = 0;
     this.last = null;
-    // Per answered edit: { kind, made: [when each edit it carries was made], sent, decoded, bytes,
-    // timings } (performance.now() ms; `made` has several times when moves were coalesced).
+    // Per answered edit: { kind, made: [when each edit it carries was made], sent, decoded,
+    // handled (the page's handler returned), bytes, timings } (performance.now() ms; `made` has
+    // several times when moves were coalesced).
     this.updateLog = [];
     this.made = new Map();  // queued edit -> the times its coalesced edits were made
     const protocols = [DESIGN_PROTOCOL];
@@ -182,9 +183,10 @@ export class DesignSession {
     const decoded = performance.now();
     const roundTripMs = decoded - sent;
     this.inFlight = null;
-    this.updateLog.push({ kind: edit.kind, made, sent, decoded, bytes: data.byteLength,
+    const entry = { kind: edit.kind, made, sent, decoded, handled: null, bytes: data.byteLength,
       timings: update.timings ? { editMs: update.timings.editMs, liftMs: update.timings.liftMs,
-        totalMs: update.timings.totalMs } : null });
+        totalMs: update.timings.totalMs } : null };
+    this.updateLog.push(entry);
     if (this.updateLog.length > UPDATE_LOG_LENGTH) this.updateLog.shift();
     if (update.error !== undefined) {
       // The daemon refused this edit and the session goes on as it was: what the user made is
@@ -206,6 +208,7 @@ export class DesignSession {
     // meanwhile.
     this.pump();
     this.handlers.onUpdate(update, edit, roundTripMs);
+    entry.handled = performance.now();
   }
 
   confirm(edit) {

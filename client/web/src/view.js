@@ -32,10 +32,16 @@ export class View {
     this.raycaster.firstHitOnly = true;  // three-mesh-bvh: the nearest hit only
     this.mesh = null;
     this.glyphs = null;
+    // What is drawn over the mesh: glyphs, markers, strokes, singularities (flat colours).
+    this.overlay = new THREE.Group();
+    this.scene.add(this.overlay);
     this.markers = new THREE.Group();
-    this.scene.add(this.markers);
+    this.overlay.add(this.markers);
     this.strokes = new THREE.Group();
-    this.scene.add(this.strokes);
+    this.overlay.add(this.strokes);
+    this.meshImage = null;  // the last drawn mesh's colours (see draw)
+    this.meshKey = null;    // the camera and size it was drawn with
+    this.backdrop = backdrop();
     this.singularities = null;
     this.labels = document.createElement("div");
     this.labels.className = "labels";
@@ -92,7 +98,7 @@ export class View {
       this.glyphs = new THREE.LineSegments(new THREE.BufferGeometry(),
         new THREE.LineBasicMaterial({ vertexColors: true }));
       this.glyphs.frustumCulled = false;
-      this.scene.add(this.glyphs);
+      this.overlay.add(this.glyphs);
     }
     const g = this.glyphs.geometry;
     g.setAttribute("position", new THREE.BufferAttribute(positions, 3));
@@ -103,7 +109,7 @@ export class View {
 
   setGlyphsVisible(on) {
     if (this.glyphs) this.glyphs.visible = on;
-    this.renderer.render(this.scene, this.camera);
+    this.draw();
   }
 
   /** Constraint markers: [{ id, position, direction (unit, ambient), hard, selected }]; a marker
@@ -162,7 +168,7 @@ export class View {
       s.position[k] + lift * normals.array[3 * s.vertex + k]) } : s));
     this.singularityList = list;
     if (this.singularities) {
-      this.scene.remove(this.singularities);
+      this.overlay.remove(this.singularities);
       this.singularities.geometry.dispose();
     }
     const positions = new Float32Array(list.flatMap((s) => s.position));
@@ -175,7 +181,7 @@ export class View {
     this.singularities = new THREE.Points(geometry, new THREE.PointsMaterial({
       size: 12, sizeAttenuation: false, vertexColors: true, map: this.dotTexture,
       alphaTest: 0.5, transparent: true }));
-    this.scene.add(this.singularities);
+    this.overlay.add(this.singularities);
     this.labels.replaceChildren(...list.map((s) => {
       const label = document.createElement("span");
       label.textContent = s.n === 1 ? String(s.index) : `${s.index}/${s.n}`;
@@ -236,7 +242,7 @@ export class View {
     requestAnimationFrame(() => {
       this.renderPending = false;
       const start = performance.now();
-      this.renderer.render(this.scene, this.camera);
+      this.draw();
       this.placeLabels();
       this.frameTimes.push(performance.now() - start);
       if (this.frameTimes.length > 100) this.frameTimes.shift();
@@ -271,11 +277,75 @@ export class View {
       matrixWorld: this.camera.matrixWorld.toArray(), width, height };
   }
 
+  /**
+   * Draws the view now. The mesh is drawn only when the camera, the size or the mesh changed: a
+   * large mesh takes seconds per frame under software GL or a slow GPU, while a design edit
+   * changes only what lies over it. The mesh's colours are then copied to a texture and its depth
+   * stays in the drawing buffer (preserveDrawingBuffer); the overlay is drawn without writing
+   * depth. Otherwise the copy is drawn back (depth untouched) and the overlay over it.
+   */
+  draw() {
+    const r = this.renderer;
+    if (this.mesh === null) {
+      r.render(this.scene, this.camera);
+      return;
+    }
+    const size = r.getDrawingBufferSize(new THREE.Vector2());
+    this.camera.updateMatrixWorld();
+    const key = [...this.camera.matrixWorld.elements, ...this.camera.projectionMatrix.elements,
+      size.x, size.y, this.mesh.id].join();
+    if (key !== this.meshKey) {
+      this.overlay.visible = false;
+      r.render(this.scene, this.camera);
+      this.overlay.visible = true;
+      if (this.meshImage?.image.width !== size.x || this.meshImage?.image.height !== size.y) {
+        this.meshImage?.dispose();
+        this.meshImage = new THREE.FramebufferTexture(size.x, size.y);
+        this.backdrop.material.uniforms.image.value = this.meshImage;
+      }
+      r.copyFramebufferToTexture(this.meshImage);
+      this.meshKey = key;
+    } else {
+      this.drawOver(this.backdrop.scene, this.backdrop.camera);
+    }
+    this.mesh.visible = false;
+    this.drawOver(this.scene, this.camera);
+    this.mesh.visible = true;
+  }
+
+  // Renders a scene over what the drawing buffer holds: no clear, no depth written.
+  drawOver(scene, camera) {
+    const r = this.renderer;
+    const depth = r.state.buffers.depth;
+    r.autoClear = false;
+    depth.setMask(false);
+    depth.setLocked(true);
+    r.render(scene, camera);
+    depth.setLocked(false);
+    depth.setMask(true);  // else the next clear would leave the depth as it is
+    r.autoClear = true;
+  }
+
   /** A PNG of the view. */
   png() {
-    this.renderer.render(this.scene, this.camera);
+    this.draw();
     return new Promise((resolve) => this.renderer.domElement.toBlob(resolve, "image/png"));
   }
+}
+
+// A full-view quad showing a texture's texels as they are (the mesh's image, see View.draw).
+function backdrop() {
+  const material = new THREE.ShaderMaterial({
+    uniforms: { image: { value: null } },
+    vertexShader: "varying vec2 uv_;\nvoid main() { uv_ = uv; gl_Position = vec4(position.xy, 0.0, 1.0); }",
+    fragmentShader: "uniform sampler2D image;\nvarying vec2 uv_;\n" +
+      "void main() { gl_FragColor = texture2D(image, uv_); }",
+    depthTest: false, depthWrite: false });
+  const scene = new THREE.Scene();
+  const quad = new THREE.Mesh(new THREE.PlaneGeometry(2, 2), material);
+  quad.frustumCulled = false;
+  scene.add(quad);
+  return { scene, camera: new THREE.OrthographicCamera(), material };
 }
 
 function markerColor(m) {
