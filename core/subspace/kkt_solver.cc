@@ -162,12 +162,8 @@ void KktSolver::GroupColumns(absl::Span<const int32_t> groups,
     }
   }
   if (mixed_ != nullptr) {
-    // Z = A_s^-1 R^T: the rows scattered, then one blocked product of solves.
-    out.setZero();
-    for (size_t i = 0; i < cols.size(); ++i) {
-      for (size_t q = 0; q < cols[i].size(); ++q) out(cols[i][q], i) += vals[i][q];
-    }
-    mixed_->SolveInPlace(out);
+    // Z = A_s^-1 R^T.
+    mixed_->SolveSparseInto(cols, vals, out);
     return;
   }
   factor_->ForwardSparseColumns(cols, vals, out);

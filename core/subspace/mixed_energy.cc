@@ -55,11 +55,38 @@ void MixedEnergyInverse::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {
   tbb::parallel_for(Eigen::Index{0}, (m + chunk - 1) / chunk, [&](Eigen::Index c) {
     const Eigen::Index j0 = c * chunk;
     auto block = B.middleCols(j0, std::min(chunk, m - j0));
-    const SupernodalFactor& k = *stiffness_->factor;
-    k.SolveInPlace(block);
-    for (Eigen::Index j = 0; j < block.cols(); ++j) block.col(j) = mass_.Multiply(block.col(j));
-    n_->SolveInPlace(block);
+    stiffness_->factor->SolveInPlace(block);
+    FinishColumns(block);
   });
+}
+
+void MixedEnergyInverse::SolveSparseInto(absl::Span<const absl::Span<const int32_t>> cols,
+                                         absl::Span<const absl::Span<const double>> vals,
+                                         Eigen::Ref<Eigen::MatrixXd> B) const {
+  if (B.cols() > 4) {
+    // Many columns (a weight change re-solves every constraint): their reaches cover most of
+    // the tree, and the blocked substitutions' matrix kernels win.
+    B.setZero();
+    for (size_t j = 0; j < cols.size(); ++j) {
+      for (size_t q = 0; q < cols[j].size(); ++q) B(cols[j][q], j) += vals[j][q];
+    }
+    SolveInPlace(B);
+    return;
+  }
+  // L^-1 P R^T over the rows' reach (one block pass), then per column the rest on its thread.
+  const SupernodalFactor& k = *stiffness_->factor;
+  k.ForwardSparseColumns(cols, vals, B);
+  tbb::parallel_for(Eigen::Index{0}, B.cols(), [&](Eigen::Index j) {
+    auto column = B.col(j);
+    k.BackwardInPlace(column);
+    column = k.PermuteOut(column);
+    FinishColumns(column);
+  });
+}
+
+void MixedEnergyInverse::FinishColumns(Eigen::Ref<Eigen::MatrixXd> B) const {
+  for (Eigen::Index j = 0; j < B.cols(); ++j) B.col(j) = mass_.Multiply(B.col(j));
+  n_->SolveInPlace(B);
 }
 
 Eigen::VectorXd MixedEnergyInverse::Multiply(const Eigen::VectorXd& v) const {

@@ -8,6 +8,7 @@
 
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
+#include "absl/types/span.h"
 #include "core/linalg/supernodal_cholesky.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/reduced_system.h"
@@ -39,10 +40,17 @@ class MixedEnergyInverse {
   // B <- A_s^-1 B for B d x m (any m): per column one solve with K_s, a product with Mr and one
   // solve with N_s (blocks of columns on parallel threads).
   void SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const;
+  // B <- A_s^-1 R^T for sparse rows R (column j: vals[j][q] at cols[j][q]; B d x #rows): as
+  // SolveInPlace, with the first sweep of K_s's solve over the rows' elimination-tree reach only.
+  void SolveSparseInto(absl::Span<const absl::Span<const int32_t>> cols,
+                       absl::Span<const absl::Span<const double>> vals,
+                       Eigen::Ref<Eigen::MatrixXd> B) const;
   // A v (d) with the true K and Mr (K's panels and Mr's factorization; no shift).
   Eigen::VectorXd Multiply(const Eigen::VectorXd& v) const;
 
  private:
+  // B <- N_s^-1 Mr B (d x m): the rest of SolveInPlace after K_s^-1.
+  void FinishColumns(Eigen::Ref<Eigen::MatrixXd> B) const;
   MixedEnergyInverse(const ReducedSystem* system,
                      std::shared_ptr<const EnergyFactorization> stiffness, double mu_s, double mu_b,
                      SupernodalMatrix mass);
