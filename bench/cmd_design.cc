@@ -10,8 +10,9 @@
 //   {"factorize_ms","edit_ms":{"p50","p99","max"},"lift_ms":{"p50"},"full_factorize_ms",
 //    "full_solve_ms","weight_change_ms":{"p50"},...}
 // factorize_ms: median numeric factorization of U^T (mu_S S + mu_B B) U (shared analysis).
-// --biharmonic: the session's BiharmonicForm (default mixed: the simultaneous eigenbasis of K and
-// Mr, computed when the session opens, session_create_ms; exact: the paper's form).
+// --biharmonic: the session's BiharmonicForm (default mixed: the product of sparse solves
+// N^-1 Mr K^-1, K's and N's factorizations made when the session opens, session_create_ms;
+// exact: the paper's form).
 // --strokes K [--stroke-faces F]: afterwards, K soft strokes of about F faces (default 50; from a
 // random face to one F dual-graph steps away, core/subspace/design_tools.h) each added, moved
 // (to the strip one step over) and removed as one group edit, on top of the session's

@@ -7,8 +7,8 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/status_macros.h"
 #include "core/subspace/kkt_solver.h"
+#include "core/subspace/mixed_energy.h"
 #include "core/subspace/projection.h"
-#include "core/subspace/spectral_mixed.h"
 
 namespace fieldspace {
 
@@ -129,13 +129,16 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> DesignSession::Energy
   EnergyWeights effective = EffectiveEnergyWeights(*system_, weights, options_.scale_free);
   const ReducedSmoother* data = options_.data_term.get();
   if (data != nullptr && options_.scale_free) effective.mu_a /= data->total_area();
+  return SharedFactorization(effective, data, &last_factorized_);
+}
+
+absl::StatusOr<std::shared_ptr<const EnergyFactorization>> DesignSession::SharedFactorization(
+    const EnergyWeights& effective, const ReducedSmoother* data, bool* factorized) const {
   if (options_.energy_cache != nullptr) {
-    return options_.energy_cache->Get(*system_, effective, options_.solve, &last_factorized_, data);
+    return options_.energy_cache->Get(*system_, effective, options_.solve, factorized, data);
   }
-  ASSIGN_OR_RETURN(std::shared_ptr<const EnergyFactorization> energy,
-                   FactorizeEnergy(*system_, effective, options_.solve, data));
-  last_factorized_ = true;
-  return energy;
+  *factorized = true;
+  return FactorizeEnergy(*system_, effective, options_.solve, data);
 }
 
 absl::StatusOr<double> DesignSession::Stiffness(const std::vector<SparseRow>& rows) const {
@@ -148,14 +151,20 @@ absl::StatusOr<double> DesignSession::Stiffness(const std::vector<SparseRow>& ro
 absl::Status DesignSession::AttachEnergy(const EnergyWeights& weights) {
   const EnergyWeights effective = EffectiveEnergyWeights(*system_, weights, options_.scale_free);
   const double mu_b = options_.biharmonic == BiharmonicForm::kMixed ? effective.mu_b : 0.0;
-  // The mixed energy is diagonal in the simultaneous eigenbasis of K and Mr (spectral_mixed.h):
-  // edits as cheap as the exact form's. A data term's mass breaks that diagonal form: then the
-  // exact form's factorization preconditions conjugate gradients (KktSolver::Solve).
+  // The mixed energy K Mr^-1 (mu_S Mr + mu_B K) is inverted as a product of sparse solves
+  // (mixed_energy.h), K's factorization shared by every weight. A data term's mass breaks that
+  // product form: then the exact form's factorization preconditions conjugate gradients
+  // (KktSolver::Solve).
   if (mu_b > 0 && !(has_data_term() && weights.mu_a > 0)) {
-    ASSIGN_OR_RETURN(std::shared_ptr<const MixedSpectrum> spectrum,
-                     MixedSpectrumCache::Global().Get(system_, options_.solve.cancel));
-    return kkt_->SetSpectral(std::make_unique<MixedEnergyInverse>(
-        system_.get(), std::move(spectrum), effective.mu_s, mu_b));
+    if (stiffness_energy_ == nullptr) {
+      bool factorized = false;
+      ASSIGN_OR_RETURN(stiffness_energy_,
+                       SharedFactorization({.mu_s = 1.0, .mu_b = 0.0}, nullptr, &factorized));
+    }
+    ASSIGN_OR_RETURN(std::unique_ptr<const MixedEnergyInverse> inverse,
+                     MixedEnergyInverse::Create(system_.get(), stiffness_energy_, effective.mu_s,
+                                                mu_b, options_.solve));
+    return kkt_->SetMixed(std::move(inverse));
   }
   RETURN_IF_ERROR(kkt_->SetMatrix(energy_->A.get(), energy_->factor.get()));
   kkt_->SetMixedBiharmonic(system_.get(), mu_b);

@@ -95,10 +95,12 @@ struct DesignSessionOptions {
   // divided by the total area (as SmoothingOptions::scale_free).
   bool scale_free = false;
   // The biharmonic term's form (ModelProblem::biharmonic; the default kMixed). With kMixed and
-  // mu_B > 0 the session solves in the simultaneous eigenbasis of K and Mr (spectral_mixed.h:
-  // computed once per reduced system on first use, then shared; an edit is one dense d x d
-  // product with its eigenvectors); with a data term (mu_A > 0) the exact form's factorization
-  // preconditions a conjugate gradient solve per edit instead (15-150 solves with it).
+  // mu_B > 0 the session inverts K Mr^-1 (mu_S Mr + mu_B K) as a product of two sparse
+  // factorizations (mixed_energy.h: K's once per session, or shared through energy_cache; the
+  // other per weight change); each constraint keeps its columns of A^-1 R^T, so an add or a move
+  // to another face costs dofs-per-face such products and an edit's solve none. With a data term
+  // (mu_A > 0) the exact form's factorization preconditions a conjugate gradient solve per edit
+  // instead (15-150 solves with it).
   BiharmonicForm biharmonic = BiharmonicForm::kMixed;
   // A data (alignment) term mu_A (X - X0)^T W M (X - X0) in the energy (paper section 8, Fig. 16:
   // a field aligned to curvature, then interpolation constraints on top), with X0, W and their
@@ -222,14 +224,19 @@ class DesignSession {
   // mu_S U^T S U + mu_B U^T B U (+ mu_A U^T W M U) with the effective weights, from the cache
   // when there is one; sets last_factorized_.
   absl::StatusOr<std::shared_ptr<const EnergyFactorization>> Energy(const EnergyWeights& weights);
+  // FactorizeEnergy for `effective` weights, from the cache when there is one; *factorized:
+  // whether this call factorized.
+  absl::StatusOr<std::shared_ptr<const EnergyFactorization>> SharedFactorization(
+      const EnergyWeights& effective, const ReducedSmoother* data, bool* factorized) const;
   // The diagonal of a soft constraint's rows in the KKT system: stiffness / (mu_C weight).
   double SoftE(double weight, double stiffness) const {
     return stiffness / (weights_.mu_c * weight);
   }
   // 1 with raw weights; else FaceStiffness of `rows` under the current energy factorization.
   absl::StatusOr<double> Stiffness(const std::vector<SparseRow>& rows) const;
-  // Hands energy_ to the KKT solver, with the mixed biharmonic's weight for `weights` (its
-  // spectrum computed on first use: Cancelled or Internal when that fails).
+  // Hands energy_ to the KKT solver, with the mixed biharmonic's weight for `weights` (with
+  // mu_B > 0 and no data term: the product form of mixed_energy.h, K's factorization made on
+  // first use; FailedPrecondition or Cancelled when a factorization fails).
   absl::Status AttachEnergy(const EnergyWeights& weights);
   // mu_A' U^T W M X0 for the current weights (empty without a data term).
   void UpdateDataRhs();
@@ -257,6 +264,9 @@ class DesignSession {
   DesignSessionOptions options_;
   EnergyWeights weights_;
   std::shared_ptr<const EnergyFactorization> energy_;
+  // K = U^T S U's factorization (weights mu_S = 1, mu_B = 0) for the mixed form; null until a
+  // mixed energy is attached, then kept across weight changes.
+  std::shared_ptr<const EnergyFactorization> stiffness_energy_;
   std::unique_ptr<KktSolver> kkt_;
   // A constraint id: its slots (rows of the KKT solver), in the group's order.
   struct Entry {

@@ -123,14 +123,32 @@ void KktSolver::EnsureCapacity(int64_t rows) {
 
 void KktSolver::ComputeGroupColumns(int32_t g) {
   const int64_t r0 = static_cast<int64_t>(g) * p_;
+  if (mixed_ != nullptr) {
+    GroupColumns({&g, 1}, W_.middleCols(r0, p_));
+    return;
+  }
   for (int32_t c = 0; c < p_; ++c) {
     const SparseRow& row = rows_[g][c];
-    if (spectral_ != nullptr) {
-      spectral_->ForwardSparse(row.cols, row.vals, W_.col(r0 + c));
-    } else {
-      factor_->ForwardSparse(row.cols, row.vals, W_.col(r0 + c));
-    }
+    factor_->ForwardSparse(row.cols, row.vals, W_.col(r0 + c));
   }
+}
+
+Eigen::MatrixXd KktSolver::CrossBlock(const Eigen::Ref<const Eigen::MatrixXd>& columns) const {
+  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  Eigen::MatrixXd out(r, columns.cols());
+  if (mixed_ != nullptr) {
+    // R Z_new: sparse rows against the new columns.
+    for (Eigen::Index j = 0; j < columns.cols(); ++j) {
+      for (int64_t i = 0; i < r; ++i) out(i, j) = rows_[i / p_][i % p_].Dot(columns.col(j).data());
+    }
+    return out;
+  }
+  // W^T W_new, one matrix-vector product per column: a matrix-matrix product would pack all of
+  // W for a few columns.
+  for (Eigen::Index j = 0; j < columns.cols(); ++j) {
+    out.col(j).noalias() = W_.leftCols(r).transpose() * columns.col(j);
+  }
+  return out;
 }
 
 void KktSolver::GroupColumns(absl::Span<const int32_t> groups,
@@ -143,43 +161,38 @@ void KktSolver::GroupColumns(absl::Span<const int32_t> groups,
       vals.emplace_back(row.vals);
     }
   }
-  if (spectral_ != nullptr) {
-    // D^-1/2 V^T R^T: each column a sum of a few rows of V (no elimination tree to share).
-    for (size_t i = 0; i < cols.size(); ++i) spectral_->ForwardSparse(cols[i], vals[i], out.col(i));
+  if (mixed_ != nullptr) {
+    // Z = A_s^-1 R^T.
+    mixed_->SolveSparseInto(cols, vals, out);
     return;
   }
   factor_->ForwardSparseColumns(cols, vals, out);
 }
 
 void KktSolver::ComputeGroup(int32_t g) {
-  // SetMatrix() or SetSpectral() computes every group later.
-  if (factor_ == nullptr && spectral_ == nullptr) return;
+  // SetMatrix() or SetMixed() computes every group later.
+  if (factor_ == nullptr && mixed_ == nullptr) return;
   ComputeGroupColumns(g);
   const int64_t r0 = static_cast<int64_t>(g) * p_;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  // K = R A^-1 R^T = W^T W: the group's rows and columns against all groups (its own block
-  // included; W^T W is symmetric by construction).
-  // Matrix-vector products, one column at a time: a matrix-matrix product would pack all of W
-  // for p columns.
-  for (int32_t c = 0; c < p_; ++c) {
-    K_.col(r0 + c).head(r).noalias() = W_.leftCols(r).transpose() * W_.col(r0 + c);
-    K_.row(r0 + c).head(r) = K_.col(r0 + c).head(r).transpose();
-  }
+  // K = R A^-1 R^T: the group's rows and columns against all groups (its own block included).
+  K_.block(0, r0, r, p_) = CrossBlock(W_.middleCols(r0, p_));
+  K_.block(r0, 0, p_, r) = K_.block(0, r0, r, p_).transpose();
 }
 
 absl::Status KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor) {
   A_ = A;
   factor_ = factor;
-  spectral_.reset();
+  mixed_.reset();
   return ComputeAllGroups();
 }
 
-absl::Status KktSolver::SetSpectral(std::unique_ptr<const MixedEnergyInverse> inverse) {
+absl::Status KktSolver::SetMixed(std::unique_ptr<const MixedEnergyInverse> inverse) {
   A_ = nullptr;
   factor_ = nullptr;
   mixed_system_ = nullptr;
   mixed_mu_b_ = 0;
-  spectral_ = std::move(inverse);
+  mixed_ = std::move(inverse);
   return ComputeAllGroups();
 }
 
@@ -188,16 +201,25 @@ absl::Status KktSolver::ComputeAllGroups() {
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   const absl::Status cancelled = absl::CancelledError("hard constraint system: cancelled");
   // Thousands of constraints take seconds here (r forward substitutions, then O(r^2 d) for K):
-  // cancellation is checked per group and per block of K's columns.
-  for (int32_t g = 0; g < num_groups_; ++g) {
-    if (IsCancelled(options_.cancel)) return cancelled;
-    ComputeGroupColumns(g);
-  }
+  // cancellation is checked per block of groups and per block of K's columns.
   constexpr int64_t kColumns = 64;
+  const int32_t groups_per_block = std::max<int32_t>(1, static_cast<int32_t>(kColumns / p_));
+  std::vector<int32_t> block;
+  for (int32_t g0 = 0; g0 < num_groups_; g0 += groups_per_block) {
+    if (IsCancelled(options_.cancel)) return cancelled;
+    const int32_t k = std::min(groups_per_block, num_groups_ - g0);
+    block.resize(k);
+    for (int32_t i = 0; i < k; ++i) block[i] = g0 + i;
+    GroupColumns(block, W_.middleCols(static_cast<int64_t>(g0) * p_, static_cast<int64_t>(k) * p_));
+  }
   for (int64_t j = 0; j < r; j += kColumns) {
     if (IsCancelled(options_.cancel)) return cancelled;
     const int64_t width = std::min(kColumns, r - j);
-    K_.block(0, j, r, width).noalias() = W_.leftCols(r).transpose() * W_.middleCols(j, width);
+    if (mixed_ != nullptr) {
+      K_.block(0, j, r, width) = CrossBlock(W_.middleCols(j, width));
+    } else {
+      K_.block(0, j, r, width).noalias() = W_.leftCols(r).transpose() * W_.middleCols(j, width);
+    }
   }
   return absl::OkStatus();
 }
@@ -235,16 +257,20 @@ void KktSolver::AppendGroups(std::vector<NewGroup> groups) {
     ++num_groups_;
   }
   schur_valid_ = false;
-  // SetMatrix() or SetSpectral() computes every group later.
-  if (factor_ == nullptr && spectral_ == nullptr) return;
+  // SetMatrix() or SetMixed() computes every group later.
+  if (factor_ == nullptr && mixed_ == nullptr) return;
   std::vector<int32_t> added(k);
   for (int32_t i = 0; i < k; ++i) added[i] = g0 + i;
   GroupColumns(added, W_.middleCols(static_cast<int64_t>(g0) * p_, static_cast<int64_t>(k) * p_));
   const int64_t r0 = static_cast<int64_t>(g0) * p_;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   const int64_t nc = r - r0;
-  // K = W^T W: the new columns against all groups, then the new rows by symmetry.
-  K_.block(0, r0, r, nc).noalias() = W_.leftCols(r).transpose() * W_.middleCols(r0, nc);
+  // K = R A^-1 R^T: the new columns against all groups, then the new rows by symmetry.
+  if (mixed_ != nullptr) {
+    K_.block(0, r0, r, nc) = CrossBlock(W_.middleCols(r0, nc));
+  } else {
+    K_.block(0, r0, r, nc).noalias() = W_.leftCols(r).transpose() * W_.middleCols(r0, nc);
+  }
   K_.block(r0, 0, nc, r0) = K_.block(0, r0, r0, nc).transpose();
 }
 
@@ -259,12 +285,14 @@ void KktSolver::ReplaceGroups(const std::vector<int32_t>& slots, std::vector<New
     hard_[slots[i]] = groups[i].hard ? 1 : 0;
   }
   schur_valid_ = false;
-  if (factor_ == nullptr && spectral_ == nullptr) return;
+  if (factor_ == nullptr && mixed_ == nullptr) return;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   Eigen::MatrixXd Wc(d_, k * p_);
   GroupColumns(slots, Wc);
   for (int64_t i = 0; i < k; ++i) W_.middleCols(slots[i] * p_, p_) = Wc.middleCols(i * p_, p_);
-  const Eigen::MatrixXd G = W_.leftCols(r).transpose() * Wc;  // r x k p
+  // r x k p: R A^-1 R^T's columns of the replaced rows (their new rows included).
+  const Eigen::MatrixXd G =
+      mixed_ != nullptr ? CrossBlock(Wc) : Eigen::MatrixXd(W_.leftCols(r).transpose() * Wc);
   for (int64_t i = 0; i < k; ++i) {
     const int64_t c0 = static_cast<int64_t>(slots[i]) * p_;
     K_.block(0, c0, r, p_) = G.middleCols(i * p_, p_);
@@ -372,22 +400,28 @@ Eigen::VectorXd KktSolver::SolveSchur(const Eigen::VectorXd& v) const {
   return out;
 }
 
-void KktSolver::SpectralSolve(const Eigen::VectorXd* f, const Eigen::VectorXd& g,
-                              Eigen::VectorXd* dx, Eigen::VectorXd* dnu) const {
-  // With G = V D^-1/2 (A^-1 = G G^T) in the role of P^T L^-T and W = G^T R^T:
-  //   u = G^T f,  H nu = W^T u - g,  x = G (u - W nu):
-  // one pass over V for the solution (a dense d x d matrix-vector product), one more when f != 0.
+void KktSolver::MixedSolve(const Eigen::VectorXd* f, const Eigen::VectorXd& g, Eigen::VectorXd* dx,
+                           Eigen::VectorXd* dnu) const {
+  // With Z = A_s^-1 R^T kept per constraint (W_) and H = R Z + E:
+  //   u = A_s^-1 f,  H nu = R u - g,  x = u - Z nu:
+  // no solve with A_s at all when f = 0 (an edit's solution is Z H^-1 t), one when f != 0.
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  Eigen::VectorXd u = f != nullptr ? spectral_->Forward(*f) : Eigen::VectorXd::Zero(d_);
+  Eigen::VectorXd u = Eigen::VectorXd::Zero(d_);
+  if (f != nullptr) {
+    u = *f;
+    mixed_->SolveInPlace(u);
+  }
   if (r > 0) {
     Eigen::VectorXd h = -g;
-    if (f != nullptr) h.noalias() += W_.leftCols(r).transpose() * u;
+    if (f != nullptr) {
+      for (int64_t i = 0; i < r; ++i) h[i] += rows_[i / p_][i % p_].Dot(u.data());
+    }
     *dnu = SolveSchur(h);
     u.noalias() -= W_.leftCols(r) * *dnu;
   } else {
     dnu->resize(0);
   }
-  *dx = spectral_->Backward(u);
+  *dx = std::move(u);
 }
 
 ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
@@ -414,8 +448,8 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
   // [dx; dnu] for right-hand sides (f, g) of the saddle-point system with A replaced by A_hat.
   const auto solve_kkt = [&](const Eigen::VectorXd* f, const Eigen::VectorXd& g,
                              Eigen::VectorXd* dx, Eigen::VectorXd* dnu) {
-    if (spectral_ != nullptr) {
-      SpectralSolve(f, g, dx, dnu);
+    if (mixed_ != nullptr) {
+      MixedSolve(f, g, dx, dnu);
       return;
     }
     Eigen::VectorXd u = Eigen::VectorXd::Zero(d_);
@@ -436,7 +470,7 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
   };
   // The true matrix times v: A, or with the mixed biharmonic A - mu_b U^T B U + mu_b K Mr^-1 K.
   const auto apply_A = [&](const Eigen::VectorXd& v) {
-    if (spectral_ != nullptr) return spectral_->Multiply(v);
+    if (mixed_ != nullptr) return mixed_->Multiply(v);
     Eigen::VectorXd out = A_->Multiply(v);
     if (mixed_system_ != nullptr) {
       const ReducedSystem& system = *mixed_system_;

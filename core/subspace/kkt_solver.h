@@ -15,8 +15,8 @@
 #include "absl/status/statusor.h"
 #include "absl/types/span.h"
 #include "core/linalg/supernodal_cholesky.h"
+#include "core/subspace/mixed_energy.h"
 #include "core/subspace/model_problem.h"
-#include "core/subspace/spectral_mixed.h"
 
 namespace fieldspace {
 
@@ -91,13 +91,14 @@ class KktSolver {
   // then incomplete: call again before solving) when the options' cancel flag is set meanwhile.
   absl::Status SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor);
 
-  // The mixed energy by simultaneous diagonalization instead (MixedEnergyInverse): the true
-  // matrix is mu_s K + mu_b K Mr^-1 K, W = D^-1/2 V^T R^T (O(d) per nonzero of a constraint row)
-  // and every solve is one product with V (d x d, dense); verified solves refine against the
-  // true matrix like the exact form's. Replaces
-  // SetMatrix's matrix and factorization (and SetMixedBiharmonic's conjugate gradients) until the
-  // next SetMatrix. Recomputes W and K for all constraints.
-  absl::Status SetSpectral(std::unique_ptr<const MixedEnergyInverse> inverse);
+  // The mixed energy mu_s K + mu_b K Mr^-1 K as the product of sparse solves MixedEnergyInverse
+  // instead: A_s^-1 = N_s^-1 Mr K_s^-1 is not a G G^T of a triangular factor, so each constraint
+  // keeps Z = A_s^-1 R^T (d x p, in place of W: p columns of solves when it is added or moved to
+  // another face) and H = R Z + E; a solve is then x = u - Z nu with u = A_s^-1 b (no solve at
+  // all when b = 0), and verified solves refine against the true matrix like the exact form's.
+  // Replaces SetMatrix's matrix and factorization (and SetMixedBiharmonic's conjugate gradients)
+  // until the next SetMatrix. Recomputes Z and K for all constraints.
+  absl::Status SetMixed(std::unique_ptr<const MixedEnergyInverse> inverse);
 
   // The mixed biharmonic (BiharmonicForm::kMixed) with weight mu_b (> 0; 0 turns it off): the
   // true matrix becomes A - mu_b U^T B U + mu_b K Mr^-1 K (K = U^T S U, Mr = U^T M U of
@@ -158,29 +159,33 @@ class KktSolver {
   // The W columns of groups `groups` (one block forward substitution) into `out` (d x p k).
   void GroupColumns(absl::Span<const int32_t> groups, Eigen::Ref<Eigen::MatrixXd> out) const;
   void ComputeGroup(int32_t g);
-  // W and K for every group (after SetMatrix / SetSpectral).
+  // W and K for every group (after SetMatrix / SetMixed).
   absl::Status ComputeAllGroups();
+  // R A^-1 R^T against `columns` (of W, or of Z with the mixed inverse; d x m), for the current
+  // r rows: W^T columns, or R columns (r x m).
+  Eigen::MatrixXd CrossBlock(const Eigen::Ref<const Eigen::MatrixXd>& columns) const;
   // H^-1 v (v: r values).
   Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;
-  // The KKT solve for right-hand sides (f, g) (f may be null: 0) with the spectral inverse.
-  void SpectralSolve(const Eigen::VectorXd* f, const Eigen::VectorXd& g, Eigen::VectorXd* dx,
-                     Eigen::VectorXd* dnu) const;
+  // The KKT solve for right-hand sides (f, g) (f may be null: 0) with the mixed inverse.
+  void MixedSolve(const Eigen::VectorXd* f, const Eigen::VectorXd& g, Eigen::VectorXd* dx,
+                  Eigen::VectorXd* dnu) const;
 
   int64_t d_;
   int32_t p_;
   ReducedSolveOptions options_;
   const SupernodalMatrix* A_ = nullptr;
   const SupernodalFactor* factor_ = nullptr;
-  std::unique_ptr<const MixedEnergyInverse> spectral_;  // see SetSpectral
-  const ReducedSystem* mixed_system_ = nullptr;  // with mixed_mu_b_ > 0: see SetMixedBiharmonic
+  std::unique_ptr<const MixedEnergyInverse> mixed_;  // see SetMixed
+  const ReducedSystem* mixed_system_ = nullptr;      // with mixed_mu_b_ > 0: see SetMixedBiharmonic
   double mixed_mu_b_ = 0;
   int32_t num_groups_ = 0;
   std::vector<std::vector<SparseRow>> rows_;  // per group, p rows
   std::vector<char> hard_;                    // per group
   Eigen::VectorXd t_;                         // per row (capacity)
   Eigen::VectorXd e_;                         // per row (capacity)
-  Eigen::MatrixXd W_;                         // d x capacity: L^-1 P R^T (permuted numbering)
-  Eigen::MatrixXd K_;                         // capacity x capacity: R F^-1 R^T = W^T W
+  // d x capacity: L^-1 P R^T (permuted numbering), or Z = A_s^-1 R^T with the mixed inverse.
+  Eigen::MatrixXd W_;
+  Eigen::MatrixXd K_;  // capacity x capacity: R F^-1 R^T (= W^T W, or R Z)
   // Factorization of the scaled, permuted H: order_[i] = row of H at position i (hard first),
   // scale_ = 1 / sqrt(diag(H)).
   std::vector<int64_t> order_;
