@@ -158,8 +158,11 @@ absl::Status BatchFaceStiffness(const ReducedSystem& system, const SupernodalFac
 struct SoftPartial {
   std::vector<double> values;  // nnz(A): sum of the faces' mu R^T R
   Eigen::VectorXd b;           // d: sum of the faces' mu R^T v
-  bool outside = false;        // an entry outside the pattern (cannot happen; checked anyway)
-  absl::Status error;          // the first FaceStiffness failure of this thread
+  // Entries outside A's pattern. The pattern holds U^T M U's nonzero values, and on symmetric
+  // meshes (a box's faces at right angles, a 4-field's frames turned by multiples of pi/2) a
+  // pair of columns that share a face can still sum to an exact 0 there, and so be missing.
+  std::vector<Eigen::Triplet<double>> outside;
+  absl::Status error;  // the first FaceStiffness failure of this thread
   // Scratch space for a batch of faces: their rows of U, their stiffnesses and matrix and
   // right-hand side scales, the forward substitutions of BatchFaceStiffness; the union of their
   // rows' columns (ascending), their rows R on those columns, scaled, and R^T diag(a) R.
@@ -219,7 +222,7 @@ void AddBatchTerms(const std::vector<std::vector<SparseRow>>& rows, absl::Span<c
       if (part->outer(i, j) == 0) continue;
       at = std::lower_bound(at, end, cols[i]);
       if (at == end || *at != cols[i]) {
-        part->outside = true;
+        part->outside.emplace_back(cols[i], cols[j], part->outer(i, j));
         continue;
       }
       part->values[at - inner] += part->outer(i, j);
@@ -309,13 +312,17 @@ absl::StatusOr<ReducedAssembly> AssembleReducedModelProblem(const ReducedSystem&
   for (const SoftPartial& part : partials) RETURN_IF_ERROR(part.error);
   if (IsCancelled(options.cancel)) return cancelled_error;
   double* a = A.valuePtr();
+  std::vector<Eigen::Triplet<double>> outside;
   for (const SoftPartial& part : partials) {
-    if (part.outside) {
-      return absl::InternalError(
-          "a soft constraint's entries fall outside the reduced system's pattern");
-    }
     for (int64_t q = 0; q < nnz; ++q) a[q] += part.values[q];
     out.b += part.b;
+    outside.insert(outside.end(), part.outside.begin(), part.outside.end());
+  }
+  if (!outside.empty()) {
+    // A wider pattern: SolveReducedModelProblem analyzes it anew (SamePattern fails).
+    Eigen::SparseMatrix<double> extra(d, d);
+    extra.setFromTriplets(outside.begin(), outside.end());
+    A = A + extra;
   }
   return out;
 }

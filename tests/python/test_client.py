@@ -437,6 +437,48 @@ class SolveAndDesignTest(unittest.TestCase):
             self.assertEqual(s2.add(3, [1, 0, 0]).num_constraints, 1)
 
 
+def open_box(k):
+    """The unit cube without its top, k x k cells of two triangles per side: (V, F)."""
+    sides = [((0, 0, 0), (0, 1, 0), (1, 0, 0)), ((0, 0, 0), (0, 0, 1), (0, 1, 0)),
+             ((1, 0, 0), (0, 1, 0), (0, 0, 1)), ((0, 0, 0), (1, 0, 0), (0, 0, 1)),
+             ((0, 1, 0), (0, 0, 1), (1, 0, 0))]
+    index, vertices, faces = {}, [], []
+
+    def at(o, u, v, i, j):
+        key = tuple(o[c] * k + i * u[c] + j * v[c] for c in range(3))
+        if key not in index:
+            index[key] = len(vertices)
+            vertices.append([x / k for x in key])
+        return index[key]
+
+    for o, u, v in sides:
+        for i in range(k):
+            for j in range(k):
+                a, b = at(o, u, v, i, j), at(o, u, v, i + 1, j)
+                c, d = at(o, u, v, i + 1, j + 1), at(o, u, v, i, j + 1)
+                faces += [[a, b, c], [a, c, d]]
+    return np.array(vertices, dtype=np.float64), np.array(faces, dtype=np.int32)
+
+
+class RightAngleFramesTest(unittest.TestCase):
+    def test_soft_constraints_on_a_four_field_of_a_box_solve(self):
+        # A 4-field's frames on a box turn by right angles: basis columns sharing a face can
+        # sum to exact zeros in the reduced matrices, so their entry is not in the shared
+        # pattern, but a soft constraint couples them (the Solve answered INTERNAL before).
+        box = CLIENT.upload(*open_box(8), name="open_box")
+        basis = CLIENT.build(box.id, "nfield", 40, n=4, progress=False)
+        faces = list(range(0, box.num_faces, 7))
+        values = [[np.cos(f), np.sin(f), 0.3] for f in faces]
+        solved = CLIENT.solve(basis, faces, values)
+        with CLIENT.design(basis) as s:
+            for i, (f, v) in enumerate(zip(faces, values)):
+                s.add(f, v, id=i)
+            session = s.coefficients
+        scale = np.linalg.norm(session)
+        self.assertGreater(scale, 0.0)
+        np.testing.assert_allclose(solved.coefficients, session, rtol=0, atol=1e-9 * scale)
+
+
 class DesignToolsTest(unittest.TestCase):
     def test_tools_are_groups_moved_and_removed_as_one(self):
         arc = [(np.cos(t), np.sin(t), 0.1) for t in np.linspace(0.0, 1.2, 4)]
