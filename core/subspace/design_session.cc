@@ -154,8 +154,10 @@ absl::Status DesignSession::AttachEnergy(const EnergyWeights& weights) {
   // The mixed energy K Mr^-1 (mu_S Mr + mu_B K) is inverted as a product of sparse solves
   // (mixed_energy.h), K's factorization shared by every weight. A data term's mass breaks that
   // product form: then the exact form's factorization preconditions conjugate gradients
-  // (KktSolver::Solve).
-  if (mu_b > 0 && !(has_data_term() && weights.mu_a > 0)) {
+  // (KktSolver::Solve). So does mu_S = 0 with kernel columns: their shift would enter A_s^-1
+  // squared, and hard constraints on the harmonic directions would read as dependent.
+  if (mu_b > 0 && !(has_data_term() && weights.mu_a > 0) &&
+      (effective.mu_s > 0 || system_->basis().kernel_columns == 0)) {
     if (stiffness_energy_ == nullptr) {
       bool factorized = false;
       ASSIGN_OR_RETURN(stiffness_energy_,

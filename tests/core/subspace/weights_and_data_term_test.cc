@@ -234,7 +234,7 @@ TEST(DataTermSessionTest, EqualsDenseSolutionThroughEditsAndWeightChanges) {
     DesignSessionOptions options;
     options.data_term = std::make_shared<const ReducedSmoother>(*std::move(smoother));
     options.energy_cache = std::make_shared<EnergyFactorCache>();
-    // The reference below is the exact form's (the mixed one: spectral_mixed_test).
+    // The reference below is the exact form's (the mixed one: mixed_energy_test).
     options.biharmonic = BiharmonicForm::kExact;
     EnergyWeights w{.mu_s = 0.01, .mu_b = 0.001, .mu_c = 5.0, .mu_a = 2.0};
     auto session = DesignSession::Create(f.system, w, options);
