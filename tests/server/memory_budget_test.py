@@ -152,7 +152,7 @@ def main():
         # A Solve with 2^20 soft constraints on a vector basis.
         basis = client.build(sphere.id, "vector", 1024, progress=False)
         rng = np.random.default_rng(7)
-        count = 1 << 20 if full else 1 << 18
+        count = 1 << 20
         faces = rng.integers(0, len(F), count)
         values = rng.normal(size=(count, 3))
         try:
