@@ -525,7 +525,10 @@ ModelProblem DesignSession::problem() const {
 }
 
 int64_t DesignSessionOpenBytes(const ReducedSystem& system) {
-  return 2 * system.stats().factor_nonzeros * 8 + 16 * int64_t{system.dimension()} * 8;
+  // The exact form's factorization and panels; with the mixed form also N's factorization, K's
+  // (shared between sessions, counted by each) and the panels of Mr (mixed_energy.h): five
+  // factor-sized arrays at most.
+  return 5 * system.stats().factor_nonzeros * 8 + 16 * int64_t{system.dimension()} * 8;
 }
 
 int64_t DesignSessionConstraintBytes(const ReducedSystem& system, int64_t constraints) {

@@ -291,7 +291,8 @@ class DesignSession {
 };
 
 // An estimate of the bytes an open DesignSession on `system` holds before its first constraint
-// (its own factorization and panels when its weights are not shared, and its working vectors);
+// (its own factorizations and panels when its weights are not shared: the exact form's, and the
+// mixed form's of N, K and Mr; and its working vectors);
 // each constraint adds about d x dofs-per-face doubles. For admission against a memory budget.
 int64_t DesignSessionOpenBytes(const ReducedSystem& system);
 
