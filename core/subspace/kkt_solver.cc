@@ -43,6 +43,10 @@ absl::StatusOr<double> FaceStiffness(const ReducedSystem& system, const Supernod
     }
     factor.ForwardSparse(cols, vals, W.col(c));
   }
+  return StiffnessOfSubstitutions(W);
+}
+
+absl::StatusOr<double> StiffnessOfSubstitutions(const Eigen::Ref<const Eigen::MatrixXd>& W) {
   const Eigen::MatrixXd G = W.transpose() * W;
   const double g = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(G, Eigen::EigenvaluesOnly)
                        .eigenvalues()

@@ -61,6 +61,11 @@ absl::StatusOr<double> FaceStiffness(const ReducedSystem& system, const Supernod
                                      const std::vector<SparseRow>& rows,
                                      bool skip_kernel_columns = true);
 
+// FaceStiffness from the face's forward substitutions W = L^-1 P U_f^T (d x p): the smallest
+// eigenvalue of W^T W, FailedPrecondition when it vanishes against the largest (batched callers
+// compute W for several faces at once).
+absl::StatusOr<double> StiffnessOfSubstitutions(const Eigen::Ref<const Eigen::MatrixXd>& W);
+
 // Factorizes `A` (on the system's shared pattern or any pattern with its own analysis) with the
 // regularization policy of ReducedSolveOptions: diagonal scaled by (1 + tau), tau raised 1000x
 // on failure up to max_regularization. Returns the tau used through `tau`.

@@ -137,19 +137,13 @@ absl::Status BatchFaceStiffness(const ReducedSystem& system, const SupernodalFac
   Y->resize(d, k);
   factor.ForwardSparseColumns(col_spans, val_spans, *Y);
   for (size_t f = 0; f < faces.size(); ++f) {
-    const auto W = Y->middleCols(static_cast<int64_t>(f) * p, p);
-    const Eigen::MatrixXd G = W.transpose() * W;
-    const double g = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(G, Eigen::EigenvaluesOnly)
-                         .eigenvalues()
-                         .minCoeff();
-    if (!(g > 1e-12 * G.trace()) || !std::isfinite(g)) {
-      return absl::FailedPreconditionError(absl::StrCat(
-          "constraint on face ", faces[f],
-          ": a scale-free soft constraint's face has (almost) no support in the subspace: no "
-          "basis field controls one of its DOF directions, so its weight cannot be normalized; "
-          "use raw weights or another face"));
+    absl::StatusOr<double> g =
+        StiffnessOfSubstitutions(Y->middleCols(static_cast<int64_t>(f) * p, p));
+    if (!g.ok()) {
+      return absl::Status(g.status().code(), absl::StrCat("constraint on face ", faces[f], ": ",
+                                                          g.status().message()));
     }
-    stiffness[f] = g;
+    stiffness[f] = *g;
   }
   return absl::OkStatus();
 }
