@@ -355,12 +355,22 @@ TEST_F(SharedStoreTest, AWaitingDaemonStreamsQueuedWaitingForTheHolderThenDone) 
 
   absl::StatusOr<v1::BasisInfo> built;
   std::thread first([&] { built = (*a)->BuildBasis(request); });
-  const std::string lease_dir = (fs::path(store_dir_) / "leases").string();
+  // The lease itself (BASIS.lease), not the temporary file it is linked from: before the link,
+  // the waiter could still take the lease and build itself.
+  const fs::path lease_dir = fs::path(store_dir_) / "leases";
+  const auto leased = [&] {
+    std::error_code ec;
+    for (const auto& entry : fs::directory_iterator(lease_dir, ec)) {
+      const std::string name = entry.path().filename().string();
+      if (name[0] != '.' && entry.path().extension() == ".lease") return true;
+    }
+    return false;
+  };
   const auto deadline = std::chrono::steady_clock::now() + 30s;
-  while (fs::is_empty(lease_dir) && std::chrono::steady_clock::now() < deadline) {
+  while (!leased() && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(1ms);
   }
-  ASSERT_FALSE(fs::is_empty(lease_dir)) << "the builder never took the lease";
+  ASSERT_TRUE(leased()) << "the builder never took the lease";
   std::vector<v1::BuildBasisProgress> seen;
   absl::StatusOr<v1::BasisInfo> waited =
       (*b)->BuildBasis(request, [&](const v1::BuildBasisProgress& p) { seen.push_back(p); });
