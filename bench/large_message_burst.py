@@ -18,17 +18,7 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tests", "server"))
-from fs_testlib import Daemon  # noqa: E402
-
-
-def varint(value):
-    out = bytearray()
-    while True:
-        byte = value & 0x7F
-        value >>= 7
-        out.append(byte | (0x80 if value else 0))
-        if not value:
-            return bytes(out)
+from fs_testlib import Daemon, with_unknown_field  # noqa: E402
 
 
 def main():
@@ -49,8 +39,8 @@ def main():
         d = Daemon(args.daemon, os.path.join(work, "store"), threads=2,
                    extra=["--memory-budget-mb", str(args.budget_mb)]).start()
         size = args.mb << 20
-        payload = (pb.SolveRequest(basis_id="b-0000000000000000").SerializeToString() +
-                   varint(999 << 3 | 2) + varint(size) + b"\0" * size)
+        payload = with_unknown_field(
+            pb.SolveRequest(basis_id="b-0000000000000000").SerializeToString(), size)
         time.sleep(0.5)
 
         def hwm():

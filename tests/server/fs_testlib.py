@@ -77,6 +77,22 @@ def obj_arrays(text):
     return np.array(V), np.array(F, dtype=np.int32)
 
 
+
+def with_unknown_field(message, size):
+    """`message` (serialized bytes) followed by an unknown length-delimited field (number 999)
+    of `size` zero bytes: a valid request of that size, which gRPC's protobuf parses and keeps
+    before any handler looks at it."""
+    def varint(value):
+        out = bytearray()
+        while True:
+            byte = value & 0x7F
+            value >>= 7
+            out.append(byte | (0x80 if value else 0))
+            if not value:
+                return bytes(out)
+    return message + varint(999 << 3 | 2) + varint(size) + b"\0" * size
+
+
 class Daemon:
     """A fieldspaced process on 127.0.0.1 with a free port."""
 

@@ -24,7 +24,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from fs_testlib import (Daemon, check, client_test_args, daemon_workdir, icosphere_obj,  # noqa: E402
-                        log, obj_arrays)
+                        log, obj_arrays, with_unknown_field)
 
 BUDGET_MB = 1024
 
@@ -35,16 +35,6 @@ def vm_mib(pid, key="VmHWM"):
             if line.startswith(key + ":"):
                 return int(line.split()[1]) / 1024.0
     raise KeyError(key)
-
-
-def varint(value):
-    out = bytearray()
-    while True:
-        byte = value & 0x7F
-        value >>= 7
-        out.append(byte | (0x80 if value else 0))
-        if not value:
-            return bytes(out)
 
 
 def hostile_obj(shape, size):
@@ -182,8 +172,8 @@ def main():
         # 16 concurrent 60 MB Solve requests for an unknown basis.
         # An unknown field (number 999, length-delimited) of 60 MB: parsed and kept by gRPC's
         # protobuf before the handler looks the basis up.
-        payload = (pb.SolveRequest(basis_id="b-0000000000000000").SerializeToString() +
-                   varint(999 << 3 | 2) + varint(60 << 20) + b"\0" * (60 << 20))
+        payload = with_unknown_field(
+            pb.SolveRequest(basis_id="b-0000000000000000").SerializeToString(), 60 << 20)
         channel = grpc.insecure_channel(d.address, options=[("grpc.max_send_message_length", -1)])
         solve = channel.unary_unary("/fieldspace.v1.FieldSpace/Solve", request_serializer=None,
                                     response_deserializer=None)
