@@ -581,9 +581,10 @@ int64_t SupernodalFactor::ForwardSparse(absl::Span<const int32_t> rows,
   return visited_rows;
 }
 
-void SupernodalFactor::ForwardSparseColumns(absl::Span<const absl::Span<const int32_t>> rows,
-                                            absl::Span<const absl::Span<const double>> vals,
-                                            Eigen::Ref<Eigen::MatrixXd> Y) const {
+void SupernodalFactor::ForwardSparseColumns(
+    absl::Span<const absl::Span<const int32_t>> rows,
+    absl::Span<const absl::Span<const double>> vals, Eigen::Ref<Eigen::MatrixXd> Y,
+    std::vector<std::pair<int64_t, int64_t>>* reach_rows) const {
   const SupernodalSymbolic& sym = *symbolic_;
   std::vector<int32_t> reach;
   std::vector<char> marked(sym.num_supernodes(), 0);
@@ -602,6 +603,16 @@ void SupernodalFactor::ForwardSparseColumns(absl::Span<const absl::Span<const in
   RowMajorMatrix tmp;
   for (const int32_t s : reach) ForwardSupernode(s, X, tmp);
   Y = X;
+  if (reach_rows == nullptr) return;
+  reach_rows->clear();
+  for (const int32_t s : reach) {
+    const int64_t begin = sym.super_begin_[s], end = sym.super_begin_[s + 1];
+    if (!reach_rows->empty() && reach_rows->back().second == begin) {
+      reach_rows->back().second = end;
+    } else {
+      reach_rows->emplace_back(begin, end);
+    }
+  }
 }
 
 void SupernodalFactor::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Core"
@@ -153,10 +154,13 @@ class SupernodalFactor {
                         Eigen::Ref<Eigen::VectorXd> y) const;
   // The same for k sparse columns at once (column j: vals[j][q] at row rows[j][q]): one pass over
   // the union of their reaches with the k columns as one block, so each supernode costs one
-  // matrix-matrix product instead of k matrix-vector products. Y: n x k, written.
+  // matrix-matrix product instead of k matrix-vector products. Y: n x k, written. With
+  // `reach_rows`, the ranges [begin, end) of permuted rows outside which Y is zero (the columns of
+  // the reach's supernodes), ascending and merged.
   void ForwardSparseColumns(absl::Span<const absl::Span<const int32_t>> rows,
                             absl::Span<const absl::Span<const double>> vals,
-                            Eigen::Ref<Eigen::MatrixXd> Y) const;
+                            Eigen::Ref<Eigen::MatrixXd> Y,
+                            std::vector<std::pair<int64_t, int64_t>>* reach_rows = nullptr) const;
 
   bool is_valid() const { return valid_; }
   int64_t rows() const { return symbolic_->rows(); }

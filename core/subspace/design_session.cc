@@ -151,11 +151,11 @@ absl::StatusOr<double> DesignSession::Stiffness(const std::vector<SparseRow>& ro
 absl::Status DesignSession::AttachEnergy(const EnergyWeights& weights) {
   const EnergyWeights effective = EffectiveEnergyWeights(*system_, weights, options_.scale_free);
   const double mu_b = options_.biharmonic == BiharmonicForm::kMixed ? effective.mu_b : 0.0;
-  // The mixed energy K Mr^-1 (mu_S Mr + mu_B K) is inverted as a product of sparse solves
-  // (mixed_energy.h), K's factorization shared by every weight. A data term's mass breaks that
-  // product form: then the exact form's factorization preconditions conjugate gradients
-  // (KktSolver::Solve). So does mu_S = 0 with kernel columns: their shift would enter A_s^-1
-  // squared, and hard constraints on the harmonic directions would read as dependent.
+  // The mixed energy K Mr^-1 (mu_S Mr + mu_B K) is inverted through its partial fractions
+  // (K^-1 - mu_B N^-1) / mu_S (mixed_energy.h), K's factorization shared by every weight. A data
+  // term's mass breaks that form: then the exact form's factorization preconditions conjugate
+  // gradients (KktSolver::Solve). So does mu_S = 0 with kernel columns: their shift would enter
+  // A_s^-1 squared, and hard constraints on the harmonic directions would read as dependent.
   if (mu_b > 0 && !(has_data_term() && weights.mu_a > 0) &&
       (effective.mu_s > 0 || system_->basis().kernel_columns == 0)) {
     if (stiffness_energy_ == nullptr) {
@@ -525,15 +525,15 @@ ModelProblem DesignSession::problem() const {
 }
 
 int64_t DesignSessionOpenBytes(const ReducedSystem& system) {
-  // The exact form's factorization and panels; with the mixed form also N's factorization, K's
-  // (shared between sessions, counted by each) and the panels of Mr (mixed_energy.h): five
-  // factor-sized arrays at most.
+  // The exact form's factorization and panels; with the mixed form also N's factorization and
+  // K's factorization and panels (shared between sessions, counted by each; mixed_energy.h):
+  // five factor-sized arrays at most.
   return 5 * system.stats().factor_nonzeros * 8 + 16 * int64_t{system.dimension()} * 8;
 }
 
 int64_t DesignSessionConstraintBytes(const ReducedSystem& system, int64_t constraints) {
   const int64_t r = std::max<int64_t>(constraints, 0) * system.dofs_per_face();
-  return 8 * (2 * int64_t{system.dimension()} * r + 6 * r * r);
+  return 8 * (4 * int64_t{system.dimension()} * r + 6 * r * r);
 }
 
 }  // namespace fieldspace

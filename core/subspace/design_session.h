@@ -235,8 +235,8 @@ class DesignSession {
   // 1 with raw weights; else FaceStiffness of `rows` under the current energy factorization.
   absl::StatusOr<double> Stiffness(const std::vector<SparseRow>& rows) const;
   // Hands energy_ to the KKT solver, with the mixed biharmonic's weight for `weights` (with
-  // mu_B > 0 and no data term: the product form of mixed_energy.h, K's factorization made on
-  // first use; FailedPrecondition or Cancelled when a factorization fails).
+  // mu_B > 0 and no data term: the partial fractions of mixed_energy.h, K's factorization made
+  // on first use; FailedPrecondition or Cancelled when a factorization fails).
   absl::Status AttachEnergy(const EnergyWeights& weights);
   // mu_A' U^T W M X0 for the current weights (empty without a data term).
   void UpdateDataRhs();
@@ -292,14 +292,16 @@ class DesignSession {
 
 // An estimate of the bytes an open DesignSession on `system` holds before its first constraint
 // (its own factorizations and panels when its weights are not shared: the exact form's, and the
-// mixed form's of N, K and Mr; and its working vectors);
-// each constraint adds about d x dofs-per-face doubles. For admission against a memory budget.
+// mixed form's of N and of K with K's panels; and its working vectors);
+// each constraint adds about d x dofs-per-face doubles per factorization it is solved with. For
+// admission against a memory budget.
 int64_t DesignSessionOpenBytes(const ReducedSystem& system);
 
 // An upper bound on the bytes `constraints` constraints add to a DesignSession on `system`, for
-// r = constraints x dofs-per-face rows: W (d x r) and K (r x r) at up to twice r (their capacity
-// doubles), and the r x r matrix H with its Cholesky factor: 8 (2 d r + 6 r^2). The r^2 terms
-// dominate beyond r ~ d / 3 (e.g. 4,700 vector constraints take ~4 GiB at any d).
+// r = constraints x dofs-per-face rows: W (d x r, one per factorization: two in the mixed form)
+// and K (r x r) at up to twice r (their capacity doubles), and the r x r matrix H with its
+// Cholesky factor: 8 (4 d r + 6 r^2). The r^2 terms dominate beyond r ~ 2 d / 3 (e.g. 4,700
+// vector constraints take ~4 GiB at any d).
 int64_t DesignSessionConstraintBytes(const ReducedSystem& system, int64_t constraints);
 
 }  // namespace fieldspace

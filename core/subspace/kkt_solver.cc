@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/common/cancel.h"
 #include "core/subspace/subspace_util.h"
+#include "oneapi/tbb/parallel_for.h"
 
 namespace fieldspace {
 
@@ -119,84 +120,150 @@ void KktSolver::EnsureCapacity(int64_t rows) {
   const int64_t cap = K_.rows();
   if (rows <= cap) return;
   const int64_t new_cap = std::max<int64_t>(rows, std::max<int64_t>(2 * cap, 16 * p_));
-  W_.conservativeResize(d_, new_cap);
+  for (Eigen::MatrixXd& W : W_) W.conservativeResize(d_, new_cap);
   K_.conservativeResize(new_cap, new_cap);
   t_.conservativeResize(new_cap);
   e_.conservativeResize(new_cap);
 }
 
-void KktSolver::ComputeGroupColumns(int32_t g) {
-  const int64_t r0 = static_cast<int64_t>(g) * p_;
-  if (mixed_ != nullptr) {
-    GroupColumns({&g, 1}, W_.middleCols(r0, p_));
-    return;
-  }
-  for (int32_t c = 0; c < p_; ++c) {
-    const SparseRow& row = rows_[g][c];
-    factor_->ForwardSparse(row.cols, row.vals, W_.col(r0 + c));
+template <typename F>
+void KktSolver::ForEachTerm(const F& f) const {
+  const size_t n = terms_.size();
+  if (n > 1 && options_.parallel) {
+    tbb::parallel_for(size_t{0}, n, [&](size_t k) { f(k); });
+  } else {
+    for (size_t k = 0; k < n; ++k) f(k);
   }
 }
 
-Eigen::MatrixXd KktSolver::CrossBlock(const Eigen::Ref<const Eigen::MatrixXd>& columns) const {
-  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  Eigen::MatrixXd out(r, columns.cols());
-  if (mixed_ != nullptr) {
-    // R Z_new: sparse rows against the new columns.
-    for (Eigen::Index j = 0; j < columns.cols(); ++j) {
-      for (int64_t i = 0; i < r; ++i) out(i, j) = rows_[i / p_][i % p_].Dot(columns.col(j).data());
+KktSolver::Substitutions KktSolver::GroupSubstitutions(absl::Span<const int32_t> groups) const {
+  std::vector<const SparseRow*> rows;
+  for (int32_t g : groups) {
+    for (const SparseRow& row : rows_[g]) rows.push_back(&row);
+  }
+  const int64_t m = static_cast<int64_t>(rows.size());
+  // The basis columns the rows touch: a stroke's faces share most of theirs (a 50-face stroke's
+  // ~100 rows touch ~30-50 columns on a 1.4M-face mesh at d = 2000), and then substituting those
+  // columns' unit vectors and combining them (C = the rows restricted to them) costs a fraction of
+  // substituting every row.
+  std::vector<int32_t> touched;
+  for (const SparseRow* row : rows)
+    touched.insert(touched.end(), row->cols.begin(), row->cols.end());
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  Substitutions out;
+  std::vector<absl::Span<const int32_t>> cols;
+  std::vector<absl::Span<const double>> vals;
+  const double one = 1.0;
+  if (static_cast<int64_t>(touched.size()) < m) {
+    out.combined = true;
+    out.C = Eigen::MatrixXd::Zero(static_cast<int64_t>(touched.size()), m);
+    for (int64_t j = 0; j < m; ++j) {
+      for (size_t q = 0; q < rows[j]->cols.size(); ++q) {
+        const auto at = std::lower_bound(touched.begin(), touched.end(), rows[j]->cols[q]);
+        out.C(at - touched.begin(), j) += rows[j]->vals[q];
+      }
     }
-    return out;
+    for (const int32_t& c : touched) {
+      cols.emplace_back(&c, 1);
+      vals.emplace_back(&one, 1);
+    }
+  } else {
+    for (const SparseRow* row : rows) {
+      cols.emplace_back(row->cols);
+      vals.emplace_back(row->vals);
+    }
   }
-  // W^T W_new, one matrix-vector product per column: a matrix-matrix product would pack all of
-  // W for a few columns.
-  for (Eigen::Index j = 0; j < columns.cols(); ++j) {
-    out.col(j).noalias() = W_.leftCols(r).transpose() * columns.col(j);
-  }
+  out.Y.resize(terms_.size());
+  ForEachTerm([&](size_t k) {
+    out.Y[k].resize(d_, static_cast<int64_t>(cols.size()));
+    terms_[k].factor->ForwardSparseColumns(cols, vals, out.Y[k], k == 0 ? &out.reach : nullptr);
+  });
   return out;
 }
 
-void KktSolver::GroupColumns(absl::Span<const int32_t> groups,
-                             Eigen::Ref<Eigen::MatrixXd> out) const {
-  std::vector<absl::Span<const int32_t>> cols;
-  std::vector<absl::Span<const double>> vals;
-  for (int32_t g : groups) {
-    for (const SparseRow& row : rows_[g]) {
-      cols.emplace_back(row.cols);
-      vals.emplace_back(row.vals);
+void KktSolver::StoreColumns(const Substitutions& s, absl::Span<const int32_t> groups) {
+  ForEachTerm([&](size_t k) {
+    Eigen::MatrixXd& W = W_[k];
+    const Eigen::MatrixXd& Y = s.Y[k];
+    // Runs of consecutive slots (an appended or moved stroke is one run) take one product.
+    for (size_t i = 0; i < groups.size();) {
+      size_t end = i + 1;
+      while (end < groups.size() && groups[end] == groups[end - 1] + 1) ++end;
+      const int64_t c0 = static_cast<int64_t>(groups[i]) * p_;
+      const int64_t width = static_cast<int64_t>(end - i) * p_;
+      const int64_t j0 = static_cast<int64_t>(i) * p_;
+      if (!s.combined) {
+        W.middleCols(c0, width) = Y.middleCols(j0, width);
+      } else {
+        W.middleCols(c0, width).setZero();
+        for (const auto& [a, b] : s.reach) {
+          W.block(a, c0, b - a, width).noalias() =
+              Y.middleRows(a, b - a) * s.C.middleCols(j0, width);
+        }
+      }
+      i = end;
     }
-  }
-  if (mixed_ != nullptr) {
-    // Z = A_s^-1 R^T.
-    mixed_->SolveSparseInto(cols, vals, out);
-    return;
-  }
-  factor_->ForwardSparseColumns(cols, vals, out);
+  });
+}
+
+Eigen::MatrixXd KktSolver::CrossBlock(const Substitutions& s) const {
+  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  const int64_t q = s.Y.empty() ? 0 : s.Y[0].cols();
+  // sum_k weight_k W_k^T Y_k over the rows where Y is nonzero (r x q), then times C.
+  std::vector<Eigen::MatrixXd> parts(terms_.size());
+  ForEachTerm([&](size_t k) {
+    parts[k] = Eigen::MatrixXd::Zero(r, q);
+    for (const auto& [a, b] : s.reach) {
+      parts[k].noalias() += W_[k].block(a, 0, b - a, r).transpose() * s.Y[k].middleRows(a, b - a);
+    }
+  });
+  Eigen::MatrixXd G = terms_[0].weight * parts[0];
+  for (size_t k = 1; k < terms_.size(); ++k) G.noalias() += terms_[k].weight * parts[k];
+  if (!s.combined) return G;
+  return G * s.C;
+}
+
+Eigen::MatrixXd KktSolver::RecomputeGroups(absl::Span<const int32_t> groups) {
+  const Substitutions s = GroupSubstitutions(groups);
+  StoreColumns(s, groups);
+  return CrossBlock(s);
 }
 
 void KktSolver::ComputeGroup(int32_t g) {
   // SetMatrix() or SetMixed() computes every group later.
-  if (factor_ == nullptr && mixed_ == nullptr) return;
-  ComputeGroupColumns(g);
+  if (terms_.empty()) return;
   const int64_t r0 = static_cast<int64_t>(g) * p_;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   // K = R A^-1 R^T: the group's rows and columns against all groups (its own block included).
-  K_.block(0, r0, r, p_) = CrossBlock(W_.middleCols(r0, p_));
+  K_.block(0, r0, r, p_) = RecomputeGroups({&g, 1});
   K_.block(r0, 0, p_, r) = K_.block(0, r0, r, p_).transpose();
 }
 
 absl::Status KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor) {
   A_ = A;
-  factor_ = factor;
   mixed_.reset();
-  return ComputeAllGroups();
+  return SetTerms({InverseTerm{factor, 1.0}});
 }
 
 absl::Status KktSolver::SetMixed(std::unique_ptr<const MixedEnergyInverse> inverse) {
   A_ = nullptr;
-  factor_ = nullptr;
   mixed_system_ = nullptr;
   mixed_mu_b_ = 0;
   mixed_ = std::move(inverse);
+  const auto terms = mixed_->terms();
+  if (&terms[0].factor->symbolic() != &terms[1].factor->symbolic()) {
+    return absl::InternalError("mixed biharmonic: the two factorizations have different patterns");
+  }
+  return SetTerms({terms.begin(), terms.end()});
+}
+
+absl::Status KktSolver::SetTerms(std::vector<InverseTerm> terms) {
+  terms_ = std::move(terms);
+  W_.resize(terms_.size());
+  for (Eigen::MatrixXd& W : W_) {
+    if (W.cols() != K_.rows()) W.resize(d_, K_.rows());
+  }
   return ComputeAllGroups();
 }
 
@@ -214,15 +281,16 @@ absl::Status KktSolver::ComputeAllGroups() {
     const int32_t k = std::min(groups_per_block, num_groups_ - g0);
     block.resize(k);
     for (int32_t i = 0; i < k; ++i) block[i] = g0 + i;
-    GroupColumns(block, W_.middleCols(static_cast<int64_t>(g0) * p_, static_cast<int64_t>(k) * p_));
+    StoreColumns(GroupSubstitutions(block), block);
   }
   for (int64_t j = 0; j < r; j += kColumns) {
     if (IsCancelled(options_.cancel)) return cancelled;
     const int64_t width = std::min(kColumns, r - j);
-    if (mixed_ != nullptr) {
-      K_.block(0, j, r, width) = CrossBlock(W_.middleCols(j, width));
-    } else {
-      K_.block(0, j, r, width).noalias() = W_.leftCols(r).transpose() * W_.middleCols(j, width);
+    K_.block(0, j, r, width).noalias() =
+        terms_[0].weight * (W_[0].leftCols(r).transpose() * W_[0].middleCols(j, width));
+    for (size_t k = 1; k < terms_.size(); ++k) {
+      K_.block(0, j, r, width).noalias() +=
+          terms_[k].weight * (W_[k].leftCols(r).transpose() * W_[k].middleCols(j, width));
     }
   }
   return absl::OkStatus();
@@ -262,19 +330,14 @@ void KktSolver::AppendGroups(std::vector<NewGroup> groups) {
   }
   schur_valid_ = false;
   // SetMatrix() or SetMixed() computes every group later.
-  if (factor_ == nullptr && mixed_ == nullptr) return;
+  if (terms_.empty()) return;
   std::vector<int32_t> added(k);
   for (int32_t i = 0; i < k; ++i) added[i] = g0 + i;
-  GroupColumns(added, W_.middleCols(static_cast<int64_t>(g0) * p_, static_cast<int64_t>(k) * p_));
   const int64_t r0 = static_cast<int64_t>(g0) * p_;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
   const int64_t nc = r - r0;
   // K = R A^-1 R^T: the new columns against all groups, then the new rows by symmetry.
-  if (mixed_ != nullptr) {
-    K_.block(0, r0, r, nc) = CrossBlock(W_.middleCols(r0, nc));
-  } else {
-    K_.block(0, r0, r, nc).noalias() = W_.leftCols(r).transpose() * W_.middleCols(r0, nc);
-  }
+  K_.block(0, r0, r, nc) = RecomputeGroups(added);
   K_.block(r0, 0, nc, r0) = K_.block(0, r0, r0, nc).transpose();
 }
 
@@ -289,14 +352,10 @@ void KktSolver::ReplaceGroups(const std::vector<int32_t>& slots, std::vector<New
     hard_[slots[i]] = groups[i].hard ? 1 : 0;
   }
   schur_valid_ = false;
-  if (factor_ == nullptr && mixed_ == nullptr) return;
+  if (terms_.empty()) return;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  Eigen::MatrixXd Wc(d_, k * p_);
-  GroupColumns(slots, Wc);
-  for (int64_t i = 0; i < k; ++i) W_.middleCols(slots[i] * p_, p_) = Wc.middleCols(i * p_, p_);
   // r x k p: R A^-1 R^T's columns of the replaced rows (their new rows included).
-  const Eigen::MatrixXd G =
-      mixed_ != nullptr ? CrossBlock(Wc) : Eigen::MatrixXd(W_.leftCols(r).transpose() * Wc);
+  const Eigen::MatrixXd G = RecomputeGroups(slots);
   for (int64_t i = 0; i < k; ++i) {
     const int64_t c0 = static_cast<int64_t>(slots[i]) * p_;
     K_.block(0, c0, r, p_) = G.middleCols(i * p_, p_);
@@ -323,7 +382,7 @@ void KktSolver::RemoveSwapLast(int32_t g) {
     hard_[g] = hard_[last];
     t_.segment(a, p_) = t_.segment(b, p_);
     e_.segment(a, p_) = e_.segment(b, p_);
-    W_.middleCols(a, p_) = W_.middleCols(b, p_);
+    for (Eigen::MatrixXd& W : W_) W.middleCols(a, p_) = W.middleCols(b, p_);
     // Move row/column block b to a (K symmetric): first the columns, then the rows.
     K_.block(0, a, r, p_) = K_.block(0, b, r, p_);
     K_.block(a, 0, p_, r) = K_.block(b, 0, p_, r);
@@ -404,37 +463,13 @@ Eigen::VectorXd KktSolver::SolveSchur(const Eigen::VectorXd& v) const {
   return out;
 }
 
-void KktSolver::MixedSolve(const Eigen::VectorXd* f, const Eigen::VectorXd& g, Eigen::VectorXd* dx,
-                           Eigen::VectorXd* dnu) const {
-  // With Z = A_s^-1 R^T kept per constraint (W_) and H = R Z + E:
-  //   u = A_s^-1 f,  H nu = R u - g,  x = u - Z nu:
-  // no solve with A_s at all when f = 0 (an edit's solution is Z H^-1 t), one when f != 0.
-  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  Eigen::VectorXd u = Eigen::VectorXd::Zero(d_);
-  if (f != nullptr) {
-    u = *f;
-    mixed_->SolveInPlace(u);
-  }
-  if (r > 0) {
-    Eigen::VectorXd h = -g;
-    if (f != nullptr) {
-      for (int64_t i = 0; i < r; ++i) h[i] += rows_[i / p_][i % p_].Dot(u.data());
-    }
-    *dnu = SolveSchur(h);
-    u.noalias() -= W_.leftCols(r) * *dnu;
-  } else {
-    dnu->resize(0);
-  }
-  *dx = std::move(u);
-}
-
 ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
   // With P A_hat P^T = L L^T and W = L^-1 P R^T: A_hat^-1 v = P^T L^-T u for u = L^-1 P v,
   // R A_hat^-1 v = W^T u, and the solution of the saddle-point system is
   //   nu = H^-1 (W^T u - t),   x = P^T L^-T (u - W nu),   u = L^-1 P b:
-  // one forward and one backward substitution, whatever the number of constraints.
+  // one forward and one backward substitution (per term of A_hat^-1, side by side), whatever the
+  // number of constraints.
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  const auto W = W_.leftCols(r);
   ReducedSolution sol;
   const auto apply_R = [&](const Eigen::VectorXd& v) {
     Eigen::VectorXd out(r);
@@ -449,28 +484,40 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
     }
     return out;
   };
-  // [dx; dnu] for right-hand sides (f, g) of the saddle-point system with A replaced by A_hat.
+  // [dx; dnu] for right-hand sides (f, g) of the saddle-point system with A replaced by A_hat,
+  // A_hat^-1 = sum_k c_k P^T L_k^-T L_k^-1 P (one term, or the mixed form's two on one pattern):
+  //   u_k = L_k^-1 P f,  H nu = sum_k c_k W_k^T u_k - g,  x = P^T sum_k c_k L_k^-T (u_k - W_k nu).
   const auto solve_kkt = [&](const Eigen::VectorXd* f, const Eigen::VectorXd& g,
                              Eigen::VectorXd* dx, Eigen::VectorXd* dnu) {
-    if (mixed_ != nullptr) {
-      MixedSolve(f, g, dx, dnu);
-      return;
-    }
-    Eigen::VectorXd u = Eigen::VectorXd::Zero(d_);
-    if (f != nullptr) {
-      u = factor_->PermuteIn(*f);
-      factor_->ForwardInPlace(u);
-    }
+    const SupernodalFactor& first = *terms_[0].factor;
+    std::vector<Eigen::VectorXd> u(terms_.size());
+    const Eigen::VectorXd pf = f != nullptr ? first.PermuteIn(*f) : Eigen::VectorXd();
+    std::vector<Eigen::VectorXd> wu(terms_.size());
+    ForEachTerm([&](size_t k) {
+      if (f == nullptr) {
+        u[k] = Eigen::VectorXd::Zero(d_);
+        return;
+      }
+      u[k] = pf;
+      terms_[k].factor->ForwardInPlace(u[k]);
+      if (r > 0) wu[k].noalias() = W_[k].leftCols(r).transpose() * u[k];
+    });
     if (r > 0) {
       Eigen::VectorXd h = -g;
-      if (f != nullptr) h.noalias() += W.transpose() * u;
+      if (f != nullptr) {
+        for (size_t k = 0; k < terms_.size(); ++k) h.noalias() += terms_[k].weight * wu[k];
+      }
       *dnu = SolveSchur(h);
-      u.noalias() -= W * *dnu;
     } else {
       dnu->resize(0);
     }
-    factor_->BackwardInPlace(u);
-    *dx = factor_->PermuteOut(u);
+    ForEachTerm([&](size_t k) {
+      if (r > 0) u[k].noalias() -= W_[k].leftCols(r) * *dnu;
+      terms_[k].factor->BackwardInPlace(u[k]);
+    });
+    Eigen::VectorXd sum = terms_[0].weight * u[0];
+    for (size_t k = 1; k < terms_.size(); ++k) sum.noalias() += terms_[k].weight * u[k];
+    *dx = first.PermuteOut(sum);
   };
   // The true matrix times v: A, or with the mixed biharmonic A - mu_b U^T B U + mu_b K Mr^-1 K.
   const auto apply_A = [&](const Eigen::VectorXd& v) {

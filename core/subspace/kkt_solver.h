@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Cholesky"
@@ -87,6 +88,10 @@ absl::StatusOr<SupernodalFactor> FactorizeRegularized(
 // correction one forward and one backward substitution). Adding a constraint costs p sparse
 // forward substitutions plus O(d r p) for H's new entries; every solve one backward substitution
 // (and a forward one when b != 0); every change refactorizes H (O(r^3), r = p * #constraints).
+// A group edit whose rows touch fewer basis columns than it has rows (a stroke's faces share most
+// of theirs) substitutes those columns' unit vectors instead and combines them. With the mixed
+// energy (SetMixed) A_hat^-1 is a signed sum of two factorizations' inverses, each with its own
+// W: H = sum_k c_k W_k^T W_k + E and x = P^T sum_k c_k L_k^-T (u_k - W_k nu).
 class KktSolver {
  public:
   KktSolver(int64_t dim, int32_t rows_per_group, const ReducedSolveOptions& options);
@@ -96,13 +101,14 @@ class KktSolver {
   // then incomplete: call again before solving) when the options' cancel flag is set meanwhile.
   absl::Status SetMatrix(const SupernodalMatrix* A, const SupernodalFactor* factor);
 
-  // The mixed energy mu_s K + mu_b K Mr^-1 K as the product of sparse solves MixedEnergyInverse
-  // instead: A_s^-1 = N_s^-1 Mr K_s^-1 is not a G G^T of a triangular factor, so each constraint
-  // keeps Z = A_s^-1 R^T (d x p, in place of W: p columns of solves when it is added or moved to
-  // another face) and H = R Z + E; a solve is then x = u - Z nu with u = A_s^-1 b (no solve at
-  // all when b = 0), and verified solves refine against the true matrix like the exact form's.
-  // Replaces SetMatrix's matrix and factorization (and SetMixedBiharmonic's conjugate gradients)
-  // until the next SetMatrix. Recomputes Z and K for all constraints.
+  // The mixed energy mu_s K + mu_b K Mr^-1 K through its partial fractions MixedEnergyInverse
+  // instead: A_s^-1 = c_1 K_s^-1 + c_2 N_s^-1, two factorizations on one pattern, so each
+  // constraint keeps W_k = L_k^-1 P R^T for both (sparse forward substitutions over the rows'
+  // elimination-tree reach, as in the exact form), H = sum_k c_k W_k^T W_k + E, and a solve runs
+  // one backward substitution per factorization. Verified solves refine against the true matrix
+  // like the exact form's. Replaces SetMatrix's matrix and factorization (and
+  // SetMixedBiharmonic's conjugate gradients) until the next SetMatrix. Recomputes W and K for
+  // all constraints.
   absl::Status SetMixed(std::unique_ptr<const MixedEnergyInverse> inverse);
 
   // The mixed biharmonic (BiharmonicForm::kMixed) with weight mu_b (> 0; 0 turns it off): the
@@ -158,28 +164,42 @@ class KktSolver {
   double schur_min_pivot() const { return schur_min_pivot_; }
 
  private:
+  // The forward substitutions of some groups' rows: per term Y_k = L_k^-1 P B (d x q), where B
+  // is the rows themselves (q = m rows) or, when they touch fewer than m basis columns (a
+  // stroke's faces), those columns' unit vectors, combined by C (q x m: the rows restricted to
+  // them): the rows' columns of W_k are Y_k C. `reach`: the row ranges where Y_k is nonzero.
+  struct Substitutions {
+    std::vector<Eigen::MatrixXd> Y;
+    bool combined = false;
+    Eigen::MatrixXd C;
+    std::vector<std::pair<int64_t, int64_t>> reach;
+  };
   void EnsureCapacity(int64_t rows);
-  // W columns of group g, then its entries of K against all current groups.
-  void ComputeGroupColumns(int32_t g);
-  // The W columns of groups `groups` (one block forward substitution) into `out` (d x p k).
-  void GroupColumns(absl::Span<const int32_t> groups, Eigen::Ref<Eigen::MatrixXd> out) const;
+  // Sets the terms of A_hat^-1 and recomputes every group.
+  absl::Status SetTerms(std::vector<InverseTerm> terms);
+  // f(k) for every term k (side by side with options.parallel).
+  template <typename F>
+  void ForEachTerm(const F& f) const;
+  Substitutions GroupSubstitutions(absl::Span<const int32_t> groups) const;
+  // Writes the groups' columns of every W_k.
+  void StoreColumns(const Substitutions& s, absl::Span<const int32_t> groups);
+  // R A_hat^-1 R^T's columns of the substituted rows against the current r rows (r x m):
+  // sum_k c_k W_k^T Y_k over the reach, times C.
+  Eigen::MatrixXd CrossBlock(const Substitutions& s) const;
+  // StoreColumns for groups whose rows changed, then their CrossBlock (the columns are stored
+  // first, so the block holds their entries against each other too).
+  Eigen::MatrixXd RecomputeGroups(absl::Span<const int32_t> groups);
   void ComputeGroup(int32_t g);
   // W and K for every group (after SetMatrix / SetMixed).
   absl::Status ComputeAllGroups();
-  // R A^-1 R^T against `columns` (of W, or of Z with the mixed inverse; d x m), for the current
-  // r rows: W^T columns, or R columns (r x m).
-  Eigen::MatrixXd CrossBlock(const Eigen::Ref<const Eigen::MatrixXd>& columns) const;
   // H^-1 v (v: r values).
   Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;
-  // The KKT solve for right-hand sides (f, g) (f may be null: 0) with the mixed inverse.
-  void MixedSolve(const Eigen::VectorXd* f, const Eigen::VectorXd& g, Eigen::VectorXd* dx,
-                  Eigen::VectorXd* dnu) const;
 
   int64_t d_;
   int32_t p_;
   ReducedSolveOptions options_;
-  const SupernodalMatrix* A_ = nullptr;
-  const SupernodalFactor* factor_ = nullptr;
+  const SupernodalMatrix* A_ = nullptr;              // the exact form's true matrix
+  std::vector<InverseTerm> terms_;                   // A_hat^-1 = sum_k c_k F_k^-1; empty: unset
   std::unique_ptr<const MixedEnergyInverse> mixed_;  // see SetMixed
   const ReducedSystem* mixed_system_ = nullptr;      // with mixed_mu_b_ > 0: see SetMixedBiharmonic
   double mixed_mu_b_ = 0;
@@ -188,9 +208,9 @@ class KktSolver {
   std::vector<char> hard_;                    // per group
   Eigen::VectorXd t_;                         // per row (capacity)
   Eigen::VectorXd e_;                         // per row (capacity)
-  // d x capacity: L^-1 P R^T (permuted numbering), or Z = A_s^-1 R^T with the mixed inverse.
-  Eigen::MatrixXd W_;
-  Eigen::MatrixXd K_;  // capacity x capacity: R F^-1 R^T (= W^T W, or R Z)
+  // Per term, d x capacity: L_k^-1 P R^T (permuted numbering).
+  std::vector<Eigen::MatrixXd> W_;
+  Eigen::MatrixXd K_;  // capacity x capacity: R A_hat^-1 R^T = sum_k c_k W_k^T W_k
   // Factorization of the scaled, permuted H: order_[i] = row of H at position i (hard first),
   // scale_ = 1 / sqrt(diag(H)).
   std::vector<int64_t> order_;

@@ -70,9 +70,9 @@ enum class BiharmonicForm : uint8_t {
   // x^T K Mr^-1 K x with K = U^T S U and Mr = U^T M U: the biharmonic energy of the subspace's own
   // Laplacian (the M-projection of M^-1 S U x onto span(U)), never more than the exact form.
   // Closer to the full-space minimizer with local bases (bench/RESULTS.md). Design sessions solve
-  // it as the product of sparse solves N^-1 Mr K^-1, N = mu_S Mr + mu_B K
-  // (core/subspace/mixed_energy.h); one-shot solves by conjugate gradients preconditioned by the
-  // exact form's factorization. The default.
+  // it through the partial fractions of its inverse, (K^-1 - mu_B N^-1) / mu_S with
+  // N = mu_S Mr + mu_B K (core/subspace/mixed_energy.h); one-shot solves by conjugate gradients
+  // preconditioned by the exact form's factorization. The default.
   kMixed = 1,
 };
 

@@ -8,12 +8,14 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "Eigen/Dense"
 #include "core/basis/basis.h"
 #include "core/operators/reference_solvers.h"
 #include "core/subspace/design_session.h"
+#include "core/subspace/design_tools.h"
 #include "core/subspace/kkt_solver.h"
 #include "core/subspace/model_problem.h"
 #include "core/subspace/reduced_system.h"
@@ -113,7 +115,7 @@ TEST(BiharmonicFormTest, MixedIsTheDefault) {
   EXPECT_EQ(DesignSessionOptions{}.biharmonic, BiharmonicForm::kMixed);
 }
 
-// SolveInPlace inverts the true mixed energy (up to rounding: no kernel columns here) and
+// The partial fractions invert the true mixed energy (up to rounding: no kernel columns here) and
 // Multiply applies it, for mu_S > 0 and mu_S = 0 (pure biharmonic).
 TEST(MixedEnergyInverseTest, InvertsAndAppliesTheMixedEnergy) {
   const TriangleMesh mesh = Icosphere(2);
@@ -134,8 +136,13 @@ TEST(MixedEnergyInverseTest, InvertsAndAppliesTheMixedEnergy) {
       Eigen::MatrixXd B(d, 3);
       for (int j = 0; j < 3; ++j) B.col(j) = RandomVector(d, ++seed);
       const Eigen::MatrixXd expected = A.ldlt().solve(B);
-      Eigen::MatrixXd X = B;
-      (*inverse)->SolveInPlace(X);
+      // A_s^-1 B from the partial fractions: sum_k c_k F_k^-1 B.
+      Eigen::MatrixXd X = Eigen::MatrixXd::Zero(d, 3);
+      for (const InverseTerm& term : (*inverse)->terms()) {
+        Eigen::MatrixXd Y = B;
+        term.factor->SolveInPlace(Y);
+        X += term.weight * Y;
+      }
       // With mu_S = 0, N_s's floor (kKernelColumnShift mu_B min_i K_ii / Mr_ii) perturbs A_s by
       // about kKernelColumnShift relative; refinement removes it in a session.
       EXPECT_LT((X - expected).norm() / expected.norm(), mu_s > 0 ? 1e-8 : 10 * kKernelColumnShift)
@@ -295,6 +302,83 @@ TEST(MixedSessionTest, DataTermStillSolvesTheMixedForm) {
   ASSERT_TRUE(s.SetWeights(w).ok());
   EXPECT_LE(s.last_backward_error(), 1e-12);
   EXPECT_LT(RelativeDifference(s.coefficients(), f.DenseSolution(w, cs)), 1e-9);
+}
+
+// The number of basis columns the rows of `constraints`' faces touch, and their rows.
+std::pair<size_t, size_t> TouchedColumnsAndRows(const ReducedSystem& system,
+                                                const std::vector<FieldConstraint>& constraints) {
+  std::vector<int32_t> touched;
+  size_t rows = 0;
+  for (const FieldConstraint& c : constraints) {
+    for (const SparseRow& row : BasisRowsOfFace(system, c.face)) {
+      ++rows;
+      touched.insert(touched.end(), row.cols.begin(), row.cols.end());
+    }
+  }
+  std::sort(touched.begin(), touched.end());
+  return {static_cast<size_t>(std::unique(touched.begin(), touched.end()) - touched.begin()), rows};
+}
+
+// A stroke whose faces' rows touch fewer basis columns than it has rows takes KktSolver's
+// combined substitutions (the touched columns' unit vectors, then the rows restricted to them)
+// and the block of H over the rows' reach: added and moved as one group it must equal the same
+// faces added one at a time (each substituted by its own rows), in both forms; the mixed session
+// also equals the dense KKT solve. Removing the group leaves the session's other constraints.
+TEST(GroupEditTest, AStrokeOfFewColumnsEqualsItsFacesOneByOne) {
+  const TriangleMesh mesh = Torus(32, 16);
+  const Fixture f = Fixture::WithKernelColumns(mesh, 40);
+  const Eigen::Vector3d center = Eigen::Vector3d::Constant(1.0 / 3.0);
+  const auto stroke = [&](int32_t from, int32_t to) {
+    auto c = StrokeConstraints(mesh, FieldType::Vector(),
+                               {SurfacePoint{from, center}, SurfacePoint{to, center}});
+    EXPECT_TRUE(c.ok()) << c.status();
+    return *std::move(c);
+  };
+  const std::vector<FieldConstraint> first = stroke(0, 300), second = stroke(5, 333);
+  for (const auto* s : {&first, &second}) {
+    const auto [touched, rows] = TouchedColumnsAndRows(*f.system, *s);
+    ASSERT_GE(s->size(), 8u);
+    ASSERT_LT(touched, rows) << "the stroke must take the combined path";
+  }
+  // Other constraints around the torus, so that the harmonic directions are controlled.
+  std::vector<FieldConstraint> others;
+  for (const int32_t face : {100, 420, 610, 777, 900}) {
+    others.push_back({face, RandomVector(2, 7 + face), 1.0, ConstraintKind::kSoft});
+  }
+  others[1].kind = ConstraintKind::kHard;
+  const EnergyWeights w{0.7, 0.3, 5.0};
+  for (const BiharmonicForm form : {BiharmonicForm::kExact, BiharmonicForm::kMixed}) {
+    DesignSessionOptions options;
+    options.biharmonic = form;
+    options.scale_free = false;
+    const auto one_by_one = [&](const std::vector<FieldConstraint>& stroke_faces) {
+      auto s = DesignSession::Create(f.system, w, options);
+      EXPECT_TRUE(s.ok()) << s.status();
+      int64_t id = 0;
+      for (const std::vector<FieldConstraint>* cs : {&std::as_const(others), &stroke_faces}) {
+        for (const FieldConstraint& c : *cs) EXPECT_TRUE((*s)->AddConstraint(id++, c).ok());
+      }
+      return (*s)->coefficients();
+    };
+    auto session = DesignSession::Create(f.system, w, options);
+    ASSERT_TRUE(session.ok()) << session.status();
+    DesignSession& s = **session;
+    for (size_t i = 0; i < others.size(); ++i) {
+      ASSERT_TRUE(s.AddConstraint(static_cast<int64_t>(i), others[i]).ok());
+    }
+    const Eigen::VectorXd before = s.coefficients();
+    ASSERT_TRUE(s.AddConstraintGroup(100, first).ok());
+    EXPECT_LT(RelativeDifference(s.coefficients(), one_by_one(first)), 1e-10);
+    ASSERT_TRUE(s.MoveConstraintGroup(100, second).ok());
+    EXPECT_LT(RelativeDifference(s.coefficients(), one_by_one(second)), 1e-10);
+    if (form == BiharmonicForm::kMixed) {
+      std::vector<FieldConstraint> all = others;
+      all.insert(all.end(), second.begin(), second.end());
+      EXPECT_LT(RelativeDifference(s.coefficients(), f.DenseSolution(w, all)), 1e-8);
+    }
+    ASSERT_TRUE(s.RemoveConstraint(100).ok());
+    EXPECT_LT(RelativeDifference(s.coefficients(), before), 1e-10);
+  }
 }
 
 }  // namespace
