@@ -586,33 +586,45 @@ void SupernodalFactor::ForwardSparseColumns(
     absl::Span<const absl::Span<const double>> vals, Eigen::Ref<Eigen::MatrixXd> Y,
     std::vector<std::pair<int64_t, int64_t>>* reach_rows) const {
   const SupernodalSymbolic& sym = *symbolic_;
+  const int64_t k = static_cast<int64_t>(rows.size());
   std::vector<int32_t> reach;
   std::vector<char> marked(sym.num_supernodes(), 0);
-  RowMajorMatrix X = RowMajorMatrix::Zero(sym.n_, static_cast<int64_t>(rows.size()));
   for (size_t j = 0; j < rows.size(); ++j) {
-    for (size_t q = 0; q < rows[j].size(); ++q) {
-      const int32_t k = sym.iperm_[rows[j][q]];
-      X(k, static_cast<int64_t>(j)) += vals[j][q];
-      for (int32_t s = sym.col_super_[k]; s >= 0 && !marked[s]; s = sym.parent_[s]) {
+    for (const int32_t row : rows[j]) {
+      for (int32_t s = sym.col_super_[sym.iperm_[row]]; s >= 0 && !marked[s]; s = sym.parent_[s]) {
         marked[s] = 1;
         reach.push_back(s);
       }
     }
   }
   std::sort(reach.begin(), reach.end());  // children before parents
-  RowMajorMatrix tmp;
-  for (const int32_t s : reach) ForwardSupernode(s, X, tmp);
-  Y = X;
-  if (reach_rows == nullptr) return;
-  reach_rows->clear();
+  // Only the reach's rows of X are read or written (a supernode's panel rows are its ancestors'
+  // columns), so only they are zeroed and copied out.
+  std::vector<std::pair<int64_t, int64_t>> ranges;
   for (const int32_t s : reach) {
     const int64_t begin = sym.super_begin_[s], end = sym.super_begin_[s + 1];
-    if (!reach_rows->empty() && reach_rows->back().second == begin) {
-      reach_rows->back().second = end;
+    if (!ranges.empty() && ranges.back().second == begin) {
+      ranges.back().second = end;
     } else {
-      reach_rows->emplace_back(begin, end);
+      ranges.emplace_back(begin, end);
     }
   }
+  RowMajorMatrix X(sym.n_, k);
+  for (const auto& [a, b] : ranges) X.middleRows(a, b - a).setZero();
+  for (size_t j = 0; j < rows.size(); ++j) {
+    for (size_t q = 0; q < rows[j].size(); ++q) {
+      X(sym.iperm_[rows[j][q]], static_cast<int64_t>(j)) += vals[j][q];
+    }
+  }
+  RowMajorMatrix tmp;
+  for (const int32_t s : reach) ForwardSupernode(s, X, tmp);
+  if (reach_rows == nullptr) {
+    Y.setZero();
+    for (const auto& [a, b] : ranges) Y.middleRows(a, b - a) = X.middleRows(a, b - a);
+    return;
+  }
+  for (const auto& [a, b] : ranges) Y.middleRows(a, b - a) = X.middleRows(a, b - a);
+  *reach_rows = std::move(ranges);
 }
 
 void SupernodalFactor::SolveInPlace(Eigen::Ref<Eigen::MatrixXd> B) const {

@@ -155,8 +155,9 @@ class SupernodalFactor {
   // The same for k sparse columns at once (column j: vals[j][q] at row rows[j][q]): one pass over
   // the union of their reaches with the k columns as one block, so each supernode costs one
   // matrix-matrix product instead of k matrix-vector products. Y: n x k, written. With
-  // `reach_rows`, the ranges [begin, end) of permuted rows outside which Y is zero (the columns of
-  // the reach's supernodes), ascending and merged.
+  // `reach_rows`, the ranges [begin, end) of permuted rows outside which the result is zero (the
+  // columns of the reach's supernodes), ascending and merged; only those rows of Y are written
+  // then (callers that keep the reach skip zeroing the rest).
   void ForwardSparseColumns(absl::Span<const absl::Span<const int32_t>> rows,
                             absl::Span<const absl::Span<const double>> vals,
                             Eigen::Ref<Eigen::MatrixXd> Y,

@@ -136,56 +136,60 @@ void KktSolver::ForEachTerm(const F& f) const {
   }
 }
 
-KktSolver::Substitutions KktSolver::GroupSubstitutions(absl::Span<const int32_t> groups) const {
+KktSolver::RightHandSides KktSolver::GroupRightHandSides(absl::Span<const int32_t> groups) const {
   std::vector<const SparseRow*> rows;
   for (int32_t g : groups) {
     for (const SparseRow& row : rows_[g]) rows.push_back(&row);
   }
   const int64_t m = static_cast<int64_t>(rows.size());
-  // The basis columns the rows touch: a stroke's faces share most of theirs (a 50-face stroke's
-  // ~100 rows touch ~30-50 columns on a 1.4M-face mesh at d = 2000), and then substituting those
+  // The basis columns the rows touch: a stroke's faces share most of theirs (a 58-face stroke's
+  // ~117 rows touch 12-48 columns on a 1.4M-face mesh at d = 2000), and then substituting those
   // columns' unit vectors and combining them (C = the rows restricted to them) costs a fraction of
   // substituting every row.
-  std::vector<int32_t> touched;
-  for (const SparseRow* row : rows)
-    touched.insert(touched.end(), row->cols.begin(), row->cols.end());
-  std::sort(touched.begin(), touched.end());
-  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
-  Substitutions out;
-  std::vector<absl::Span<const int32_t>> cols;
-  std::vector<absl::Span<const double>> vals;
-  const double one = 1.0;
-  if (static_cast<int64_t>(touched.size()) < m) {
+  RightHandSides out;
+  for (const SparseRow* row : rows) {
+    out.touched.insert(out.touched.end(), row->cols.begin(), row->cols.end());
+  }
+  std::sort(out.touched.begin(), out.touched.end());
+  out.touched.erase(std::unique(out.touched.begin(), out.touched.end()), out.touched.end());
+  const int64_t q = static_cast<int64_t>(out.touched.size());
+  if (q < m) {
     out.combined = true;
-    out.C = Eigen::MatrixXd::Zero(static_cast<int64_t>(touched.size()), m);
+    out.C = Eigen::MatrixXd::Zero(q, m);
     for (int64_t j = 0; j < m; ++j) {
-      for (size_t q = 0; q < rows[j]->cols.size(); ++q) {
-        const auto at = std::lower_bound(touched.begin(), touched.end(), rows[j]->cols[q]);
-        out.C(at - touched.begin(), j) += rows[j]->vals[q];
+      for (size_t k = 0; k < rows[j]->cols.size(); ++k) {
+        const auto at = std::lower_bound(out.touched.begin(), out.touched.end(), rows[j]->cols[k]);
+        out.C(at - out.touched.begin(), j) += rows[j]->vals[k];
       }
     }
-    for (const int32_t& c : touched) {
-      cols.emplace_back(&c, 1);
-      vals.emplace_back(&one, 1);
+    out.cols.reserve(q);
+    out.vals.reserve(q);
+    for (const int32_t& c : out.touched) {
+      out.cols.emplace_back(&c, 1);
+      out.vals.emplace_back(&kOne, 1);
     }
   } else {
     for (const SparseRow* row : rows) {
-      cols.emplace_back(row->cols);
-      vals.emplace_back(row->vals);
+      out.cols.emplace_back(row->cols);
+      out.vals.emplace_back(row->vals);
     }
   }
-  out.Y.resize(terms_.size());
-  ForEachTerm([&](size_t k) {
-    out.Y[k].resize(d_, static_cast<int64_t>(cols.size()));
-    terms_[k].factor->ForwardSparseColumns(cols, vals, out.Y[k], k == 0 ? &out.reach : nullptr);
-  });
   return out;
 }
 
-void KktSolver::StoreColumns(const Substitutions& s, absl::Span<const int32_t> groups) {
+Eigen::MatrixXd KktSolver::RecomputeGroups(absl::Span<const int32_t> groups, bool cross) {
+  const RightHandSides rhs = GroupRightHandSides(groups);
+  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  const int64_t q = static_cast<int64_t>(rhs.cols.size());
+  std::vector<Eigen::MatrixXd> parts(terms_.size());
+  // Per term on its own thread: Y = L_k^-1 P B over the reach, the groups' columns of W_k (Y, or
+  // Y C), then W_k^T Y over the reach (after the columns are stored, so that it holds their
+  // entries against each other too).
   ForEachTerm([&](size_t k) {
+    Eigen::MatrixXd Y(d_, q);
+    std::vector<std::pair<int64_t, int64_t>> reach;
+    terms_[k].factor->ForwardSparseColumns(rhs.cols, rhs.vals, Y, &reach);
     Eigen::MatrixXd& W = W_[k];
-    const Eigen::MatrixXd& Y = s.Y[k];
     // Runs of consecutive slots (an appended or moved stroke is one run) take one product.
     for (size_t i = 0; i < groups.size();) {
       size_t end = i + 1;
@@ -193,41 +197,31 @@ void KktSolver::StoreColumns(const Substitutions& s, absl::Span<const int32_t> g
       const int64_t c0 = static_cast<int64_t>(groups[i]) * p_;
       const int64_t width = static_cast<int64_t>(end - i) * p_;
       const int64_t j0 = static_cast<int64_t>(i) * p_;
-      if (!s.combined) {
-        W.middleCols(c0, width) = Y.middleCols(j0, width);
-      } else {
-        W.middleCols(c0, width).setZero();
-        for (const auto& [a, b] : s.reach) {
+      int64_t next = 0;  // rows outside the reach are zero
+      for (const auto& [a, b] : reach) {
+        W.block(next, c0, a - next, width).setZero();
+        if (rhs.combined) {
           W.block(a, c0, b - a, width).noalias() =
-              Y.middleRows(a, b - a) * s.C.middleCols(j0, width);
+              Y.middleRows(a, b - a) * rhs.C.middleCols(j0, width);
+        } else {
+          W.block(a, c0, b - a, width) = Y.block(a, j0, b - a, width);
         }
+        next = b;
       }
+      W.block(next, c0, d_ - next, width).setZero();
       i = end;
     }
-  });
-}
-
-Eigen::MatrixXd KktSolver::CrossBlock(const Substitutions& s) const {
-  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
-  const int64_t q = s.Y.empty() ? 0 : s.Y[0].cols();
-  // sum_k weight_k W_k^T Y_k over the rows where Y is nonzero (r x q), then times C.
-  std::vector<Eigen::MatrixXd> parts(terms_.size());
-  ForEachTerm([&](size_t k) {
+    if (!cross) return;
     parts[k] = Eigen::MatrixXd::Zero(r, q);
-    for (const auto& [a, b] : s.reach) {
-      parts[k].noalias() += W_[k].block(a, 0, b - a, r).transpose() * s.Y[k].middleRows(a, b - a);
+    for (const auto& [a, b] : reach) {
+      parts[k].noalias() += W.block(a, 0, b - a, r).transpose() * Y.middleRows(a, b - a);
     }
   });
+  if (!cross) return {};
   Eigen::MatrixXd G = terms_[0].weight * parts[0];
   for (size_t k = 1; k < terms_.size(); ++k) G.noalias() += terms_[k].weight * parts[k];
-  if (!s.combined) return G;
-  return G * s.C;
-}
-
-Eigen::MatrixXd KktSolver::RecomputeGroups(absl::Span<const int32_t> groups) {
-  const Substitutions s = GroupSubstitutions(groups);
-  StoreColumns(s, groups);
-  return CrossBlock(s);
+  if (!rhs.combined) return G;
+  return G * rhs.C;
 }
 
 void KktSolver::ComputeGroup(int32_t g) {
@@ -281,7 +275,7 @@ absl::Status KktSolver::ComputeAllGroups() {
     const int32_t k = std::min(groups_per_block, num_groups_ - g0);
     block.resize(k);
     for (int32_t i = 0; i < k; ++i) block[i] = g0 + i;
-    StoreColumns(GroupSubstitutions(block), block);
+    RecomputeGroups(block, /*cross=*/false);
   }
   for (int64_t j = 0; j < r; j += kColumns) {
     if (IsCancelled(options_.cancel)) return cancelled;

@@ -164,31 +164,30 @@ class KktSolver {
   double schur_min_pivot() const { return schur_min_pivot_; }
 
  private:
-  // The forward substitutions of some groups' rows: per term Y_k = L_k^-1 P B (d x q), where B
-  // is the rows themselves (q = m rows) or, when they touch fewer than m basis columns (a
-  // stroke's faces), those columns' unit vectors, combined by C (q x m: the rows restricted to
-  // them): the rows' columns of W_k are Y_k C. `reach`: the row ranges where Y_k is nonzero.
-  struct Substitutions {
-    std::vector<Eigen::MatrixXd> Y;
+  // The right-hand sides whose forward substitutions give some groups' columns of W: the rows
+  // themselves (m of them), or, when they touch fewer than m basis columns (a stroke's faces),
+  // those columns' unit vectors, whose substitutions Y give the columns as Y C (C: q x m, the
+  // rows restricted to them).
+  struct RightHandSides {
+    std::vector<int32_t> touched;
+    std::vector<absl::Span<const int32_t>> cols;
+    std::vector<absl::Span<const double>> vals;
     bool combined = false;
     Eigen::MatrixXd C;
-    std::vector<std::pair<int64_t, int64_t>> reach;
   };
+  static constexpr double kOne = 1.0;
   void EnsureCapacity(int64_t rows);
   // Sets the terms of A_hat^-1 and recomputes every group.
   absl::Status SetTerms(std::vector<InverseTerm> terms);
   // f(k) for every term k (side by side with options.parallel).
   template <typename F>
   void ForEachTerm(const F& f) const;
-  Substitutions GroupSubstitutions(absl::Span<const int32_t> groups) const;
-  // Writes the groups' columns of every W_k.
-  void StoreColumns(const Substitutions& s, absl::Span<const int32_t> groups);
-  // R A_hat^-1 R^T's columns of the substituted rows against the current r rows (r x m):
-  // sum_k c_k W_k^T Y_k over the reach, times C.
-  Eigen::MatrixXd CrossBlock(const Substitutions& s) const;
-  // StoreColumns for groups whose rows changed, then their CrossBlock (the columns are stored
-  // first, so the block holds their entries against each other too).
-  Eigen::MatrixXd RecomputeGroups(absl::Span<const int32_t> groups);
+  RightHandSides GroupRightHandSides(absl::Span<const int32_t> groups) const;
+  // For groups whose rows changed: their columns of every W_k (forward substitutions over the
+  // rows' elimination-tree reach, the terms side by side), and with `cross` R A_hat^-1 R^T's
+  // columns of their rows against all r current rows (r x p k: sum_k c_k W_k^T W_k over the
+  // reach, their entries against each other included).
+  Eigen::MatrixXd RecomputeGroups(absl::Span<const int32_t> groups, bool cross = true);
   void ComputeGroup(int32_t g);
   // W and K for every group (after SetMatrix / SetMixed).
   absl::Status ComputeAllGroups();
