@@ -133,12 +133,14 @@ absl::StatusOr<std::shared_ptr<const EnergyFactorization>> DesignSession::Energy
 }
 
 absl::StatusOr<std::shared_ptr<const EnergyFactorization>> DesignSession::SharedFactorization(
-    const EnergyWeights& effective, const ReducedSmoother* data, bool* factorized) const {
+    const EnergyWeights& effective, const ReducedSmoother* data, bool* factorized,
+    const ReducedSolveOptions* solve) const {
+  if (solve == nullptr) solve = &options_.solve;
   if (options_.energy_cache != nullptr) {
-    return options_.energy_cache->Get(*system_, effective, options_.solve, factorized, data);
+    return options_.energy_cache->Get(*system_, effective, *solve, factorized, data);
   }
   *factorized = true;
-  return FactorizeEnergy(*system_, effective, options_.solve, data);
+  return FactorizeEnergy(*system_, effective, *solve, data);
 }
 
 absl::StatusOr<double> DesignSession::Stiffness(const std::vector<SparseRow>& rows) const {
@@ -158,14 +160,20 @@ absl::Status DesignSession::AttachEnergy(const EnergyWeights& weights) {
   // A_s^-1 squared, and hard constraints on the harmonic directions would read as dependent.
   if (mu_b > 0 && !(has_data_term() && weights.mu_a > 0) &&
       (effective.mu_s > 0 || system_->basis().kernel_columns == 0)) {
+    // Both factorizations start without the regularization's diagonal scaling (the policy's
+    // shift still follows a failure): the fractions' cancellation amplifies it, and with it the
+    // first solve missed the tolerance and was refined on every edit with a low-modes basis.
+    ReducedSolveOptions unshifted = options_.solve;
+    unshifted.regularization = 0;
     if (stiffness_energy_ == nullptr) {
       bool factorized = false;
       ASSIGN_OR_RETURN(stiffness_energy_,
-                       SharedFactorization({.mu_s = 1.0, .mu_b = 0.0}, nullptr, &factorized));
+                       SharedFactorization({.mu_s = 1.0, .mu_b = 0.0}, nullptr, &factorized,
+                                           &unshifted));
     }
     ASSIGN_OR_RETURN(std::unique_ptr<const MixedEnergyInverse> inverse,
                      MixedEnergyInverse::Create(system_.get(), stiffness_energy_, effective.mu_s,
-                                                mu_b, options_.solve));
+                                                mu_b, unshifted));
     return kkt_->SetMixed(std::move(inverse));
   }
   RETURN_IF_ERROR(kkt_->SetMatrix(energy_->A.get(), energy_->factor.get()));

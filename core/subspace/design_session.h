@@ -225,9 +225,10 @@ class DesignSession {
   // when there is one; sets last_factorized_.
   absl::StatusOr<std::shared_ptr<const EnergyFactorization>> Energy(const EnergyWeights& weights);
   // FactorizeEnergy for `effective` weights, from the cache when there is one; *factorized:
-  // whether this call factorized.
+  // whether this call factorized. `solve`: the regularization policy (null: the session's).
   absl::StatusOr<std::shared_ptr<const EnergyFactorization>> SharedFactorization(
-      const EnergyWeights& effective, const ReducedSmoother* data, bool* factorized) const;
+      const EnergyWeights& effective, const ReducedSmoother* data, bool* factorized,
+      const ReducedSolveOptions* solve = nullptr) const;
   // The diagonal of a soft constraint's rows in the KKT system: stiffness / (mu_C weight).
   double SoftE(double weight, double stiffness) const {
     return stiffness / (weights_.mu_c * weight);
