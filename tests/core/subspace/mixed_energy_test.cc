@@ -166,7 +166,7 @@ void ExpectSessionMatches(const Fixture& f, const std::vector<FieldConstraint>& 
   options.biharmonic = BiharmonicForm::kMixed;
   options.scale_free = scale_free;
   // The conjugate gradients would stop after one iteration, unconverged: the session's 1e-12
-  // below shows that it solved by the product form (and refinement) instead.
+  // below shows that it solved by the partial fractions (and refinement) instead.
   options.solve.max_iterations = 1;
   auto session = DesignSession::Create(f.system, w, options);
   ASSERT_TRUE(session.ok()) << session.status();
@@ -297,7 +297,7 @@ TEST(MixedSessionTest, DataTermStillSolvesTheMixedForm) {
   EXPECT_LE(s.last_backward_error(), 1e-12);
   EXPECT_GT(s.last_refinement_steps(), 0);  // conjugate gradient iterations
   EXPECT_LT(RelativeDifference(s.coefficients(), f.DenseSolution(w, cs, D, data_b)), 1e-8);
-  // mu_a = 0: the data term's mass is out of the energy, and the product form takes over.
+  // mu_a = 0: the data term's mass is out of the energy, and the partial fractions take over.
   w.mu_a = 0.0;
   ASSERT_TRUE(s.SetWeights(w).ok());
   EXPECT_LE(s.last_backward_error(), 1e-12);
