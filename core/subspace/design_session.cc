@@ -167,9 +167,8 @@ absl::Status DesignSession::AttachEnergy(const EnergyWeights& weights) {
     unshifted.regularization = 0;
     if (stiffness_energy_ == nullptr) {
       bool factorized = false;
-      ASSIGN_OR_RETURN(stiffness_energy_,
-                       SharedFactorization({.mu_s = 1.0, .mu_b = 0.0}, nullptr, &factorized,
-                                           &unshifted));
+      ASSIGN_OR_RETURN(stiffness_energy_, SharedFactorization({.mu_s = 1.0, .mu_b = 0.0}, nullptr,
+                                                              &factorized, &unshifted));
     }
     ASSIGN_OR_RETURN(std::unique_ptr<const MixedEnergyInverse> inverse,
                      MixedEnergyInverse::Create(system_.get(), stiffness_energy_, effective.mu_s,

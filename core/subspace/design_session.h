@@ -95,10 +95,11 @@ struct DesignSessionOptions {
   // divided by the total area (as SmoothingOptions::scale_free).
   bool scale_free = false;
   // The biharmonic term's form (ModelProblem::biharmonic; the default kMixed). With kMixed and
-  // mu_B > 0 the session inverts K Mr^-1 (mu_S Mr + mu_B K) as a product of two sparse
-  // factorizations (mixed_energy.h: K's once per session, or shared through energy_cache; the
-  // other per weight change); each constraint keeps its columns of A^-1 R^T, so an add or a move
-  // to another face costs dofs-per-face such products and an edit's solve none. With a data term
+  // mu_B > 0 the session inverts K Mr^-1 (mu_S Mr + mu_B K) through its partial fractions
+  // (K^-1 - mu_B N^-1) / mu_S, two sparse factorizations (mixed_energy.h: K's once per session,
+  // or shared through energy_cache; N's per weight change), each used as the exact form uses its
+  // one: an add or a move to another face costs sparse forward substitutions with both, an
+  // edit's solve a backward substitution with each. With a data term
   // (mu_A > 0) the exact form's factorization preconditions a conjugate gradient solve per edit
   // instead (15-150 solves with it).
   BiharmonicForm biharmonic = BiharmonicForm::kMixed;
@@ -302,7 +303,7 @@ int64_t DesignSessionOpenBytes(const ReducedSystem& system);
 // r = constraints x dofs-per-face rows: W (d x r, one per factorization: two in the mixed form)
 // and K (r x r) at up to twice r (their capacity doubles), and the r x r matrix H with its
 // Cholesky factor: 8 (4 d r + 6 r^2). The r^2 terms dominate beyond r ~ 2 d / 3 (e.g. 4,700
-// vector constraints take ~4 GiB at any d).
+// vector constraints take ~4.5 GiB at d = 2000).
 int64_t DesignSessionConstraintBytes(const ReducedSystem& system, int64_t constraints);
 
 }  // namespace fieldspace

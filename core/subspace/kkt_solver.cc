@@ -241,14 +241,14 @@ absl::Status KktSolver::SetMatrix(const SupernodalMatrix* A, const SupernodalFac
 }
 
 absl::Status KktSolver::SetMixed(std::unique_ptr<const MixedEnergyInverse> inverse) {
+  const auto terms = inverse->terms();
+  if (&terms[0].factor->symbolic() != &terms[1].factor->symbolic()) {
+    return absl::InternalError("mixed biharmonic: the two factorizations have different patterns");
+  }
   A_ = nullptr;
   mixed_system_ = nullptr;
   mixed_mu_b_ = 0;
   mixed_ = std::move(inverse);
-  const auto terms = mixed_->terms();
-  if (&terms[0].factor->symbolic() != &terms[1].factor->symbolic()) {
-    return absl::InternalError("mixed biharmonic: the two factorizations have different patterns");
-  }
   return SetTerms({terms.begin(), terms.end()});
 }
 

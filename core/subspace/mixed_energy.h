@@ -37,8 +37,9 @@ struct InverseTerm {
 // stays symmetric; solves refine against the true A (Multiply), which removes the shift as it
 // does for the exact form's factorization. mu_n = max(mu_s, kKernelColumnShift mu_b
 // min_i K_ii / Mr_ii) (pure biharmonic, mu_s = 0, gets that floor): the two terms cancel to a
-// relative accuracy of about eps (1 + mu_b lambda_1 / mu_n) for the lowest eigenvalue lambda_1
-// of (K, Mr), at most eps 1e6 at the floor, which the refinement absorbs.
+// relative accuracy of about eps cond(K) (1 + mu_b lambda_1 / mu_n) for the lowest eigenvalue
+// lambda_1 of (K, Mr), the last factor at most 1e6 at the floor, which the refinement absorbs
+// (docs/design-notes.md, "Mixed biharmonic edits").
 class MixedEnergyInverse {
  public:
   // `stiffness`: FactorizeEnergy(*system, {mu_s = 1, mu_b = 0}) (K_s's factorization and K's
