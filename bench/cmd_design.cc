@@ -1,6 +1,7 @@
 // `fieldspace-bench design MESH --field vector|nfield|tensor [--n N] --dim D --edits N --seed S
 //  [--sigma S] [--max-constraints C] [--no-full] [--full-biharmonic] [--no-kernel-columns]
-//  [--coarse-dim C] [--quality paper|low-modes|smooth] [--biharmonic exact|mixed]`:
+//  [--coarse-dim C] [--quality paper|low-modes|smooth] [--biharmonic exact|mixed]
+//  [--verify-every K]`:
 // simulates an interactive design session (paper section 8, "Vector fields design") on the
 // mesh scaled to unit area: random add / move / remove of soft and hard constraints (at most C
 // live, default 40) and a few weight changes, timing each edit (the solve included), plus lifts
@@ -13,6 +14,8 @@
 // --biharmonic: the session's BiharmonicForm (default mixed: the product of sparse solves
 // N^-1 Mr K^-1, K's and N's factorizations made when the session opens, session_create_ms;
 // exact: the paper's form).
+// --verify-every K: the sessions' DesignSessionOptions::verify_interval (default 1: every solve
+// checked against the true matrix; fieldspaced checks every 16th, --design-verify-every).
 // --strokes K [--stroke-faces F]: afterwards, K soft strokes of about F faces (default 50; from a
 // random face to one F dual-graph steps away, core/subspace/design_tools.h) each added, moved
 // (to the strip one step over) and removed as one group edit, on top of the session's
@@ -97,7 +100,8 @@ int RunDesign(const Args& args) {
   auto max_constraints = args.GetInt("max-constraints", 40);
   auto strokes = args.GetInt("strokes", 0);
   auto stroke_faces = args.GetInt("stroke-faces", 50);
-  for (const auto* v : {&edits, &seed, &max_constraints, &strokes, &stroke_faces}) {
+  auto verify_every = args.GetInt("verify-every", 1);
+  for (const auto* v : {&edits, &seed, &max_constraints, &strokes, &stroke_faces, &verify_every}) {
     if (!v->ok()) return ReportError(v->status());
   }
   if (*edits < 1 || *edits > 10000000 || *max_constraints < 1 || *max_constraints > 100000) {
@@ -106,6 +110,9 @@ int RunDesign(const Args& args) {
   if (*strokes < 0 || *strokes > 100000 || *stroke_faces < 1 || *stroke_faces > 100000) {
     return ReportError(
         absl::InvalidArgumentError("--strokes must be >= 0 and --stroke-faces >= 1"));
+  }
+  if (*verify_every < 1 || *verify_every > 1000000) {
+    return ReportError(absl::InvalidArgumentError("--verify-every must be in [1, 1000000]"));
   }
 
   auto form = BiharmonicFormFromArgs(args);
@@ -136,6 +143,7 @@ int RunDesign(const Args& args) {
   Stopwatch create_watch;
   DesignSessionOptions session_options;
   session_options.biharmonic = *form;
+  session_options.verify_interval = static_cast<int32_t>(*verify_every);
   auto session = DesignSession::Create(sub->system, initial, session_options);
   if (!session.ok()) return ReportError(session.status());
   const double create_ms = create_watch.Seconds() * 1e3;
@@ -290,6 +298,7 @@ int RunDesign(const Args& args) {
       .Int("edits", static_cast<int64_t>(edit_ms.size()))
       .Int("rejected_edits", rejected)
       .String("biharmonic", *form == BiharmonicForm::kMixed ? "mixed" : "exact")
+      .Int("verify_every", *verify_every)
       .Int("final_constraints", s.num_constraints())
       .Double("mean_refinement_steps",
               edit_ms.empty() ? 0.0 : static_cast<double>(refinement_steps) / edit_ms.size())

@@ -120,10 +120,74 @@ void KktSolver::EnsureCapacity(int64_t rows) {
   const int64_t cap = K_.rows();
   if (rows <= cap) return;
   const int64_t new_cap = std::max<int64_t>(rows, std::max<int64_t>(2 * cap, 16 * p_));
-  for (Eigen::MatrixXd& W : W_) W.conservativeResize(d_, new_cap);
   K_.conservativeResize(new_cap, new_cap);
   t_.conservativeResize(new_cap);
   e_.conservativeResize(new_cap);
+}
+
+void KktSolver::EnsureSourceCapacity(int64_t cols) {
+  for (Eigen::MatrixXd& V : V_) {
+    if (cols <= V.cols()) continue;
+    V.conservativeResize(d_, std::max<int64_t>(cols, std::max<int64_t>(2 * V.cols(), 16 * p_)));
+  }
+}
+
+void KktSolver::ReleaseSource(int32_t g) {
+  const int32_t i = source_of_[g];
+  if (i < 0) return;
+  source_of_[g] = -1;
+  if (--sources_[i].members > 0) return;
+  const int64_t v0 = sources_[i].v0;
+  const int64_t width = sources_[i].width;
+  int32_t at_end = i;  // the source in V's last columns
+  for (int32_t j = 0; j < static_cast<int32_t>(sources_.size()); ++j) {
+    if (sources_[j].v0 + sources_[j].width == v_cols_) at_end = j;
+  }
+  if (at_end != i && sources_[at_end].width == width) {
+    // That source (a single constraint's, like most) moves into the hole.
+    for (Eigen::MatrixXd& V : V_) {
+      V.middleCols(v0, width) = V.middleCols(sources_[at_end].v0, width);
+    }
+    sources_[at_end].v0 = v0;
+  } else {
+    // The later columns move down.
+    const int64_t tail = v_cols_ - v0 - width;
+    for (Eigen::MatrixXd& V : V_) {
+      for (int64_t j = 0; j < tail; ++j) V.col(v0 + j) = V.col(v0 + width + j);
+    }
+    for (Source& src : sources_) src.v0 -= src.v0 > v0 ? width : 0;
+  }
+  sources_.erase(sources_.begin() + i);
+  for (int32_t& s : source_of_) s -= s > i ? 1 : 0;
+  v_cols_ -= width;
+}
+
+Eigen::MatrixXd KktSolver::ApplySt(const Eigen::Ref<const Eigen::MatrixXd>& X) const {
+  Eigen::MatrixXd out(static_cast<int64_t>(num_groups_) * p_, X.cols());
+  for (int32_t g = 0; g < num_groups_; ++g) {
+    const Source& src = sources_[source_of_[g]];
+    if (src.C.size() == 0) {
+      out.middleRows(static_cast<int64_t>(g) * p_, p_) = X.middleRows(src.v0, p_);
+    } else {
+      out.middleRows(static_cast<int64_t>(g) * p_, p_).noalias() =
+          src.C.middleCols(source_col_[g], p_).transpose() * X.middleRows(src.v0, src.width);
+    }
+  }
+  return out;
+}
+
+Eigen::VectorXd KktSolver::ApplyS(const Eigen::VectorXd& nu) const {
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(v_cols_);
+  for (int32_t g = 0; g < num_groups_; ++g) {
+    const Source& src = sources_[source_of_[g]];
+    const auto nu_g = nu.segment(static_cast<int64_t>(g) * p_, p_);
+    if (src.C.size() == 0) {
+      out.segment(src.v0, p_) += nu_g;
+    } else {
+      out.segment(src.v0, src.width).noalias() += src.C.middleCols(source_col_[g], p_) * nu_g;
+    }
+  }
+  return out;
 }
 
 template <typename F>
@@ -178,50 +242,52 @@ KktSolver::RightHandSides KktSolver::GroupRightHandSides(absl::Span<const int32_
 }
 
 Eigen::MatrixXd KktSolver::RecomputeGroups(absl::Span<const int32_t> groups, bool cross) {
-  const RightHandSides rhs = GroupRightHandSides(groups);
-  const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  for (int32_t g : groups) ReleaseSource(g);
+  RightHandSides rhs = GroupRightHandSides(groups);
   const int64_t q = static_cast<int64_t>(rhs.cols.size());
+  const int64_t v0 = v_cols_;
+  EnsureSourceCapacity(v0 + q);
+  v_cols_ += q;
+  if (rhs.combined) {
+    for (size_t i = 0; i < groups.size(); ++i) {
+      source_of_[groups[i]] = static_cast<int32_t>(sources_.size());
+      source_col_[groups[i]] = static_cast<int64_t>(i) * p_;
+    }
+    sources_.push_back({v0, q, static_cast<int32_t>(groups.size()), std::move(rhs.C)});
+  } else {
+    for (size_t i = 0; i < groups.size(); ++i) {
+      source_of_[groups[i]] = static_cast<int32_t>(sources_.size());
+      source_col_[groups[i]] = 0;
+      sources_.push_back({v0 + static_cast<int64_t>(i) * p_, p_, 1, {}});
+    }
+  }
+  const int64_t s = v_cols_;
   std::vector<Eigen::MatrixXd> parts(terms_.size());
-  // Per term on its own thread: Y = L_k^-1 P B over the reach, the groups' columns of W_k (Y, or
-  // Y C), then W_k^T Y over the reach (after the columns are stored, so that it holds their
-  // entries against each other too).
+  // Per term on its own thread: the new sources' columns Y = L_k^-1 P B over the reach (zero
+  // elsewhere), then V_k^T Y over the reach (after Y is stored, so that it holds their entries
+  // against each other too).
   ForEachTerm([&](size_t k) {
-    Eigen::MatrixXd Y(d_, q);
+    auto Y = V_[k].middleCols(v0, q);
     std::vector<std::pair<int64_t, int64_t>> reach;
     terms_[k].factor->ForwardSparseColumns(rhs.cols, rhs.vals, Y, &reach);
-    Eigen::MatrixXd& W = W_[k];
-    // Runs of consecutive slots (an appended or moved stroke is one run) take one product.
-    for (size_t i = 0; i < groups.size();) {
-      size_t end = i + 1;
-      while (end < groups.size() && groups[end] == groups[end - 1] + 1) ++end;
-      const int64_t c0 = static_cast<int64_t>(groups[i]) * p_;
-      const int64_t width = static_cast<int64_t>(end - i) * p_;
-      const int64_t j0 = static_cast<int64_t>(i) * p_;
-      int64_t next = 0;  // rows outside the reach are zero
-      for (const auto& [a, b] : reach) {
-        W.block(next, c0, a - next, width).setZero();
-        if (rhs.combined) {
-          W.block(a, c0, b - a, width).noalias() =
-              Y.middleRows(a, b - a) * rhs.C.middleCols(j0, width);
-        } else {
-          W.block(a, c0, b - a, width) = Y.block(a, j0, b - a, width);
-        }
-        next = b;
-      }
-      W.block(next, c0, d_ - next, width).setZero();
-      i = end;
-    }
-    if (!cross) return;
-    parts[k] = Eigen::MatrixXd::Zero(r, q);
+    int64_t next = 0;
     for (const auto& [a, b] : reach) {
-      parts[k].noalias() += W.block(a, 0, b - a, r).transpose() * Y.middleRows(a, b - a);
+      Y.middleRows(next, a - next).setZero();
+      next = b;
+    }
+    Y.bottomRows(d_ - next).setZero();
+    if (!cross) return;
+    parts[k] = Eigen::MatrixXd::Zero(s, q);
+    for (const auto& [a, b] : reach) {
+      parts[k].noalias() += V_[k].block(a, 0, b - a, s).transpose() * Y.middleRows(a, b - a);
     }
   });
   if (!cross) return {};
   Eigen::MatrixXd G = terms_[0].weight * parts[0];
   for (size_t k = 1; k < terms_.size(); ++k) G.noalias() += terms_[k].weight * parts[k];
-  if (!rhs.combined) return G;
-  return G * rhs.C;
+  const Source& last = sources_.back();
+  if (last.C.size() != 0) G = G * last.C;  // s x m: the groups' own W columns
+  return ApplySt(G);
 }
 
 void KktSolver::ComputeGroup(int32_t g) {
@@ -254,10 +320,7 @@ absl::Status KktSolver::SetMixed(std::unique_ptr<const MixedEnergyInverse> inver
 
 absl::Status KktSolver::SetTerms(std::vector<InverseTerm> terms) {
   terms_ = std::move(terms);
-  W_.resize(terms_.size());
-  for (Eigen::MatrixXd& W : W_) {
-    if (W.cols() != K_.rows()) W.resize(d_, K_.rows());
-  }
+  V_.resize(terms_.size());
   return ComputeAllGroups();
 }
 
@@ -269,6 +332,11 @@ absl::Status KktSolver::ComputeAllGroups() {
   // cancellation is checked per block of groups and per block of K's columns.
   constexpr int64_t kColumns = 64;
   const int32_t groups_per_block = std::max<int32_t>(1, static_cast<int32_t>(kColumns / p_));
+  // New sources for every group, by blocks of consecutive groups (a stroke's faces, appended as
+  // one run, share one again).
+  sources_.clear();
+  v_cols_ = 0;
+  std::fill(source_of_.begin(), source_of_.end(), -1);
   std::vector<int32_t> block;
   for (int32_t g0 = 0; g0 < num_groups_; g0 += groups_per_block) {
     if (IsCancelled(options_.cancel)) return cancelled;
@@ -277,16 +345,21 @@ absl::Status KktSolver::ComputeAllGroups() {
     for (int32_t i = 0; i < k; ++i) block[i] = g0 + i;
     RecomputeGroups(block, /*cross=*/false);
   }
-  for (int64_t j = 0; j < r; j += kColumns) {
+  // K = S^T G S for G = sum_k c_k V_k^T V_k (s x s).
+  const int64_t s = v_cols_;
+  Eigen::MatrixXd G(s, s);
+  for (int64_t j = 0; j < s; j += kColumns) {
     if (IsCancelled(options_.cancel)) return cancelled;
-    const int64_t width = std::min(kColumns, r - j);
-    K_.block(0, j, r, width).noalias() =
-        terms_[0].weight * (W_[0].leftCols(r).transpose() * W_[0].middleCols(j, width));
+    const int64_t width = std::min(kColumns, s - j);
+    G.middleCols(j, width).noalias() =
+        terms_[0].weight * (V_[0].leftCols(s).transpose() * V_[0].middleCols(j, width));
     for (size_t k = 1; k < terms_.size(); ++k) {
-      K_.block(0, j, r, width).noalias() +=
-          terms_[k].weight * (W_[k].leftCols(r).transpose() * W_[k].middleCols(j, width));
+      G.middleCols(j, width).noalias() +=
+          terms_[k].weight * (V_[k].leftCols(s).transpose() * V_[k].middleCols(j, width));
     }
   }
+  const Eigen::MatrixXd StG = ApplySt(G);  // r x s
+  K_.topLeftCorner(r, r) = ApplySt(StG.transpose()).transpose();
   return absl::OkStatus();
 }
 
@@ -302,6 +375,8 @@ void KktSolver::Append(std::vector<SparseRow> rows, const Eigen::VectorXd& targe
   EnsureCapacity(static_cast<int64_t>(g + 1) * p_);
   rows_.push_back(std::move(rows));
   hard_.push_back(hard ? 1 : 0);
+  source_of_.push_back(-1);
+  source_col_.push_back(0);
   ++num_groups_;
   t_.segment(static_cast<int64_t>(g) * p_, p_) = target;
   e_.segment(static_cast<int64_t>(g) * p_, p_).setConstant(e);
@@ -320,6 +395,8 @@ void KktSolver::AppendGroups(std::vector<NewGroup> groups) {
     e_.segment(r0, p_).setConstant(group.e);
     rows_.push_back(std::move(group.rows));
     hard_.push_back(group.hard ? 1 : 0);
+    source_of_.push_back(-1);
+    source_col_.push_back(0);
     ++num_groups_;
   }
   schur_valid_ = false;
@@ -369,6 +446,7 @@ void KktSolver::SetE(int32_t g, double e) {
 void KktSolver::RemoveSwapLast(int32_t g) {
   const int32_t last = num_groups_ - 1;
   const int64_t r = static_cast<int64_t>(num_groups_) * p_;
+  ReleaseSource(g);
   if (g != last) {
     const int64_t a = static_cast<int64_t>(g) * p_;
     const int64_t b = static_cast<int64_t>(last) * p_;
@@ -376,7 +454,8 @@ void KktSolver::RemoveSwapLast(int32_t g) {
     hard_[g] = hard_[last];
     t_.segment(a, p_) = t_.segment(b, p_);
     e_.segment(a, p_) = e_.segment(b, p_);
-    for (Eigen::MatrixXd& W : W_) W.middleCols(a, p_) = W.middleCols(b, p_);
+    source_of_[g] = source_of_[last];
+    source_col_[g] = source_col_[last];
     // Move row/column block b to a (K symmetric): first the columns, then the rows.
     K_.block(0, a, r, p_) = K_.block(0, b, r, p_);
     K_.block(a, 0, p_, r) = K_.block(b, 0, p_, r);
@@ -385,6 +464,8 @@ void KktSolver::RemoveSwapLast(int32_t g) {
   }
   rows_.pop_back();
   hard_.pop_back();
+  source_of_.pop_back();
+  source_col_.pop_back();
   --num_groups_;
   schur_valid_ = false;
 }
@@ -494,19 +575,22 @@ ReducedSolution KktSolver::Solve(const Eigen::VectorXd* b, bool verify) const {
       }
       u[k] = pf;
       terms_[k].factor->ForwardInPlace(u[k]);
-      if (r > 0) wu[k].noalias() = W_[k].leftCols(r).transpose() * u[k];
+      if (r > 0) wu[k].noalias() = V_[k].leftCols(v_cols_).transpose() * u[k];
     });
     if (r > 0) {
       Eigen::VectorXd h = -g;
       if (f != nullptr) {
-        for (size_t k = 0; k < terms_.size(); ++k) h.noalias() += terms_[k].weight * wu[k];
+        Eigen::VectorXd vu = terms_[0].weight * wu[0];
+        for (size_t k = 1; k < terms_.size(); ++k) vu.noalias() += terms_[k].weight * wu[k];
+        h.noalias() += ApplySt(vu).col(0);
       }
       *dnu = SolveSchur(h);
     } else {
       dnu->resize(0);
     }
+    const Eigen::VectorXd s_nu = r > 0 ? ApplyS(*dnu) : Eigen::VectorXd();
     ForEachTerm([&](size_t k) {
-      if (r > 0) u[k].noalias() -= W_[k].leftCols(r) * *dnu;
+      if (r > 0) u[k].noalias() -= V_[k].leftCols(v_cols_) * s_nu;
       terms_[k].factor->BackwardInPlace(u[k]);
     });
     Eigen::VectorXd sum = terms_[0].weight * u[0];

@@ -88,10 +88,14 @@ absl::StatusOr<SupernodalFactor> FactorizeRegularized(
 // correction one forward and one backward substitution). Adding a constraint costs p sparse
 // forward substitutions plus O(d r p) for H's new entries; every solve one backward substitution
 // (and a forward one when b != 0); every change refactorizes H (O(r^3), r = p * #constraints).
-// A group edit whose rows touch fewer basis columns than it has rows (a stroke's faces share most
-// of theirs) substitutes those columns' unit vectors instead and combines them. With the mixed
-// energy (SetMixed) A_hat^-1 is a signed sum of two factorizations' inverses, each with its own
-// W: H = sum_k c_k W_k^T W_k + E and x = P^T sum_k c_k L_k^-T (u_k - W_k nu).
+// W is kept as W = V S: V = L^-1 P B (d x s) for the constraints' sources B, S (s x r)
+// block-sparse. A constraint's source is its own p rows (S's block the identity); a group edit
+// whose rows touch fewer basis columns than it has rows (a stroke's faces share most of theirs)
+// gets one source for all its groups, the unit vectors of the touched columns, and S's blocks are
+// its rows restricted to them. So a stroke of m rows over q < m columns costs q forward
+// substitutions, q columns of V and products with q columns per solve instead of m. With the
+// mixed energy (SetMixed) A_hat^-1 is a signed sum of two factorizations' inverses, each with its
+// own V (S is shared): H = sum_k c_k W_k^T W_k + E and x = P^T sum_k c_k L_k^-T (u_k - W_k nu).
 class KktSolver {
  public:
   KktSolver(int64_t dim, int32_t rows_per_group, const ReducedSolveOptions& options);
@@ -183,14 +187,23 @@ class KktSolver {
   template <typename F>
   void ForEachTerm(const F& f) const;
   RightHandSides GroupRightHandSides(absl::Span<const int32_t> groups) const;
-  // For groups whose rows changed: their columns of every W_k (forward substitutions over the
-  // rows' elimination-tree reach, the terms side by side), and with `cross` R A_hat^-1 R^T's
-  // columns of their rows against all r current rows (r x p k: sum_k c_k W_k^T W_k over the
-  // reach, their entries against each other included).
+  // For groups whose rows changed: releases their sources and gives them new ones (one combined
+  // source, or one per group; see the class comment) with their columns of every V_k (forward
+  // substitutions over the rows' elimination-tree reach, the terms side by side), and with
+  // `cross` R A_hat^-1 R^T's columns of their rows against all r current rows (r x p k:
+  // S^T sum_k c_k V_k^T V_k S over the reach, their entries against each other included).
   Eigen::MatrixXd RecomputeGroups(absl::Span<const int32_t> groups, bool cross = true);
   void ComputeGroup(int32_t g);
-  // W and K for every group (after SetMatrix / SetMixed).
+  // V and K for every group (after SetMatrix / SetMixed).
   absl::Status ComputeAllGroups();
+  // S^T X for X with s rows (indexed like V's columns): r rows.
+  Eigen::MatrixXd ApplySt(const Eigen::Ref<const Eigen::MatrixXd>& X) const;
+  // S nu (nu: r values): s values.
+  Eigen::VectorXd ApplyS(const Eigen::VectorXd& nu) const;
+  // Group g no longer uses its source; a source without groups leaves V (the last source, when
+  // as wide, moves into its columns; otherwise the later columns move down).
+  void ReleaseSource(int32_t g);
+  void EnsureSourceCapacity(int64_t cols);
   // H^-1 v (v: r values).
   Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;
 
@@ -207,8 +220,23 @@ class KktSolver {
   std::vector<char> hard_;                    // per group
   Eigen::VectorXd t_;                         // per row (capacity)
   Eigen::VectorXd e_;                         // per row (capacity)
-  // Per term, d x capacity: L_k^-1 P R^T (permuted numbering).
-  std::vector<Eigen::MatrixXd> W_;
+  // The sources (class comment), packed in V's first v_cols_ columns in any order; a group's W
+  // columns are
+  // V_k.middleCols(v0, width) C_g, C_g = C.middleCols(source_col_[g], p) (identity when C is
+  // empty: then width = p and the source is that group's alone).
+  struct Source {
+    int64_t v0 = 0;
+    int64_t width = 0;
+    int32_t members = 0;  // groups that use it
+    Eigen::MatrixXd C;    // width x (p * groups at creation), or empty
+  };
+  std::vector<Source> sources_;
+  std::vector<int32_t> source_of_;   // per group; -1: none yet (before SetMatrix / SetMixed)
+  std::vector<int64_t> source_col_;  // per group: its first column of the source's C
+  int64_t v_cols_ = 0;               // s: V's columns in use
+  // Per term, d x capacity: L_k^-1 P B for the sources B (permuted numbering), zero outside
+  // each source's reach.
+  std::vector<Eigen::MatrixXd> V_;
   Eigen::MatrixXd K_;  // capacity x capacity: R A_hat^-1 R^T = sum_k c_k W_k^T W_k
   // Factorization of the scaled, permuted H: order_[i] = row of H at position i (hard first),
   // scale_ = 1 / sqrt(diag(H)).

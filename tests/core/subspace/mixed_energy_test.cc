@@ -381,5 +381,80 @@ TEST(GroupEditTest, AStrokeOfFewColumnsEqualsItsFacesOneByOne) {
   }
 }
 
+// The sources behind W (kkt_solver.h): strokes share one per edit, single constraints have their
+// own, and removes swap groups between them. Through interleaved adds, a remove from the middle,
+// a move that keeps half a stroke's faces, a weight change (every source rebuilt) and a re-add,
+// the session equals a fresh one with the same constraints added one by one.
+TEST(GroupEditTest, StrokesAmongSingleConstraintsKeepTheirSourcesThroughEdits) {
+  const TriangleMesh mesh = Torus(32, 16);
+  const Fixture f = Fixture::WithKernelColumns(mesh, 40);
+  const Eigen::Vector3d center = Eigen::Vector3d::Constant(1.0 / 3.0);
+  const auto stroke = [&](int32_t from, int32_t to) {
+    auto c = StrokeConstraints(mesh, FieldType::Vector(),
+                               {SurfacePoint{from, center}, SurfacePoint{to, center}});
+    EXPECT_TRUE(c.ok()) << c.status();
+    return *std::move(c);
+  };
+  const std::vector<FieldConstraint> a = stroke(0, 300), b = stroke(40, 380), c = stroke(9, 200);
+  for (const auto* s : {&a, &b, &c}) {
+    const auto [touched, rows] = TouchedColumnsAndRows(*f.system, *s);
+    ASSERT_LT(touched, rows) << "the stroke must take the combined path";
+  }
+  std::vector<FieldConstraint> others;
+  for (const int32_t face : {100, 420, 610, 777, 900}) {
+    others.push_back({face, RandomVector(2, 3 + face), 1.0, ConstraintKind::kSoft});
+  }
+  others[2].kind = ConstraintKind::kHard;
+  for (const BiharmonicForm form : {BiharmonicForm::kExact, BiharmonicForm::kMixed}) {
+    DesignSessionOptions options;
+    options.biharmonic = form;
+    options.scale_free = false;
+    EnergyWeights w{0.7, 0.3, 5.0};
+    auto session = DesignSession::Create(f.system, w, options);
+    ASSERT_TRUE(session.ok()) << session.status();
+    DesignSession& s = **session;
+    const auto expect_one_by_one = [&](const char* step) {
+      auto fresh = DesignSession::Create(f.system, w, options);
+      ASSERT_TRUE(fresh.ok()) << fresh.status();
+      int64_t id = 0;
+      for (const FieldConstraint& k : s.problem().constraints) {
+        ASSERT_TRUE((*fresh)->AddConstraint(id++, k).ok()) << step;
+      }
+      EXPECT_LT(RelativeDifference(s.coefficients(), (*fresh)->coefficients()), 1e-10) << step;
+    };
+    for (int i = 0; i < 3; ++i) ASSERT_TRUE(s.AddConstraint(i, others[i]).ok());
+    ASSERT_TRUE(s.AddConstraintGroup(100, a).ok());
+    ASSERT_TRUE(s.AddConstraint(3, others[3]).ok());
+    ASSERT_TRUE(s.AddConstraintGroup(101, b).ok());
+    ASSERT_TRUE(s.AddConstraint(4, others[4]).ok());
+    expect_one_by_one("added");
+    // Constraint 4's source, the last in V, moves into constraint 0's columns.
+    ASSERT_TRUE(s.RemoveConstraint(0).ok());
+    expect_one_by_one("0 removed");
+    ASSERT_TRUE(s.AddConstraint(0, others[0]).ok());
+    // The last groups (constraint 4, then b's faces) move into a's slots.
+    ASSERT_TRUE(s.RemoveConstraint(100).ok());
+    expect_one_by_one("a removed");
+    // Half of b's faces keep their face (new values), the rest become c's.
+    std::vector<FieldConstraint> moved(b.begin(), b.begin() + b.size() / 2);
+    for (FieldConstraint& k : moved) k.value = RandomVector(2, k.face);
+    moved.insert(moved.end(), c.begin(), c.end());
+    ASSERT_TRUE(s.MoveConstraintGroup(101, moved).ok());
+    expect_one_by_one("b half moved");
+    w = {1.3, 0.05, 20.0};
+    ASSERT_TRUE(s.SetWeights(w).ok());
+    expect_one_by_one("weights changed");
+    ASSERT_TRUE(s.AddConstraintGroup(100, a).ok());
+    expect_one_by_one("a added again");
+    ASSERT_TRUE(s.RemoveConstraint(2).ok());
+    ASSERT_TRUE(s.RemoveConstraint(101).ok());
+    expect_one_by_one("b removed");
+    if (form == BiharmonicForm::kMixed) {
+      EXPECT_LT(RelativeDifference(s.coefficients(), f.DenseSolution(w, s.problem().constraints)),
+                1e-8);
+    }
+  }
+}
+
 }  // namespace
 }  // namespace fieldspace
