@@ -163,14 +163,22 @@ void KktSolver::ReleaseSource(int32_t g) {
 }
 
 Eigen::MatrixXd KktSolver::ApplySt(const Eigen::Ref<const Eigen::MatrixXd>& X) const {
+  // A combined source's block C^T X_src once for all its groups, then its groups' rows of it.
+  std::vector<Eigen::MatrixXd> combined(sources_.size());
+  for (size_t i = 0; i < sources_.size(); ++i) {
+    const Source& src = sources_[i];
+    if (src.C.size() != 0) {
+      combined[i].noalias() = src.C.transpose() * X.middleRows(src.v0, src.width);
+    }
+  }
   Eigen::MatrixXd out(static_cast<int64_t>(num_groups_) * p_, X.cols());
   for (int32_t g = 0; g < num_groups_; ++g) {
     const Source& src = sources_[source_of_[g]];
     if (src.C.size() == 0) {
       out.middleRows(static_cast<int64_t>(g) * p_, p_) = X.middleRows(src.v0, p_);
     } else {
-      out.middleRows(static_cast<int64_t>(g) * p_, p_).noalias() =
-          src.C.middleCols(source_col_[g], p_).transpose() * X.middleRows(src.v0, src.width);
+      out.middleRows(static_cast<int64_t>(g) * p_, p_) =
+          combined[source_of_[g]].middleRows(source_col_[g], p_);
     }
   }
   return out;
