@@ -28,6 +28,9 @@ struct EdgeTransport {
 
 // O(#E), parallel.
 EdgeTransport ComputeEdgeTransport(const TriangleMesh& mesh);
+// One edge's record (e in [0, #E)): what ComputeEdgeTransport stores for it, for callers that
+// need a few edges (a vertex's fan).
+EdgeTransport::Edge EdgeTransportOf(const TriangleMesh& mesh, int32_t e);
 
 // e^{i n delta} of an edge's transport e^{i delta} by repeated squaring (exact rotations, no
 // trigonometry), renormalized against rounding drift: the rotation that maps n-field

@@ -119,7 +119,8 @@ struct DesignSessionOptions {
 // (sparse supernodal Cholesky P A P^T = L L^T on the basis's shared symbolic analysis; shared
 // between sessions through an EnergyFactorCache). Constraints never touch that factorization:
 // each one keeps W = L^-1 P U_f^T (2-3 columns, sparse forward substitutions when it is added or
-// moved to another face), and every edit refactorizes only the small dense matrix
+// moved to another face; a group edit such as a stroke keeps one column per basis column its
+// rows touch instead, KktSolver), and every edit refactorizes only the small dense matrix
 // H = U_C A^-1 U_C^T + E = W^T W + E over the current constraint rows (Woodbury for soft
 // constraints, Schur complement for hard ones; see KktSolver). An edit costs
 // O(nnz(L) + d r + r^3) for r constraint rows instead of a refactorization. Changing mu_S, mu_B

@@ -207,7 +207,6 @@ absl::StatusOr<std::vector<FieldConstraint>> SingularityConstraints(
         "angle) between neighbouring faces of vertex %d's %d faces; at most 180",
         turns, s * 180 / std::numbers::pi, vertex, m));
   }
-  const EdgeTransport transport = ComputeEdgeTransport(mesh);
   std::vector<FieldConstraint> out;
   std::complex<double> u(1.0, 0.0);
   const std::complex<double> step = std::polar(1.0, s);
@@ -222,7 +221,7 @@ absl::StatusOr<std::vector<FieldConstraint>> SingularityConstraints(
     // T maps representation vectors of fan[j] to fan[j + 1]: TransportPower maps f1's to f0's.
     const int32_t e = SharedEdge(mesh, fan[j], fan[j + 1]);
     double cr, ci;
-    TransportPower(transport.edges[e], n, &cr, &ci);
+    TransportPower(EdgeTransportOf(mesh, e), n, &cr, &ci);
     std::complex<double> T(cr, ci);
     if (mesh.edge_faces()(e, 1) == fan[j + 1]) T = std::conj(T);  // fan[j] is f1: the inverse
     u = step * T * u;

@@ -80,8 +80,8 @@ absl::StatusOr<SupernodalFactor> FactorizeRegularized(
 // (p = rows_per_group rows per constraint, the rows of U at its face), E = diag(e) with
 // e = 1 / (mu_C w) on a soft constraint's rows and 0 on a hard one's. For soft rows, nu = the
 // scaled residual; this is exactly the minimizer of x^T A x - 2 b^T x + sum_soft (R_i x -
-// t_i)^2 / e_i subject to R_h x = t_h. With F = P^T L L^T P, W = L^-1 P R^T (d x r, kept per
-// constraint; R's rows are sparse, so each column costs a forward substitution over the
+// t_i)^2 / e_i subject to R_h x = t_h. With F = P^T L L^T P, W = L^-1 P R^T (d x r, kept as V S
+// below; R's rows are sparse, so each column costs a forward substitution over the
 // elimination-tree paths of its nonzeros only) and H = R F^-1 R^T + E = W^T W + E (r x r):
 //   u = L^-1 P b,  H nu = W^T u - t,  x = P^T L^-T (u - W nu),
 // followed by iterative refinement against the true A (residuals are cheap sparse products, each
