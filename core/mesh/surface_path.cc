@@ -351,24 +351,47 @@ absl::StatusOr<SurfacePoint> SnapToSurface(const TriangleMesh& mesh, const Eigen
   const auto better = [](const Best& x, const Best& y) {
     return x.dist2 < y.dist2 || (x.dist2 == y.dist2 && x.face < y.face && x.face >= 0);
   };
-  const Best best = tbb::parallel_reduce(
-      tbb::blocked_range<int32_t>(0, mesh.num_faces(), 8192), Best{},
-      [&](const tbb::blocked_range<int32_t>& r, Best acc) {
-        for (int32_t f = r.begin(); f != r.end(); ++f) {
-          const Eigen::Vector3d a = Vertex(mesh, mesh.faces()(f, 0));
-          const Eigen::Vector3d b = Vertex(mesh, mesh.faces()(f, 1));
-          const Eigen::Vector3d c = Vertex(mesh, mesh.faces()(f, 2));
-          const Eigen::Vector3d w = ClosestBarycentric(p, a, b, c);
-          const Best here{(w[0] * a + w[1] * b + w[2] * c - p).squaredNorm(), f};
-          if (better(here, acc)) acc = here;
-        }
-        return acc;
-      },
-      [&](const Best& x, const Best& y) { return better(y, x) ? y : x; });
-  const int32_t f = best.face;
-  return SurfacePoint{
-      f, ClosestBarycentric(p, Vertex(mesh, mesh.faces()(f, 0)), Vertex(mesh, mesh.faces()(f, 1)),
-                            Vertex(mesh, mesh.faces()(f, 2)))};
+  const auto closest = [&](int32_t f) {
+    return ClosestBarycentric(p, Vertex(mesh, mesh.faces()(f, 0)), Vertex(mesh, mesh.faces()(f, 1)),
+                              Vertex(mesh, mesh.faces()(f, 2)));
+  };
+  const auto distance2 = [&](int32_t f) {
+    const Eigen::Vector3d w = closest(f);
+    return (w[0] * Vertex(mesh, mesh.faces()(f, 0)) + w[1] * Vertex(mesh, mesh.faces()(f, 1)) +
+            w[2] * Vertex(mesh, mesh.faces()(f, 2)) - p)
+        .squaredNorm();
+  };
+  const VertexMatrix& centers = mesh.face_barycenters();
+  const tbb::blocked_range<int32_t> all(0, mesh.num_faces(), 8192);
+  const auto reduce = [&](const auto& body) {
+    return tbb::parallel_reduce(all, Best{}, body,
+                                [&](const Best& x, const Best& y) { return better(y, x) ? y : x; });
+  };
+  // The nearest barycenter's face bounds the distance: D = its distance to p. A face within D of p
+  // has its barycenter within D + max_face_radius, so only those faces (a ball's worth, read in
+  // one pass over the contiguous barycenters) take the exact test.
+  const Best nearest_center = reduce([&](const tbb::blocked_range<int32_t>& r, Best acc) {
+    for (int32_t f = r.begin(); f != r.end(); ++f) {
+      const Best here{(centers.row(f).transpose() - p).squaredNorm(), f};
+      if (better(here, acc)) acc = here;
+    }
+    return acc;
+  });
+  // Rounding: the bound is widened by a relative 1e-9 (and the absolute scale of the query).
+  const Best bound{distance2(nearest_center.face), nearest_center.face};
+  const double reach =
+      (std::sqrt(bound.dist2) + mesh.max_face_radius()) * (1 + 1e-9) + 1e-12 * p.norm();
+  const double reach2 = reach * reach;
+  Best best = reduce([&](const tbb::blocked_range<int32_t>& r, Best acc) {
+    for (int32_t f = r.begin(); f != r.end(); ++f) {
+      if ((centers.row(f).transpose() - p).squaredNorm() > reach2) continue;
+      const Best here{distance2(f), f};
+      if (better(here, acc)) acc = here;
+    }
+    return acc;
+  });
+  if (better(bound, best)) best = bound;  // (it is among the candidates, up to rounding)
+  return SurfacePoint{best.face, closest(best.face)};
 }
 
 absl::StatusOr<std::vector<PathSegment>> ShortestSurfacePath(const TriangleMesh& mesh,

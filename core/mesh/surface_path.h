@@ -27,8 +27,9 @@ absl::Status ValidateSurfacePoint(const TriangleMesh& mesh, const SurfacePoint& 
 // The 3D position of a surface point.
 Eigen::Vector3d SurfacePosition(const TriangleMesh& mesh, const SurfacePoint& point);
 
-// The closest point of the surface to `p` (ties: the lowest face). O(#F), in parallel: ~20 ms per
-// point per million faces on 2 cores; callers that know the face (a picking client) send
+// The closest point of the surface to `p` (ties: the lowest face). Two parallel passes over the
+// face barycenters, the exact point-triangle test only for faces whose barycenter is near enough
+// (TriangleMesh::max_face_radius); callers that know the face (a picking client) send
 // SurfacePoints.
 // InvalidArgument for a non-finite p.
 absl::StatusOr<SurfacePoint> SnapToSurface(const TriangleMesh& mesh, const Eigen::Vector3d& p);

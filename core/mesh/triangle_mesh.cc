@@ -15,6 +15,7 @@
 #include "absl/synchronization/mutex.h"
 #include "core/common/status_macros.h"
 #include "tbb/blocked_range.h"
+#include "tbb/combinable.h"
 #include "tbb/parallel_for.h"
 
 namespace fieldspace {
@@ -147,7 +148,9 @@ absl::StatusOr<TriangleMesh> TriangleMesh::Create(MeshArrays arrays) {
   mesh.frame_x_.resize(nf, 3);
   mesh.frame_y_.resize(nf, 3);
   std::vector<uint8_t> degenerate(nf, 0);
+  tbb::combinable<double> radius2([] { return 0.0; });
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, nf, kGrain), [&](const auto& r) {
+    double& local_radius2 = radius2.local();
     for (int64_t f = r.begin(); f < r.end(); ++f) {
       const Eigen::Vector3d p0 = V.row(F(f, 0)), p1 = V.row(F(f, 1)), p2 = V.row(F(f, 2));
       const Eigen::Vector3d e1 = p1 - p0, e2 = p2 - p0;
@@ -163,7 +166,10 @@ absl::StatusOr<TriangleMesh> TriangleMesh::Create(MeshArrays arrays) {
       const Eigen::Vector3d x = e1.normalized();
       mesh.face_areas_(f) = 0.5 * twice_area;
       mesh.face_normals_.row(f) = n;
-      mesh.face_barycenters_.row(f) = (p0 + p1 + p2) / 3.0;
+      const Eigen::Vector3d b = (p0 + p1 + p2) / 3.0;
+      mesh.face_barycenters_.row(f) = b;
+      local_radius2 = std::max(
+          {local_radius2, (p0 - b).squaredNorm(), (p1 - b).squaredNorm(), (p2 - b).squaredNorm()});
       mesh.frame_x_.row(f) = x;
       mesh.frame_y_.row(f) = n.cross(x);
     }
@@ -176,6 +182,8 @@ absl::StatusOr<TriangleMesh> TriangleMesh::Create(MeshArrays arrays) {
     }
   }
   std::vector<uint8_t>().swap(degenerate);
+  mesh.max_face_radius_ =
+      std::sqrt(radius2.combine([](double a, double b) { return std::max(a, b); }));
 
   // Edges, edge-face incidence, face adjacency; non-manifold edges and orientation. Buckets are
   // independent, so both passes run in parallel; edge ids follow (lower, upper) vertex order.

@@ -72,6 +72,9 @@ class TriangleMesh {
   const VertexMatrix& face_barycenters() const { return face_barycenters_; }
   const VertexMatrix& frame_x() const { return frame_x_; }
   const VertexMatrix& frame_y() const { return frame_y_; }
+  // The largest distance from a face's barycenter to one of its corners: every point of face f
+  // lies within it of face_barycenters().row(f) (SnapToSurface prunes with it).
+  double max_face_radius() const { return max_face_radius_; }
   // The edge vector t_k = p_{k+2} - p_{k+1} of face f (opposite corner k, counter-clockwise) in
   // f's frame: (t_k . x_f, t_k . y_f). The one definition every operator assembly uses, so that
   // operators built from it agree to the last bit (the factored Hodge form B B^T reproduces S).
@@ -116,6 +119,7 @@ class TriangleMesh {
   std::vector<MeshComponent> components_;
   std::vector<std::vector<int32_t>> boundary_loops_;
   double total_area_ = 0.0;
+  double max_face_radius_ = 0.0;
   int32_t dropped_unreferenced_vertices_ = 0;
 };
 
