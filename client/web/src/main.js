@@ -415,6 +415,8 @@ function openSession() {
     },
   });
   studio.session = session;
+  studio.watched = null;  // an earlier session's, not drawn yet
+  studio.singularitiesChanged = false;
   studio.singularities = new Map();
   view.setSingularities([]);
 }
@@ -431,21 +433,12 @@ function onUpdate(session, update, edit, roundTripMs) {
   const t = update.timings;
   studio.lastTimings = { edit: edit.kind, editMs: t?.editMs ?? 0, liftMs: t?.liftMs ?? 0,
     totalMs: t?.totalMs ?? 0, roundTripMs };
-  $("timings").textContent = `${edit.kind}: edit ${fmt(t?.editMs)} ms · lift ${fmt(t?.liftMs)} ms` +
+  studio.timingsText = `${edit.kind}: edit ${fmt(t?.editMs)} ms · lift ${fmt(t?.liftMs)} ms` +
     ` · server ${fmt(t?.totalMs)} ms · round trip ${fmt(roundTripMs)} ms` +
     `${t?.refactorized ? " (refactorized)" : ""} · ${update.numConstraints} constraints`;
-  // The update's own watched faces: a new sample may be on its way (a watch edit).
-  const values = Float32Array.from(update.watched?.values ?? []);
-  if (values.length) {
-    const glyphs = fieldGlyphs(studio.field, studio.geometry.frames,
-      Int32Array.from(update.watched.faces), values, studio.sample.spacing);
-    view.setGlyphs(glyphs.positions, glyphs.colors);
-    // After the frame that draws them (view's render was requested first): the page's first field.
-    if (!firstFieldDrawn) {
-      firstFieldDrawn = true;
-      requestAnimationFrame(() => performance.mark(FIRST_FIELD_MARK));
-    }
-  }
+  // The update's own watched faces (a new sample may be on its way: a watch edit), drawn by the
+  // next frame with the latest ones.
+  if (update.watched?.values?.length) studio.watched = update.watched;
   const changes = update.singularities;
   if (changes) {
     studio.singularityN = changes.n || 1;
@@ -453,13 +446,44 @@ function onUpdate(session, update, edit, roundTripMs) {
       studio.singularities.set(s.vertex, { vertex: s.vertex, index: s.index, position: s.position });
     }
     for (const v of changes.vanished) studio.singularities.delete(v);
-    view.setSingularities([...studio.singularities.values()].map((s) => ({ ...s,
-      n: studio.singularityN })), 0.15 * studio.sample.spacing);
+    studio.singularitiesChanged = true;
   }
-  drawMarkers();
-  syncWeightSliders();
-  syncSelection();
-  syncAlignment();
+  syncBeforeFrame();
+}
+
+// What an update changes on the page (glyphs, singularities, markers, controls, the timings
+// line), once per frame with the latest update: updates arrive faster than frames while a
+// drag streams edits, and every DOM or buffer change in between would be work (and, with
+// software GL, compositing on the CPU) that the round trips wait behind.
+let syncPending = false;
+function syncBeforeFrame() {
+  if (syncPending) return;
+  syncPending = true;
+  view.beforeFrame(() => {
+    syncPending = false;
+    $("timings").textContent = studio.timingsText ?? "";
+    if (studio.watched && studio.geometry) {
+      const glyphs = fieldGlyphs(studio.field, studio.geometry.frames,
+        Int32Array.from(studio.watched.faces), Float32Array.from(studio.watched.values),
+        studio.sample.spacing);
+      studio.watched = null;
+      view.setGlyphs(glyphs.positions, glyphs.colors);
+      // After the frame that draws them: the page's first field.
+      if (!firstFieldDrawn) {
+        firstFieldDrawn = true;
+        requestAnimationFrame(() => performance.mark(FIRST_FIELD_MARK));
+      }
+    }
+    if (studio.singularitiesChanged) {
+      studio.singularitiesChanged = false;
+      view.setSingularities([...studio.singularities.values()].map((s) => ({ ...s,
+        n: studio.singularityN })), 0.15 * studio.sample.spacing);
+    }
+    drawMarkers();
+    syncWeightSliders();
+    syncSelection();
+    syncAlignment();
+  });
 }
 
 function fmt(ms) {
@@ -1103,7 +1127,8 @@ window.__studio = {
   state: () => ({
     basisId: studio.basis?.id ?? null,
     ready: Boolean(studio.session?.ready),
-    idle: Boolean(studio.session?.idle),
+    // No edit waiting or in flight, and the latest update drawn.
+    idle: Boolean(studio.session?.idle) && !syncPending,
     coefficients: studio.session?.last ? [...studio.session.last.coefficients] : null,
     constraints: [...studio.constraints].map(([id, c]) => ({ id, ...c })),
     weights: { ...studio.weights },

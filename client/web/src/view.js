@@ -10,10 +10,28 @@ THREE.BufferGeometry.prototype.computeBoundsTree = computeBoundsTree;
 THREE.BufferGeometry.prototype.disposeBoundsTree = disposeBoundsTree;
 THREE.Mesh.prototype.raycast = acceleratedRaycast;
 
+/**
+ * Whether WebGL runs in software (SwiftShader, llvmpipe): there multisampling multiplies the
+ * CPU cost of every frame by the sample count, and that CPU is the one the page's design round
+ * trips need (docs/studio.md, Performance).
+ */
+export function softwareGL() {
+  const gl = document.createElement("canvas").getContext("webgl2");
+  if (!gl) return false;
+  const info = gl.getExtension("WEBGL_debug_renderer_info");
+  const renderer = String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER));
+  gl.getExtension("WEBGL_lose_context")?.loseContext();
+  return /swiftshader|llvmpipe|softpipe|software/i.test(renderer);
+}
+
+const SOFTWARE_FRAMES_PER_SECOND = 10;
+
 export class View {
   constructor(container) {
     this.container = container;
-    this.renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    this.software = softwareGL();
+    this.renderer = new THREE.WebGLRenderer({ antialias: !this.software,
+      preserveDrawingBuffer: true });
     this.renderer.setPixelRatio(window.devicePixelRatio);
     this.renderer.setClearColor(0xf4f4f2);
     container.appendChild(this.renderer.domElement);
@@ -49,6 +67,8 @@ export class View {
     this.singularityList = [];
     this.frameTimes = [];
     this.renderPending = false;
+    this.lastFrame = -Infinity;
+    this.beforeFrameCallbacks = [];
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
   }
@@ -236,17 +256,35 @@ export class View {
     return new THREE.Vector2((x / w) * 2 - 1, -(y / h) * 2 + 1);
   }
 
+  /** Runs `callback` at the start of the next frame (before it draws), and asks for a frame. */
+  beforeFrame(callback) {
+    this.beforeFrameCallbacks.push(callback);
+    this.requestRender();
+  }
+
   requestRender() {
     if (this.renderPending) return;
     this.renderPending = true;
-    requestAnimationFrame(() => {
+    const frame = () => requestAnimationFrame(() => {
       this.renderPending = false;
       const start = performance.now();
+      const before = this.beforeFrameCallbacks.splice(0);
+      for (const callback of before) callback();
       this.draw();
       this.placeLabels();
-      this.frameTimes.push(performance.now() - start);
+      this.lastFrame = performance.now();
+      this.frameTimes.push(this.lastFrame - start);
       if (this.frameTimes.length > 100) this.frameTimes.shift();
     });
+    // Software GL draws on the CPU that the design round trips need: at most
+    // SOFTWARE_FRAMES_PER_SECOND frames there, the rest of the time left to them.
+    const wait = this.software ? this.lastFrame + 1000 / SOFTWARE_FRAMES_PER_SECOND -
+      performance.now() : 0;
+    if (wait > 0) {
+      setTimeout(frame, wait);
+    } else {
+      frame();
+    }
   }
 
   // Labels follow their dots on screen; a label whose dot the mesh hides is hidden too.
