@@ -266,15 +266,16 @@ export class View {
     if (this.renderPending) return;
     this.renderPending = true;
     const frame = () => requestAnimationFrame(() => {
-      this.renderPending = false;
       const start = performance.now();
-      const before = this.beforeFrameCallbacks.splice(0);
-      for (const callback of before) callback();
+      // What they change is drawn by this frame (their requestRender()s find it pending).
+      for (const callback of this.beforeFrameCallbacks.splice(0)) callback();
+      this.renderPending = false;
       this.draw();
       this.placeLabels();
       this.lastFrame = performance.now();
       this.frameTimes.push(this.lastFrame - start);
       if (this.frameTimes.length > 100) this.frameTimes.shift();
+      if (this.beforeFrameCallbacks.length) this.requestRender();
     });
     // Software GL draws on the CPU that the design round trips need: at most
     // SOFTWARE_FRAMES_PER_SECOND frames there, the rest of the time left to them.
