@@ -335,6 +335,36 @@ await page.click("#redo");
 await until("the redone stroke", () => window.__studio.state().constraints.length === 1);
 s = await checkAgainstSolve("redo the stroke");
 
+// Dragging the stroke moves it as a whole: each point goes to the surface under its screen
+// position plus the drag (one move of the group), and one undo puts it back.
+let shift = null;
+for (const [dx, dy] of [[24, 16], [-24, 16], [24, -16], [-24, -16], [12, 0], [0, 12], [-12, 0],
+  [0, -12], [6, 6], [-6, -6]]) {
+  const hits = screen.map(([x, y]) => castRay(cameraRay(camera, x + dx, y + dy), geometry.vertices,
+    geometry.faces));
+  // Away from the faces' edges, where the page's pick and this ray cast could disagree.
+  if (hits.every((h) => h !== null && Math.min(...h.bary) > 1e-3)) {
+    shift = { dx, dy, faces: hits.map((h) => h.face) };
+    break;
+  }
+}
+check(shift !== null, "an offset that keeps the stroke on the surface");
+await page.mouse.move(...toPage(middle[0], middle[1]));
+await page.mouse.down();
+await page.mouse.move(...toPage(middle[0] + shift.dx, middle[1] + shift.dy), { steps: 12 });
+await page.mouse.up();
+await until("the moved stroke", (faces) => {
+  const c = window.__studio.state().constraints[0];
+  return c?.tool === "stroke" && JSON.stringify(c.points.map((p) => p.face)) === faces;
+}, JSON.stringify(shift.faces));
+s = await checkAgainstSolve("move the stroke by a drag");
+check(s.constraints.length === 1 && s.constraints[0].points.length === stroke.points.length,
+  `the stroke moved by (${shift.dx}, ${shift.dy}) px: its ${stroke.points.length} points on the faces under them`);
+await page.click("#undo");
+await until("the undone move", (want) => JSON.stringify(window.__studio.state().constraints[0]) ===
+  want, JSON.stringify(stroke));
+await checkAgainstSolve("undo the move (one step)");
+
 // A reload reopens the session with the stroke (replayed as add_stroke).
 await page.reload();
 s = await checkAgainstSolve("reload");

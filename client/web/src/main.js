@@ -708,9 +708,13 @@ $("stage").addEventListener("pointerdown", (event) => {
     drawMarkers();
     syncSelection();
     // A constraint's marker moves or turns, a placed singularity's moves to another vertex, a
-    // stroke's selects only.
+    // stroke moves as a whole (each point to the surface under its screen position plus the
+    // drag); other tools' select only.
     gesture = c.tool === "singularity" ? { kind: "moveSingularity", id: marker, x, y,
       started: false, before: { ...c }, after: { ...c } }
+      : c.tool === "stroke" ? { kind: "moveStroke", id: marker, x, y, started: false,
+        before: { ...c }, after: { ...c },
+        screen: c.points.map((q) => view.screenOf(facePoint(q.face, q.barycentric))) }
       : { kind: c.tool !== undefined ? "select" : event.shiftKey ? "turn" : "move",
         id: marker, x, y, started: false, face0: c.face, value0: c.value && [...c.value],
         face: c.face, value: c.value && [...c.value] };
@@ -755,6 +759,21 @@ canvas.addEventListener(GESTURE_MOVE, (event) => {
       const hit = view.pick(cx, cy);
       if (hit !== null) strokePoint(cx, cy, hit);
     }
+    return;
+  }
+  if (gesture.kind === "moveStroke") {
+    // Every point where the surface lies under it once moved with the pointer; none if one
+    // would leave the surface. One `move {id, group}` (coalesced while one is in flight).
+    const [dx, dy] = [x - gesture.x, y - gesture.y];
+    const points = [];
+    for (const [sx, sy] of gesture.screen) {
+      const hit = view.pick(sx + dx, sy + dy);
+      if (hit === null) return;
+      points.push({ face: hit.face, barycentric: barycentric(hit.face, hit.point) });
+    }
+    gesture.started = true;
+    gesture.after = { ...gesture.after, points };
+    edit({ kind: "replace", id: gesture.id, constraint: { ...gesture.after } });
     return;
   }
   if (gesture.kind === "moveSingularity") {
@@ -832,7 +851,7 @@ function endGesture(event) {
     const c = { ...g.constraint, value: g.value };
     studio.history.push({ do: [{ kind: "add", id: g.id, constraint: c }],
       undo: [{ kind: "remove", id: g.id }] });
-  } else if (g.kind === "moveSingularity") {
+  } else if (g.kind === "moveSingularity" || g.kind === "moveStroke") {
     studio.history.push({ do: [{ kind: "replace", id: g.id, constraint: g.after }],
       undo: [{ kind: "replace", id: g.id, constraint: g.before }] });
   } else if (g.kind !== "select") {
