@@ -162,6 +162,22 @@ await until("the session without curvature", () => {
   return !s.curvature && s.ready && s.idle && s.weights.muA === undefined;
 });
 await checkAgainstSolve("curvature off");
+// The switch is one undo step each way.
+await page.click("#undo");
+await until("curvature back on by undo", () => {
+  const s = window.__studio.state();
+  return s.curvature && s.ready && s.idle && s.weights.muA !== undefined;
+});
+s = await settled();
+check(relativeError(s.coefficients, aligned.coefficients) <= 1e-9 &&
+  (await page.isChecked("#curvature")), "undo: curvature alignment again, the box checked");
+await page.click("#redo");
+await until("curvature off by redo", () => {
+  const s = window.__studio.state();
+  return !s.curvature && s.ready && s.idle && s.weights.muA === undefined;
+});
+await checkAgainstSolve("redo: curvature off");
+check(!(await page.isChecked("#curvature")), "redo: the box unchecked");
 
 // Screen points whose rays hit a face well inside, cast here.
 const canvasBox = await page.locator("#stage canvas").boundingBox();

@@ -543,7 +543,10 @@ function edit(e) {
 }
 
 function perform(edits, record) {
-  for (const e of edits) edit(e);
+  for (const e of edits) {
+    if (e.kind === "curvature") setCurvature(e.on);
+    else edit(e);
+  }
   if (record) {
     studio.history.push(record);
     persist();
@@ -1018,14 +1021,23 @@ $("feature-angle").addEventListener("change", () => {
 });
 
 // The curvature term is part of the session's energy (OpenDesign.data): switching it reopens
-// the session with the same constraints.
-$("curvature").addEventListener("change", () => {
-  if (!studio.session || !curvatureAllowed()) return;
-  studio.curvature = $("curvature").checked;
-  $("mu-a-row").hidden = !studio.curvature;
+// the session with the same constraints. A switch is one undoable action (the history's
+// `curvature` entries, which perform() turns into this instead of a session edit).
+function setCurvature(on) {
+  if (!studio.session || !curvatureAllowed() || studio.curvature === on) return;
+  studio.curvature = on;
+  $("curvature").checked = on;
+  $("mu-a-row").hidden = !on;
   persist();
   studio.session.close();
   openSession();
+}
+
+$("curvature").addEventListener("change", () => {
+  const on = $("curvature").checked;
+  if (!studio.session || !curvatureAllowed() || studio.curvature === on) return;
+  perform([{ kind: "curvature", on }], { do: [{ kind: "curvature", on }],
+    undo: [{ kind: "curvature", on: !on }] });
 });
 
 // ---------------------------------------------------------------------------------------------
