@@ -139,27 +139,36 @@ void KktSolver::ReleaseSource(int32_t g) {
   if (--sources_[i].members > 0) return;
   const int64_t v0 = sources_[i].v0;
   const int64_t width = sources_[i].width;
-  int32_t at_end = i;  // the source in V's last columns
-  for (int32_t j = 0; j < static_cast<int32_t>(sources_.size()); ++j) {
-    if (sources_[j].v0 + sources_[j].width == v_cols_) at_end = j;
-  }
-  if (at_end != i && sources_[at_end].width == width) {
-    // That source (a single constraint's, like most) moves into the hole.
-    for (Eigen::MatrixXd& V : V_) {
-      V.middleCols(v0, width) = V.middleCols(sources_[at_end].v0, width);
-    }
-    sources_[at_end].v0 = v0;
-  } else {
-    // The later columns move down.
-    const int64_t tail = v_cols_ - v0 - width;
-    for (Eigen::MatrixXd& V : V_) {
-      for (int64_t j = 0; j < tail; ++j) V.col(v0 + j) = V.col(v0 + width + j);
-    }
-    for (Source& src : sources_) src.v0 -= src.v0 > v0 ? width : 0;
-  }
   sources_.erase(sources_.begin() + i);
   for (int32_t& s : source_of_) s -= s > i ? 1 : 0;
-  v_cols_ -= width;
+  if (v0 + width == v_cols_) {
+    v_cols_ -= width;
+  } else {
+    // A hole: zero (no source's S reads or writes it, and 0 times its entries stays 0), moved
+    // out once the holes are a quarter of V.
+    for (Eigen::MatrixXd& V : V_) V.middleCols(v0, width).setZero();
+    hole_cols_ += width;
+  }
+  if (4 * hole_cols_ > v_cols_) CompactSources();
+}
+
+void KktSolver::CompactSources() {
+  std::vector<Source*> by_column;
+  for (Source& src : sources_) by_column.push_back(&src);
+  std::sort(by_column.begin(), by_column.end(),
+            [](const Source* a, const Source* b) { return a->v0 < b->v0; });
+  int64_t next = 0;
+  for (Source* src : by_column) {
+    if (src->v0 != next) {
+      for (Eigen::MatrixXd& V : V_) {
+        for (int64_t j = 0; j < src->width; ++j) V.col(next + j) = V.col(src->v0 + j);
+      }
+      src->v0 = next;
+    }
+    next += src->width;
+  }
+  v_cols_ = next;
+  hole_cols_ = 0;
 }
 
 Eigen::MatrixXd KktSolver::ApplySt(const Eigen::Ref<const Eigen::MatrixXd>& X) const {
@@ -344,6 +353,7 @@ absl::Status KktSolver::ComputeAllGroups() {
   // one run, share one again).
   sources_.clear();
   v_cols_ = 0;
+  hole_cols_ = 0;
   std::fill(source_of_.begin(), source_of_.end(), -1);
   std::vector<int32_t> block;
   for (int32_t g0 = 0; g0 < num_groups_; g0 += groups_per_block) {

@@ -200,9 +200,11 @@ class KktSolver {
   Eigen::MatrixXd ApplySt(const Eigen::Ref<const Eigen::MatrixXd>& X) const;
   // S nu (nu: r values): s values.
   Eigen::VectorXd ApplyS(const Eigen::VectorXd& nu) const;
-  // Group g no longer uses its source; a source without groups leaves V (the last source, when
-  // as wide, moves into its columns; otherwise the later columns move down).
+  // Group g no longer uses its source; a source without groups leaves V: its columns become a
+  // hole (zero), and once holes are a quarter of V's columns in use the sources move down
+  // (CompactSources), so that a remove costs O(d p) amortized whatever the number of sources.
   void ReleaseSource(int32_t g);
+  void CompactSources();
   void EnsureSourceCapacity(int64_t cols);
   // H^-1 v (v: r values).
   Eigen::VectorXd SolveSchur(const Eigen::VectorXd& v) const;
@@ -220,10 +222,9 @@ class KktSolver {
   std::vector<char> hard_;                    // per group
   Eigen::VectorXd t_;                         // per row (capacity)
   Eigen::VectorXd e_;                         // per row (capacity)
-  // The sources (class comment), packed in V's first v_cols_ columns in any order; a group's W
-  // columns are
-  // V_k.middleCols(v0, width) C_g, C_g = C.middleCols(source_col_[g], p) (identity when C is
-  // empty: then width = p and the source is that group's alone).
+  // The sources (class comment), in V's first v_cols_ columns in any order, with holes. A
+  // group's W columns are V_k.middleCols(v0, width) C_g with C_g = C.middleCols(source_col_[g],
+  // p), or V_k.middleCols(v0, p) when C is empty (the source is that group's alone).
   struct Source {
     int64_t v0 = 0;
     int64_t width = 0;
@@ -233,7 +234,8 @@ class KktSolver {
   std::vector<Source> sources_;
   std::vector<int32_t> source_of_;   // per group; -1: none yet (before SetMatrix / SetMixed)
   std::vector<int64_t> source_col_;  // per group: its first column of the source's C
-  int64_t v_cols_ = 0;               // s: V's columns in use
+  int64_t v_cols_ = 0;               // s: V's columns in use, holes included
+  int64_t hole_cols_ = 0;            // columns of V no source uses (zero)
   // Per term, d x capacity: L_k^-1 P B for the sources B (permuted numbering), zero outside
   // each source's reach.
   std::vector<Eigen::MatrixXd> V_;

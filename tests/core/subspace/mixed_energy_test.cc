@@ -382,9 +382,10 @@ TEST(GroupEditTest, AStrokeOfFewColumnsEqualsItsFacesOneByOne) {
 }
 
 // The sources behind W (kkt_solver.h): strokes share one per edit, single constraints have their
-// own, and removes swap groups between them. Through interleaved adds, a remove from the middle,
-// a move that keeps half a stroke's faces, a weight change (every source rebuilt) and a re-add,
-// the session equals a fresh one with the same constraints added one by one.
+// own, and removes swap groups between them and leave holes in V (moved out later). Through
+// interleaved adds, removes from the middle, a move that keeps half a stroke's faces, a weight
+// change (every source rebuilt) and a re-add, the session equals a fresh one with the same
+// constraints added one by one.
 TEST(GroupEditTest, StrokesAmongSingleConstraintsKeepTheirSourcesThroughEdits) {
   const TriangleMesh mesh = Torus(32, 16);
   const Fixture f = Fixture::WithKernelColumns(mesh, 40);
@@ -428,11 +429,12 @@ TEST(GroupEditTest, StrokesAmongSingleConstraintsKeepTheirSourcesThroughEdits) {
     ASSERT_TRUE(s.AddConstraintGroup(101, b).ok());
     ASSERT_TRUE(s.AddConstraint(4, others[4]).ok());
     expect_one_by_one("added");
-    // Constraint 4's source, the last in V, moves into constraint 0's columns.
+    // Constraint 0's source leaves a hole in V.
     ASSERT_TRUE(s.RemoveConstraint(0).ok());
     expect_one_by_one("0 removed");
     ASSERT_TRUE(s.AddConstraint(0, others[0]).ok());
-    // The last groups (constraint 4, then b's faces) move into a's slots.
+    // The last groups (constraint 4, then b's faces) move into a's slots; a's source's columns
+    // make the holes a quarter of V, which moves the sources down.
     ASSERT_TRUE(s.RemoveConstraint(100).ok());
     expect_one_by_one("a removed");
     // Half of b's faces keep their face (new values), the rest become c's.
