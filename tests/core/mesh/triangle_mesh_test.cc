@@ -480,6 +480,19 @@ TEST_P(SnapToSurfaceTest, FindsTheClosestFaceOfAll) {
   }
 }
 
+TEST(SnapToSurfaceTest, APointWhoseDistancesOverflowIsAnError) {
+  auto arrays = MakeIcosphere(1);
+  ASSERT_TRUE(arrays.ok());
+  auto m = TriangleMesh::Create(*std::move(arrays));
+  ASSERT_TRUE(m.ok());
+  EXPECT_THAT(SnapToSurface(*m, Eigen::Vector3d(1e300, -1e300, 0)),
+              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("too far")));
+  // Far, and the distances still tell the faces apart: the nearest point is found.
+  absl::StatusOr<SurfacePoint> far = SnapToSurface(*m, Eigen::Vector3d(1e6, 0, 0));
+  ASSERT_TRUE(far.ok()) << far.status();
+  EXPECT_GT(SurfacePosition(*m, *far)[0], 0.9);
+}
+
 INSTANTIATE_TEST_SUITE_P(Catalogue, SnapToSurfaceTest,
                          ::testing::ValuesIn(testing::MeshCatalogue()), testing::MeshCaseName);
 
