@@ -300,11 +300,12 @@ class DesignSession {
 // admission against a memory budget.
 int64_t DesignSessionOpenBytes(const ReducedSystem& system);
 
-// An upper bound on the bytes `constraints` constraints add to a DesignSession on `system`, for
-// r = constraints x dofs-per-face rows: W (d x r, one per factorization: two in the mixed form)
-// and K (r x r) at up to twice r (their capacity doubles), and the r x r matrix H with its
-// Cholesky factor: 8 (4 d r + 6 r^2). The r^2 terms dominate beyond r ~ 2 d / 3 (e.g. 4,700
-// vector constraints take ~4.5 GiB at d = 2000).
+// The bytes `constraints` constraints add to a DesignSession on `system`, for r = constraints x
+// dofs-per-face rows: W's substitutions V (d x at most r, one per factorization: two in the mixed
+// form) and K (r x r) at up to twice r (their capacity doubles), and the r x r matrix H with its
+// Cholesky factor: 8 (4 d r + 6 r^2). An upper bound but for V's holes (KktSolver), which can
+// add a third to V's columns before they are moved out. The r^2 terms dominate beyond
+// r ~ 2 d / 3 (e.g. 4,700 vector constraints take ~4.5 GiB at d = 2000).
 int64_t DesignSessionConstraintBytes(const ReducedSystem& system, int64_t constraints);
 
 }  // namespace fieldspace

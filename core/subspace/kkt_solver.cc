@@ -207,6 +207,20 @@ Eigen::VectorXd KktSolver::ApplyS(const Eigen::VectorXd& nu) const {
   return out;
 }
 
+Eigen::MatrixXd KktSolver::GroupColumns(size_t k, int32_t g0, int32_t n) const {
+  Eigen::MatrixXd W(d_, static_cast<int64_t>(n) * p_);
+  for (int32_t i = 0; i < n; ++i) {
+    const Source& src = sources_[source_of_[g0 + i]];
+    if (src.C.size() == 0) {
+      W.middleCols(static_cast<int64_t>(i) * p_, p_) = V_[k].middleCols(src.v0, p_);
+    } else {
+      W.middleCols(static_cast<int64_t>(i) * p_, p_).noalias() =
+          V_[k].middleCols(src.v0, src.width) * src.C.middleCols(source_col_[g0 + i], p_);
+    }
+  }
+  return W;
+}
+
 template <typename F>
 void KktSolver::ForEachTerm(const F& f) const {
   const size_t n = terms_.size();
@@ -302,8 +316,7 @@ Eigen::MatrixXd KktSolver::RecomputeGroups(absl::Span<const int32_t> groups, boo
   if (!cross) return {};
   Eigen::MatrixXd G = terms_[0].weight * parts[0];
   for (size_t k = 1; k < terms_.size(); ++k) G.noalias() += terms_[k].weight * parts[k];
-  const Source& last = sources_.back();
-  if (last.C.size() != 0) G = G * last.C;  // s x m: the groups' own W columns
+  if (rhs.combined) G = G * sources_.back().C;  // s x m: the groups' own W columns
   return ApplySt(G);
 }
 
@@ -363,21 +376,17 @@ absl::Status KktSolver::ComputeAllGroups() {
     for (int32_t i = 0; i < k; ++i) block[i] = g0 + i;
     RecomputeGroups(block, /*cross=*/false);
   }
-  // K = S^T G S for G = sum_k c_k V_k^T V_k (s x s).
+  // K = S^T sum_k c_k V_k^T W_k by blocks of its columns (groups g0 .. g0 + n - 1).
   const int64_t s = v_cols_;
-  Eigen::MatrixXd G(s, s);
-  for (int64_t j = 0; j < s; j += kColumns) {
+  for (int32_t g0 = 0; g0 < num_groups_; g0 += groups_per_block) {
     if (IsCancelled(options_.cancel)) return cancelled;
-    const int64_t width = std::min(kColumns, s - j);
-    G.middleCols(j, width).noalias() =
-        terms_[0].weight * (V_[0].leftCols(s).transpose() * V_[0].middleCols(j, width));
-    for (size_t k = 1; k < terms_.size(); ++k) {
-      G.middleCols(j, width).noalias() +=
-          terms_[k].weight * (V_[k].leftCols(s).transpose() * V_[k].middleCols(j, width));
+    const int32_t n = std::min(groups_per_block, num_groups_ - g0);
+    Eigen::MatrixXd G = Eigen::MatrixXd::Zero(s, static_cast<int64_t>(n) * p_);
+    for (size_t k = 0; k < terms_.size(); ++k) {
+      G.noalias() += terms_[k].weight * (V_[k].leftCols(s).transpose() * GroupColumns(k, g0, n));
     }
+    K_.block(0, static_cast<int64_t>(g0) * p_, r, G.cols()) = ApplySt(G);
   }
-  const Eigen::MatrixXd StG = ApplySt(G);  // r x s
-  K_.topLeftCorner(r, r) = ApplySt(StG.transpose()).transpose();
   return absl::OkStatus();
 }
 

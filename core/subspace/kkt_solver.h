@@ -200,6 +200,8 @@ class KktSolver {
   Eigen::MatrixXd ApplySt(const Eigen::Ref<const Eigen::MatrixXd>& X) const;
   // S nu (nu: r values): s values.
   Eigen::VectorXd ApplyS(const Eigen::VectorXd& nu) const;
+  // Groups g0 .. g0 + n - 1's columns of W_k = V_k S (d x n p).
+  Eigen::MatrixXd GroupColumns(size_t k, int32_t g0, int32_t n) const;
   // Group g no longer uses its source; a source without groups leaves V: its columns become a
   // hole (zero), and once holes are a quarter of V's columns in use the sources move down
   // (CompactSources), so that a remove costs O(d p) amortized whatever the number of sources.

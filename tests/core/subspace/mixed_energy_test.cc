@@ -319,6 +319,15 @@ std::pair<size_t, size_t> TouchedColumnsAndRows(const ReducedSystem& system,
   return {static_cast<size_t>(std::unique(touched.begin(), touched.end()) - touched.begin()), rows};
 }
 
+// A vector field's stroke from face `from`'s center to face `to`'s (StrokeConstraints).
+std::vector<FieldConstraint> FaceCenterStroke(const TriangleMesh& mesh, int32_t from, int32_t to) {
+  const Eigen::Vector3d center = Eigen::Vector3d::Constant(1.0 / 3.0);
+  auto c = StrokeConstraints(mesh, FieldType::Vector(),
+                             {SurfacePoint{from, center}, SurfacePoint{to, center}});
+  EXPECT_TRUE(c.ok()) << c.status();
+  return c.ok() ? *std::move(c) : std::vector<FieldConstraint>{};
+}
+
 // A stroke whose faces' rows touch fewer basis columns than it has rows takes KktSolver's
 // combined substitutions (the touched columns' unit vectors, then the rows restricted to them)
 // and the block of H over the rows' reach: added and moved as one group it must equal the same
@@ -327,14 +336,8 @@ std::pair<size_t, size_t> TouchedColumnsAndRows(const ReducedSystem& system,
 TEST(GroupEditTest, AStrokeOfFewColumnsEqualsItsFacesOneByOne) {
   const TriangleMesh mesh = Torus(32, 16);
   const Fixture f = Fixture::WithKernelColumns(mesh, 40);
-  const Eigen::Vector3d center = Eigen::Vector3d::Constant(1.0 / 3.0);
-  const auto stroke = [&](int32_t from, int32_t to) {
-    auto c = StrokeConstraints(mesh, FieldType::Vector(),
-                               {SurfacePoint{from, center}, SurfacePoint{to, center}});
-    EXPECT_TRUE(c.ok()) << c.status();
-    return *std::move(c);
-  };
-  const std::vector<FieldConstraint> first = stroke(0, 300), second = stroke(5, 333);
+  const std::vector<FieldConstraint> first = FaceCenterStroke(mesh, 0, 300),
+                                     second = FaceCenterStroke(mesh, 5, 333);
   for (const auto* s : {&first, &second}) {
     const auto [touched, rows] = TouchedColumnsAndRows(*f.system, *s);
     ASSERT_GE(s->size(), 8u);
@@ -389,14 +392,9 @@ TEST(GroupEditTest, AStrokeOfFewColumnsEqualsItsFacesOneByOne) {
 TEST(GroupEditTest, StrokesAmongSingleConstraintsKeepTheirSourcesThroughEdits) {
   const TriangleMesh mesh = Torus(32, 16);
   const Fixture f = Fixture::WithKernelColumns(mesh, 40);
-  const Eigen::Vector3d center = Eigen::Vector3d::Constant(1.0 / 3.0);
-  const auto stroke = [&](int32_t from, int32_t to) {
-    auto c = StrokeConstraints(mesh, FieldType::Vector(),
-                               {SurfacePoint{from, center}, SurfacePoint{to, center}});
-    EXPECT_TRUE(c.ok()) << c.status();
-    return *std::move(c);
-  };
-  const std::vector<FieldConstraint> a = stroke(0, 300), b = stroke(40, 380), c = stroke(9, 200);
+  const std::vector<FieldConstraint> a = FaceCenterStroke(mesh, 0, 300),
+                                     b = FaceCenterStroke(mesh, 40, 380),
+                                     c = FaceCenterStroke(mesh, 9, 200);
   for (const auto* s : {&a, &b, &c}) {
     const auto [touched, rows] = TouchedColumnsAndRows(*f.system, *s);
     ASSERT_LT(touched, rows) << "the stroke must take the combined path";
