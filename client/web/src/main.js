@@ -765,18 +765,14 @@ canvas.addEventListener(GESTURE_MOVE, (event) => {
     return;
   }
   if (gesture.kind === "moveStroke") {
-    // Every point where the surface lies under it once moved with the pointer; none if one
-    // would leave the surface. One `move {id, group}` (coalesced while one is in flight).
-    const [dx, dy] = [x - gesture.x, y - gesture.y];
-    const points = [];
-    for (const [sx, sy] of gesture.screen) {
-      const hit = view.pick(sx + dx, sy + dy);
-      if (hit === null) return;
-      points.push({ face: hit.face, barycentric: barycentric(hit.face, hit.point) });
+    // A pick per point (up to STROKE_MAX_POINTS rays): once per frame with the latest offset,
+    // not per pointer event.
+    const g = gesture;
+    g.offset = [x - g.x, y - g.y];
+    if (!g.movePending) {
+      g.movePending = true;
+      view.beforeFrame(() => moveStroke(g));
     }
-    gesture.started = true;
-    gesture.after = { ...gesture.after, points };
-    edit({ kind: "replace", id: gesture.id, constraint: { ...gesture.after } });
     return;
   }
   if (gesture.kind === "moveSingularity") {
@@ -816,9 +812,28 @@ canvas.addEventListener(GESTURE_MOVE, (event) => {
   }
 });
 
+// Moves a stroke being dragged by its latest offset: every point to the surface under its screen
+// position plus the offset, or nowhere if one would leave the surface. One `move {id, group}`
+// (coalesced while one is in flight).
+function moveStroke(g) {
+  if (!g.movePending) return;
+  g.movePending = false;
+  const [dx, dy] = g.offset;
+  const points = [];
+  for (const [sx, sy] of g.screen) {
+    const hit = view.pick(sx + dx, sy + dy);
+    if (hit === null) return;
+    points.push({ face: hit.face, barycentric: barycentric(hit.face, hit.point) });
+  }
+  g.started = true;
+  g.after = { ...g.after, points };
+  edit({ kind: "replace", id: g.id, constraint: { ...g.after } });
+}
+
 function endGesture(event) {
   if (gesture === null) return;
   const g = gesture;
+  if (g.kind === "moveStroke") moveStroke(g);  // the last offset, if its frame has not come
   if (g.kind === "stroke" && event.type === "pointerup") {
     const [x, y] = local(event);
     const hit = view.pick(x, y);

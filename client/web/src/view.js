@@ -15,7 +15,7 @@ THREE.Mesh.prototype.raycast = acceleratedRaycast;
  * CPU cost of every frame by the sample count, and that CPU is the one the page's design round
  * trips need (docs/studio.md, Performance).
  */
-export function softwareGL() {
+function softwareGL() {
   const gl = document.createElement("canvas").getContext("webgl2");
   if (!gl) return false;
   const info = gl.getExtension("WEBGL_debug_renderer_info");
