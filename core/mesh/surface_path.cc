@@ -377,13 +377,13 @@ absl::StatusOr<SurfacePoint> SnapToSurface(const TriangleMesh& mesh, const Eigen
     }
     return acc;
   });
-  // Rounding: the bound is widened by a relative 1e-9 (and the absolute scale of the query).
   if (nearest_center.face < 0) {
     // Every squared distance overflowed (coordinates beyond ~1e154).
     return absl::InvalidArgumentError(absl::StrFormat(
         "surface point (%g, %g, %g) is too far from the mesh to snap", p[0], p[1], p[2]));
   }
   const Best bound{distance2(nearest_center.face), nearest_center.face};
+  // Rounding: the bound is widened by a relative 1e-9 (and the absolute scale of the query).
   const double reach =
       (std::sqrt(bound.dist2) + mesh.max_face_radius()) * (1 + 1e-9) + 1e-12 * p.norm();
   const double reach2 = reach * reach;

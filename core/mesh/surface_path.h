@@ -31,7 +31,7 @@ Eigen::Vector3d SurfacePosition(const TriangleMesh& mesh, const SurfacePoint& po
 // face barycenters, the exact point-triangle test only for faces whose barycenter is near enough
 // (TriangleMesh::max_face_radius); callers that know the face (a picking client) send
 // SurfacePoints.
-// InvalidArgument for a non-finite p.
+// InvalidArgument for a non-finite p, or one so far away that its squared distances overflow.
 absl::StatusOr<SurfacePoint> SnapToSurface(const TriangleMesh& mesh, const Eigen::Vector3d& p);
 
 // One straight piece of a path on the surface, inside face `face` (from `a` to `b`, both in the
