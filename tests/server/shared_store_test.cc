@@ -179,11 +179,14 @@ TEST_F(SharedStoreTest, ABasisIsBuiltOnceAcrossDaemonsAndTheOthersWaitForIt) {
   EXPECT_EQ(second->job->basis_id(), first->job->basis_id());
   std::string waiting_for;
   std::mutex mu;
-  second->job->Subscribe([&] {
+  const auto note_waiting = [&] {
     BuildJob::Progress p = second->job->progress();
     std::lock_guard<std::mutex> lock(mu);
     if (!p.waiting_for.empty()) waiting_for = p.waiting_for;
-  });
+  };
+  second->job->Subscribe(note_waiting);
+  // Listeners hear changes after they subscribe: the job may have started waiting before.
+  note_waiting();
   BuildJob::Progress a_done = Wait(first->job);
   BuildJob::Progress b_done = Wait(second->job);
   ASSERT_TRUE(a_done.status.ok()) << a_done.status;
@@ -229,11 +232,14 @@ TEST_F(SharedStoreTest, AStaleLeaseOfADeadDaemonIsTakenOver) {
   ASSERT_EQ(started->job->basis_id(), basis_id);
   std::string waiting_for;
   std::mutex mu;
-  started->job->Subscribe([&] {
+  const auto note_waiting = [&] {
     BuildJob::Progress p = started->job->progress();
     std::lock_guard<std::mutex> lock(mu);
     if (!p.waiting_for.empty()) waiting_for = p.waiting_for;
-  });
+  };
+  started->job->Subscribe(note_waiting);
+  // Listeners hear changes after they subscribe: the job may have started waiting before.
+  note_waiting();
   BuildJob::Progress done = Wait(started->job);
   ASSERT_TRUE(done.status.ok()) << done.status;
   EXPECT_GE(std::chrono::steady_clock::now() - start, 400ms) << "took over before stale_after";
