@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 
@@ -18,6 +19,7 @@
 #include "client/field_client.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "server/build_job.h"
 #include "server/compute_pool.h"
 #include "server/field_server.h"
 #include "server/lease.h"
@@ -65,6 +67,39 @@ BuildJob::Progress Wait(const std::shared_ptr<BuildJob>& job) {
   }
   return job->progress();
 }
+
+// The holder a build job waits for, recorded from construction on. A job's listeners hear only
+// changes made after they subscribe, so the state at subscription is read too. The listener owns
+// what it writes: the job may still be calling it when the recorder goes.
+class WaitingRecorder {
+ public:
+  explicit WaitingRecorder(std::shared_ptr<BuildJob> job) : job_(std::move(job)) {
+    token_ = job_->Subscribe(
+        [state = state_, job = std::weak_ptr<BuildJob>(job_)] { Note(job.lock(), *state); });
+    Note(job_, *state_);
+  }
+  ~WaitingRecorder() { job_->Unsubscribe(token_); }
+  std::string waiting_for() {
+    std::lock_guard<std::mutex> lock(state_->mu);
+    return state_->waiting_for;
+  }
+
+ private:
+  struct State {
+    std::mutex mu;
+    std::string waiting_for;
+  };
+  static void Note(const std::shared_ptr<BuildJob>& job, State& state) {
+    if (job == nullptr) return;
+    BuildJob::Progress p = job->progress();
+    std::lock_guard<std::mutex> lock(state.mu);
+    if (!p.waiting_for.empty()) state.waiting_for = p.waiting_for;
+  }
+
+  std::shared_ptr<BuildJob> job_;
+  std::shared_ptr<State> state_ = std::make_shared<State>();
+  uint64_t token_ = 0;
+};
 
 class SharedStoreTest : public ::testing::Test {
  protected:
@@ -177,25 +212,13 @@ TEST_F(SharedStoreTest, ABasisIsBuiltOnceAcrossDaemonsAndTheOthersWaitForIt) {
   ASSERT_TRUE(second.ok()) << second.status();
   ASSERT_NE(second->job, nullptr) << "b found the basis before a saved it";
   EXPECT_EQ(second->job->basis_id(), first->job->basis_id());
-  std::string waiting_for;
-  std::mutex mu;
-  const auto note_waiting = [&] {
-    BuildJob::Progress p = second->job->progress();
-    std::lock_guard<std::mutex> lock(mu);
-    if (!p.waiting_for.empty()) waiting_for = p.waiting_for;
-  };
-  second->job->Subscribe(note_waiting);
-  // Listeners hear changes after they subscribe: the job may have started waiting before.
-  note_waiting();
+  WaitingRecorder waiting(second->job);
   BuildJob::Progress a_done = Wait(first->job);
   BuildJob::Progress b_done = Wait(second->job);
   ASSERT_TRUE(a_done.status.ok()) << a_done.status;
   ASSERT_TRUE(b_done.status.ok()) << b_done.status;
   EXPECT_EQ(b_done.stage, BuildStage::kDone);
-  {
-    std::lock_guard<std::mutex> lock(mu);
-    EXPECT_EQ(waiting_for, a.registry->owner_name());
-  }
+  EXPECT_EQ(waiting.waiting_for(), a.registry->owner_name());
   EXPECT_EQ(a.registry->builds_run(), 1);
   EXPECT_EQ(b.registry->builds_run(), 0);
   EXPECT_EQ(b_done.record.created_unix_ms, a_done.record.created_unix_ms);  // the same file
@@ -230,22 +253,12 @@ TEST_F(SharedStoreTest, AStaleLeaseOfADeadDaemonIsTakenOver) {
   ASSERT_TRUE(started.ok()) << started.status();
   ASSERT_NE(started->job, nullptr);
   ASSERT_EQ(started->job->basis_id(), basis_id);
-  std::string waiting_for;
-  std::mutex mu;
-  const auto note_waiting = [&] {
-    BuildJob::Progress p = started->job->progress();
-    std::lock_guard<std::mutex> lock(mu);
-    if (!p.waiting_for.empty()) waiting_for = p.waiting_for;
-  };
-  started->job->Subscribe(note_waiting);
-  // Listeners hear changes after they subscribe: the job may have started waiting before.
-  note_waiting();
+  WaitingRecorder waiting(started->job);
   BuildJob::Progress done = Wait(started->job);
   ASSERT_TRUE(done.status.ok()) << done.status;
   EXPECT_GE(std::chrono::steady_clock::now() - start, 400ms) << "took over before stale_after";
   EXPECT_EQ(b.registry->builds_run(), 1);
-  std::lock_guard<std::mutex> lock(mu);
-  EXPECT_EQ(waiting_for, "deadhost/4242/gone");
+  EXPECT_EQ(waiting.waiting_for(), "deadhost/4242/gone");
 }
 
 TEST_F(SharedStoreTest, ALiveLeaseIsRenewedAndNotBroken) {
