@@ -426,6 +426,34 @@ TEST(BasisTest, ProgressAndCancellation) {
   EXPECT_THAT(BuildBasis(mesh, op, options), StatusIs(absl::StatusCode::kCancelled));
 }
 
+// Eigen 3.4's SparseMatrix has no move operations of its own (core/common/
+// eigen_sparse_matrix_plugin.h adds them): without them each of these moves copied U.
+TEST(BasisTest, MovingABasisTakesOverItsArrays) {
+  const TriangleMesh mesh = Icosphere(3);
+  FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  BasisOptions options;
+  options.params.dimension = 40;
+  absl::StatusOr<Basis> built = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(built.ok()) << built.status();
+  const float* values = built->U.valuePtr();
+  const int* columns = built->U.innerIndexPtr();
+  const Eigen::MatrixXf dense = Eigen::MatrixXf(built->U);
+
+  Basis moved = *std::move(built);
+  EXPECT_EQ(moved.U.valuePtr(), values);
+  EXPECT_EQ(moved.U.innerIndexPtr(), columns);
+  EXPECT_EQ(built->U.nonZeros(), 0);
+  absl::StatusOr<Basis> again;
+  again = std::move(moved);
+  EXPECT_EQ(again->U.valuePtr(), values);
+  EXPECT_EQ(Eigen::MatrixXf(again->U), dense);
+
+  const double* stiffness = op.stiffness.valuePtr();
+  const FieldOperator taken = std::move(op);
+  EXPECT_EQ(taken.stiffness.valuePtr(), stiffness);
+  EXPECT_EQ(op.stiffness.rows(), 0);
+}
+
 TEST(BasisTest, StackBasesConcatenatesColumns) {
   const TriangleMesh mesh = Icosphere(3);  // 1280 faces
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
