@@ -141,6 +141,10 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   }
   LocalEigenResult result;
   bool verified = false;  // SX recomputed exactly since the last update
+  // The trial basis [X, W, P] and its products, allocated once: on a coarse level's region of
+  // ~1.5M DOFs each is ~70 MB, which the allocator maps afresh on every allocation, so a new one
+  // per iteration paid its page faults every time (bench/RESULTS.md, Session 21).
+  Eigen::MatrixXd B(n, 3 * p), SB(n, 3 * p);
   for (int32_t it = 1; it <= options.max_iterations; ++it) {
     if (cancel.Check()) return absl::CancelledError("basis construction cancelled");
     R = SX - X * theta.asDiagonal();
@@ -190,17 +194,18 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
       const bool with_p = attempt == 0 && P.cols() > 0;
       if (attempt == 1 && P.cols() == 0) break;
       const int32_t q = with_p ? 3 * p : 2 * p;
-      Eigen::MatrixXd B(n, q), SB(n, q);
       B.leftCols(p) = X;
       B.middleCols(p, p) = W;
       SB.leftCols(p) = SX;
       SB.middleCols(p, p) = SW;
       if (with_p) {
-        B.rightCols(p) = P;
-        SB.rightCols(p) = SP;
+        B.middleCols(2 * p, p) = P;
+        SB.middleCols(2 * p, p) = SP;
       }
-      const Eigen::MatrixXd G = B.transpose() * B;
-      Eigen::MatrixXd H = B.transpose() * SB;
+      const auto Bq = B.leftCols(q);
+      const auto SBq = SB.leftCols(q);
+      const Eigen::MatrixXd G = Bq.transpose() * Bq;
+      Eigen::MatrixXd H = Bq.transpose() * SBq;
       H = 0.5 * (H + H.transpose()).eval();
       Eigen::LLT<Eigen::MatrixXd> llt(G);
       if (llt.info() != Eigen::Success) continue;
@@ -212,10 +217,11 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
       Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (A + A.transpose()));
       if (es.info() != Eigen::Success) continue;
       const Eigen::MatrixXd C = llt.matrixU().solve(Eigen::MatrixXd(es.eigenvectors().leftCols(p)));
-      X = B * C;
-      SX = SB * C;
-      P = B.rightCols(q - p) * C.bottomRows(q - p);
-      SP = SB.rightCols(q - p) * C.bottomRows(q - p);
+      // B holds copies of X, W and P, so the products may write straight into them.
+      X.noalias() = Bq * C;
+      SX.noalias() = SBq * C;
+      P.noalias() = Bq.rightCols(q - p) * C.bottomRows(q - p);
+      SP.noalias() = SBq.rightCols(q - p) * C.bottomRows(q - p);
       theta = es.eigenvalues().head(p);
       solved = true;
     }
