@@ -24,41 +24,49 @@ namespace {
 using basis_internal::ProgressTicker;
 using RowMajorU = Eigen::SparseMatrix<float, Eigen::RowMajor>;
 
-// [A, B]: the columns of B appended to those of A (both k rows, row-major, compressed), B's
-// column j becoming column A.cols() + j. ResourceExhausted (naming `what`) past the 2^31 - 1
-// nonzeros of U's 32-bit indices.
-absl::StatusOr<RowMajorU> AppendColumns(const RowMajorU& a, const RowMajorU& b,
-                                        absl::string_view what) {
-  const int64_t nnz = static_cast<int64_t>(a.nonZeros()) + b.nonZeros();
+// [A, B]: the b_cols columns of a block B appended to those of A (k rows, row-major,
+// compressed), B's column j becoming column A.cols() + j. B is read through two calls per row:
+// `count(row)`, its entries in the row, and `write(row, columns, values)`, which stores them
+// (columns relative to B, ascending). ResourceExhausted (naming `what`) past the 2^31 - 1
+// nonzeros of U's 32-bit indices. A, B and the result are alive together: this is the peak of a
+// stacking or of kernel columns, so B is best read in place rather than converted first.
+template <typename Count, typename Write>
+absl::StatusOr<RowMajorU> AppendColumns(const RowMajorU& a, int32_t b_cols, const Count& count,
+                                        const Write& write, absl::string_view what) {
+  const int64_t k = a.rows();
+  const int32_t* a_outer = a.outerIndexPtr();
+  std::vector<int32_t> b_count(k);
+  int64_t nnz = a.nonZeros();
+  for (int64_t row = 0; row < k; ++row) {
+    b_count[row] = count(row);
+    nnz += b_count[row];
+  }
   if (nnz > std::numeric_limits<int32_t>::max()) {
     return absl::ResourceExhaustedError(
         absl::StrFormat("%s: %d nonzeros exceed the 2^31 - 1 of U's indices", what, nnz));
   }
-  const int64_t k = a.rows();
   const int32_t d1 = static_cast<int32_t>(a.cols());
-  RowMajorU U(k, d1 + b.cols());
+  RowMajorU U(k, d1 + b_cols);
   U.resizeNonZeros(static_cast<Eigen::Index>(nnz));
   int32_t* outer = U.outerIndexPtr();
   outer[0] = 0;
   for (int64_t row = 0; row < k; ++row) {
-    const int32_t na = a.outerIndexPtr()[row + 1] - a.outerIndexPtr()[row];
-    const int32_t nb = b.outerIndexPtr()[row + 1] - b.outerIndexPtr()[row];
-    outer[row + 1] = outer[row] + na + nb;
+    outer[row + 1] = outer[row] + (a_outer[row + 1] - a_outer[row]) + b_count[row];
   }
-  tbb::parallel_for(
-      tbb::blocked_range<int64_t>(0, k, 4096), [&](const tbb::blocked_range<int64_t>& range) {
-        for (int64_t row = range.begin(); row != range.end(); ++row) {
-          int32_t pos = outer[row];
-          for (int32_t q = a.outerIndexPtr()[row]; q < a.outerIndexPtr()[row + 1]; ++q, ++pos) {
-            U.innerIndexPtr()[pos] = a.innerIndexPtr()[q];
-            U.valuePtr()[pos] = a.valuePtr()[q];
-          }
-          for (int32_t q = b.outerIndexPtr()[row]; q < b.outerIndexPtr()[row + 1]; ++q, ++pos) {
-            U.innerIndexPtr()[pos] = b.innerIndexPtr()[q] + d1;
-            U.valuePtr()[pos] = b.valuePtr()[q];
-          }
-        }
-      });
+  std::vector<int32_t>().swap(b_count);
+  tbb::parallel_for(tbb::blocked_range<int64_t>(0, k, 4096),
+                    [&](const tbb::blocked_range<int64_t>& range) {
+                      for (int64_t row = range.begin(); row != range.end(); ++row) {
+                        const int32_t na = a_outer[row + 1] - a_outer[row];
+                        int32_t* columns = U.innerIndexPtr() + outer[row];
+                        float* values = U.valuePtr() + outer[row];
+                        std::copy_n(a.innerIndexPtr() + a_outer[row], na, columns);
+                        std::copy_n(a.valuePtr() + a_outer[row], na, values);
+                        const int32_t nb = outer[row + 1] - outer[row] - na;
+                        write(row, columns + na, values + na);
+                        for (int32_t i = na; i < na + nb; ++i) columns[i] += d1;
+                      }
+                    });
   return U;
 }
 
@@ -72,13 +80,24 @@ absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
   }
   const int32_t q = static_cast<int32_t>(K.cols());
   if (q == 0) return absl::OkStatus();
-  // Row-major float copy of K without its exact zeros (kernel fields of one component of a
-  // several-component mesh, the zero a12 of c I).
-  const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor> Kf = K.cast<float>();
-  RowMajorU kernel = Kf.sparseView();
-  kernel.makeCompressed();
+  // K is read in place (its float values without their exact zeros: kernel fields of one
+  // component of a several-component mesh, the zero a12 of c I); a float or sparse copy of it
+  // would add to the old and the new U, this step's peak and the build's (Session 22).
   if (!basis->U.isCompressed()) basis->U.makeCompressed();
-  ASSIGN_OR_RETURN(RowMajorU U, AppendColumns(basis->U, kernel, "AppendKernelColumns"));
+  auto count = [&](int64_t row) {
+    int32_t n = 0;
+    for (int32_t j = 0; j < q; ++j) n += static_cast<float>(K(row, j)) != 0.0f;
+    return n;
+  };
+  auto write = [&](int64_t row, int32_t* columns, float* values) {
+    for (int32_t j = 0; j < q; ++j) {
+      const float v = static_cast<float>(K(row, j));
+      if (v == 0.0f) continue;
+      *columns++ = j;
+      *values++ = v;
+    }
+  };
+  ASSIGN_OR_RETURN(RowMajorU U, AppendColumns(basis->U, q, count, write, "AppendKernelColumns"));
   basis->U.swap(U);
   basis->params.dimension = static_cast<int32_t>(basis->U.cols());
   basis->local_eigenvalues.resize(basis->U.cols(), 0.0);
@@ -98,7 +117,15 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
     return absl::InvalidArgumentError(
         "StackBases: the bases have kernel columns; append them after stacking");
   }
-  ASSIGN_OR_RETURN(RowMajorU U, AppendColumns(fine.U, coarse.U, "StackBases"));
+  const RowMajorU& b = coarse.U;
+  auto count = [&](int64_t row) { return b.outerIndexPtr()[row + 1] - b.outerIndexPtr()[row]; };
+  auto write = [&](int64_t row, int32_t* columns, float* values) {
+    const int32_t begin = b.outerIndexPtr()[row];
+    std::copy_n(b.innerIndexPtr() + begin, count(row), columns);
+    std::copy_n(b.valuePtr() + begin, count(row), values);
+  };
+  ASSIGN_OR_RETURN(RowMajorU U, AppendColumns(fine.U, static_cast<int32_t>(b.cols()), count, write,
+                                              "StackBases"));
   fine.U.swap(U);
   fine.params.dimension = static_cast<int32_t>(fine.U.cols());
   fine.sample_faces.insert(fine.sample_faces.end(), coarse.sample_faces.begin(),
