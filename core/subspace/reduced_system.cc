@@ -4,6 +4,8 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <utility>
 #include <vector>
 
@@ -369,14 +371,14 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
 
 }  // namespace
 
-absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
-    std::shared_ptr<const Basis> basis, const FieldOperator& op,
-    const ReducedSystemOptions& options) {
-  const auto t_start = std::chrono::steady_clock::now();
+namespace {
+
+// The checks both Builds make before any work.
+absl::Status CheckBuildInputs(const Basis* basis, const FieldOperator& op,
+                              const ReducedSystemOptions& options) {
   if (basis == nullptr) return absl::InvalidArgumentError("ReducedSystem: no basis");
-  const BasisMatrix& U = basis->U;
-  const int64_t k = U.rows();
-  const int64_t d = U.cols();
+  const int64_t k = basis->U.rows();
+  const int64_t d = basis->U.cols();
   if (!(basis->type == op.type)) {
     return absl::InvalidArgumentError(absl::StrCat("ReducedSystem: basis is for ",
                                                    basis->type.ToString(), ", operator for ",
@@ -401,21 +403,112 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
         "ReducedSystem: threads must be >= 0 and the "
         "accumulator budget > 0");
   }
+  return absl::OkStatus();
+}
+
+// Runs `build` in an arena of options.threads threads (when > 0) with threads reset to 0.
+template <typename F>
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> InArena(const ReducedSystemOptions& options,
+                                                             const F& build) {
+  tbb::task_arena arena(options.threads);
+  ReducedSystemOptions inner = options;
+  inner.threads = 0;
+  absl::StatusOr<std::shared_ptr<const ReducedSystem>> result;
+  arena.execute([&] { result = build(inner); });
+  return result;
+}
+
+// That `m` is the given reduced matrices' shared pattern (ReducedMatrices): d x d, compressed,
+// rows ascending in every column, the diagonal present, symmetric; values finite.
+absl::Status CheckReducedMatrices(const ReducedMatrices& m, int64_t d) {
+  const Eigen::SparseMatrix<double>* all[3] = {&m.stiffness, &m.bilaplacian, &m.mass_matrix};
+  for (const Eigen::SparseMatrix<double>* a : all) {
+    if (a->rows() != d || a->cols() != d || !a->isCompressed()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("ReducedSystem: the given reduced matrices are not ", d, " x ", d,
+                       " compressed matrices (", a->rows(), " x ", a->cols(), ")"));
+    }
+  }
+  const int64_t nnz = m.stiffness.nonZeros();
+  for (const Eigen::SparseMatrix<double>* a : {&m.bilaplacian, &m.mass_matrix}) {
+    if (a->nonZeros() != nnz ||
+        !std::equal(a->outerIndexPtr(), a->outerIndexPtr() + d + 1, m.stiffness.outerIndexPtr()) ||
+        !std::equal(a->innerIndexPtr(), a->innerIndexPtr() + nnz, m.stiffness.innerIndexPtr())) {
+      return absl::InvalidArgumentError(
+          "ReducedSystem: the given reduced matrices do not share one pattern");
+    }
+  }
+  const int* outer = m.stiffness.outerIndexPtr();
+  const int* inner = m.stiffness.innerIndexPtr();
+  if (outer[0] != 0 || outer[d] != nnz) {
+    return absl::InvalidArgumentError("ReducedSystem: the given pattern's columns are malformed");
+  }
+  // Columns first (so that every column's range below is valid), then rows within a column,
+  // then the symmetry (binary searches in sorted columns).
+  for (int64_t c = 0; c < d; ++c) {
+    if (outer[c + 1] < outer[c]) {
+      return absl::InvalidArgumentError("ReducedSystem: the given pattern's columns are malformed");
+    }
+  }
+  for (int64_t c = 0; c < d; ++c) {
+    bool diagonal = false;
+    for (int64_t q = outer[c]; q < outer[c + 1]; ++q) {
+      const int r = inner[q];
+      if (r < 0 || r >= d || (q > outer[c] && r <= inner[q - 1])) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "ReducedSystem: column ", c, " of the given pattern has rows out of range or order"));
+      }
+      diagonal = diagonal || r == c;
+    }
+    if (!diagonal) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("ReducedSystem: the given pattern lacks diagonal entry ", c));
+    }
+  }
+  for (int64_t c = 0; c < d; ++c) {
+    for (int64_t q = outer[c]; q < outer[c + 1]; ++q) {
+      const int r = inner[q];
+      if (!std::binary_search(inner + outer[r], inner + outer[r + 1], static_cast<int>(c))) {
+        return absl::InvalidArgumentError("ReducedSystem: the given pattern is not symmetric");
+      }
+    }
+  }
+  for (const Eigen::SparseMatrix<double>* a : all) {
+    for (int64_t q = 0; q < nnz; ++q) {
+      if (!std::isfinite(a->valuePtr()[q])) {
+        return absl::InvalidArgumentError(
+            "ReducedSystem: the given reduced matrices are not finite");
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+constexpr char kReducedMagic[8] = {'F', 'S', 'R', 'E', 'D', 'U', 'C', '\1'};
+constexpr uint32_t kReducedVersion = 1;
+constexpr size_t kReducedHeaderBytes = 32;
+
+}  // namespace
+
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
+    std::shared_ptr<const Basis> basis, const FieldOperator& op,
+    const ReducedSystemOptions& options) {
+  const auto t_start = std::chrono::steady_clock::now();
+  RETURN_IF_ERROR(CheckBuildInputs(basis.get(), op, options));
   if (options.threads > 0) {
     // Run everything (the parallel loops included) in an arena of that many threads.
-    tbb::task_arena arena(options.threads);
-    ReducedSystemOptions inner = options;
-    inner.threads = 0;
-    absl::StatusOr<std::shared_ptr<const ReducedSystem>> result;
-    arena.execute([&] { result = Build(std::move(basis), op, inner); });
-    return result;
+    return InArena(options, [&](const ReducedSystemOptions& inner) {
+      return Build(std::move(basis), op, inner);
+    });
   }
+  const BasisMatrix& U = basis->U;
+  const int64_t k = U.rows();
+  const int64_t d = U.cols();
   RETURN_IF_ERROR(CheckPositiveVector(op.mass, k, "ReducedSystem: operator mass"));
   RETURN_IF_ERROR(CheckFiniteValues(op.stiffness, "ReducedSystem: operator stiffness"));
   RETURN_IF_ERROR(CheckBasisMatrix(U, "ReducedSystem"));
 
   auto sys = std::shared_ptr<ReducedSystem>(new ReducedSystem());
-  sys->mass_ = op.mass;
   const Eigen::SparseMatrix<double>& S = op.stiffness;
   const Eigen::VectorXd& mass = op.mass;
 
@@ -457,28 +550,61 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   std::vector<Eigen::Triplet<double>>().swap(triplets);
   sys->stiffness_ = ids;
   sys->bilaplacian_ = ids;
-  sys->mass_matrix_ = ids;
-  int64_t nnz_s = 0, nnz_b = 0, nnz_m = 0;
-  for (int64_t p = 0; p < ids.nonZeros(); ++p) {
-    const Entry& e = entries[static_cast<size_t>(ids.valuePtr()[p])];
+  sys->mass_matrix_ = std::move(ids);
+  for (int64_t p = 0; p < sys->mass_matrix_.nonZeros(); ++p) {
+    const Entry& e = entries[static_cast<size_t>(sys->mass_matrix_.valuePtr()[p])];
     sys->stiffness_.valuePtr()[p] = e.s;
     sys->bilaplacian_.valuePtr()[p] = e.b;
     sys->mass_matrix_.valuePtr()[p] = e.m;
-    nnz_s += e.s != 0.0;
-    nnz_b += e.b != 0.0;
-    nnz_m += e.m != 0.0;
   }
   std::vector<Entry>().swap(entries);
+  sys->stats_.products_seconds = SecondsSince(t_start);
+  return Complete(std::move(sys), std::move(basis), op, options, t_start);
+}
+
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
+    std::shared_ptr<const Basis> basis, const FieldOperator& op, ReducedMatrices matrices,
+    const ReducedSystemOptions& options) {
+  const auto t_start = std::chrono::steady_clock::now();
+  RETURN_IF_ERROR(CheckBuildInputs(basis.get(), op, options));
+  if (options.threads > 0) {
+    return InArena(options, [&](const ReducedSystemOptions& inner) {
+      return Build(std::move(basis), op, std::move(matrices), inner);
+    });
+  }
+  RETURN_IF_ERROR(CheckPositiveVector(op.mass, basis->U.rows(), "ReducedSystem: operator mass"));
+  RETURN_IF_ERROR(CheckReducedMatrices(matrices, basis->U.cols()));
+  auto sys = std::shared_ptr<ReducedSystem>(new ReducedSystem());
+  sys->stiffness_ = std::move(matrices.stiffness);
+  sys->bilaplacian_ = std::move(matrices.bilaplacian);
+  sys->mass_matrix_ = std::move(matrices.mass_matrix);
+  sys->stats_.products_given = true;
+  return Complete(std::move(sys), std::move(basis), op, options, t_start);
+}
+
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Complete(
+    std::shared_ptr<ReducedSystem> sys, std::shared_ptr<const Basis> basis, const FieldOperator& op,
+    const ReducedSystemOptions& options, std::chrono::steady_clock::time_point t_start) {
+  const BasisMatrix& U = basis->U;
+  const int64_t k = U.rows();
+  const int64_t d = U.cols();
+  sys->mass_ = op.mass;
+  const int64_t nnz = sys->mass_matrix_.nonZeros();
+  int64_t nnz_s = 0, nnz_b = 0, nnz_m = 0;
+  for (int64_t p = 0; p < nnz; ++p) {
+    nnz_s += sys->stiffness_.valuePtr()[p] != 0.0;
+    nnz_b += sys->bilaplacian_.valuePtr()[p] != 0.0;
+    nnz_m += sys->mass_matrix_.valuePtr()[p] != 0.0;
+  }
   sys->stats_.stiffness_nonzeros = nnz_s;
   sys->stats_.bilaplacian_nonzeros = nnz_b;
   sys->stats_.mass_nonzeros = nnz_m;
-  sys->stats_.pattern_nonzeros = ids.nonZeros();
-  sys->stats_.products_seconds = SecondsSince(t_start);
+  sys->stats_.pattern_nonzeros = nnz;
 
   const auto t_analysis = std::chrono::steady_clock::now();
   SupernodalAnalyzeOptions analyze_options;
   analyze_options.thorough = options.thorough_ordering;
-  ASSIGN_OR_RETURN(sys->symbolic_, SupernodalSymbolic::Analyze(ids, analyze_options));
+  ASSIGN_OR_RETURN(sys->symbolic_, SupernodalSymbolic::Analyze(sys->mass_matrix_, analyze_options));
   sys->stats_.analysis_seconds = SecondsSince(t_analysis);
   sys->stats_.factor_nonzeros = sys->symbolic_->factor_nonzeros();
   sys->stats_.factor_flops = sys->symbolic_->flops();
@@ -503,6 +629,67 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   sys->basis_ = std::move(basis);
   sys->stats_.total_seconds = SecondsSince(t_start);
   return std::shared_ptr<const ReducedSystem>(std::move(sys));
+}
+
+std::string EncodeReducedMatrices(const ReducedSystem& system) {
+  const Eigen::SparseMatrix<double>& pattern = system.mass_matrix();
+  const int64_t d = pattern.cols();
+  const int64_t nnz = pattern.nonZeros();
+  std::string out(kReducedHeaderBytes, '\0');
+  std::memcpy(out.data(), kReducedMagic, 8);
+  const uint32_t version = kReducedVersion;
+  std::memcpy(out.data() + 8, &version, 4);
+  std::memcpy(out.data() + 16, &d, 8);
+  std::memcpy(out.data() + 24, &nnz, 8);
+  out.reserve(kReducedHeaderBytes + 4 * (d + 1) + 28 * nnz);
+  const auto append = [&out](const void* data, size_t bytes) {
+    out.append(static_cast<const char*>(data), bytes);
+  };
+  append(pattern.outerIndexPtr(), 4 * static_cast<size_t>(d + 1));
+  append(pattern.innerIndexPtr(), 4 * static_cast<size_t>(nnz));
+  append(system.stiffness().valuePtr(), 8 * static_cast<size_t>(nnz));
+  append(system.bilaplacian().valuePtr(), 8 * static_cast<size_t>(nnz));
+  append(system.mass_matrix().valuePtr(), 8 * static_cast<size_t>(nnz));
+  return out;
+}
+
+absl::StatusOr<ReducedMatrices> DecodeReducedMatrices(std::string_view bytes) {
+  if (bytes.size() < kReducedHeaderBytes || std::memcmp(bytes.data(), kReducedMagic, 8) != 0) {
+    return absl::DataLossError("not a reduced-matrices payload (bad magic)");
+  }
+  uint32_t version = 0;
+  int64_t d = 0, nnz = 0;
+  std::memcpy(&version, bytes.data() + 8, 4);
+  std::memcpy(&d, bytes.data() + 16, 8);
+  std::memcpy(&nnz, bytes.data() + 24, 8);
+  if (version != kReducedVersion) {
+    return absl::DataLossError(
+        absl::StrCat("unsupported reduced-matrices format version ", version));
+  }
+  if (d < 1 || d >= (int64_t{1} << 30) || nnz < d || nnz > std::numeric_limits<int32_t>::max() ||
+      static_cast<uint64_t>(bytes.size()) != kReducedHeaderBytes +
+                                                 4 * static_cast<uint64_t>(d + 1) +
+                                                 28 * static_cast<uint64_t>(nnz)) {
+    return absl::DataLossError(absl::StrCat("reduced matrices: d ", d, ", ", nnz,
+                                            " nonzeros do not match the payload's ", bytes.size(),
+                                            " bytes"));
+  }
+  ReducedMatrices m;
+  const char* p = bytes.data() + kReducedHeaderBytes;
+  Eigen::SparseMatrix<double>& first = m.stiffness;
+  first.resize(d, d);
+  first.resizeNonZeros(nnz);
+  std::memcpy(first.outerIndexPtr(), p, 4 * static_cast<size_t>(d + 1));
+  p += 4 * (d + 1);
+  std::memcpy(first.innerIndexPtr(), p, 4 * static_cast<size_t>(nnz));
+  p += 4 * nnz;
+  m.bilaplacian = first;
+  m.mass_matrix = first;
+  for (Eigen::SparseMatrix<double>* a : {&m.stiffness, &m.bilaplacian, &m.mass_matrix}) {
+    std::memcpy(a->valuePtr(), p, 8 * static_cast<size_t>(nnz));
+    p += 8 * nnz;
+  }
+  return m;
 }
 
 absl::StatusOr<Eigen::SparseMatrix<double>> WeightedMassMatrix(

@@ -1,9 +1,12 @@
 #ifndef FIELDSPACE_CORE_SUBSPACE_REDUCED_SYSTEM_H_
 #define FIELDSPACE_CORE_SUBSPACE_REDUCED_SYSTEM_H_
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
+#include <string_view>
 
 #include "Eigen/Core"
 #include "Eigen/SparseCore"
@@ -41,11 +44,22 @@ struct ReducedSystemStats {
   int64_t pattern_nonzeros = 0;      // of the shared pattern (union of the three)
   int64_t factor_nonzeros = 0;       // of the Cholesky factor of a matrix on that pattern
   double factor_flops = 0;           // of one numeric factorization on that pattern
-  double products_seconds = 0;       // computing the three reduced matrices
+  double products_seconds = 0;       // computing the three reduced matrices (0 when given)
+  bool products_given = false;       // built from ReducedMatrices computed earlier
   double analysis_seconds = 0;       // ordering + symbolic analysis
   double mass_factor_seconds = 0;    // factorizing U^T M U
   double total_seconds = 0;
   int64_t memory_bytes = 0;  // held by the ReducedSystem itself (not counting the Basis)
+};
+
+// The three reduced matrices of a ReducedSystem on their shared pattern: d x d, both triangles,
+// compressed, one symmetric pattern with every diagonal entry (ReducedSystem::stiffness() etc.).
+// What the product pass over U computes, and what a store keeps so that a basis loaded again
+// skips that pass (EncodeReducedMatrices).
+struct ReducedMatrices {
+  Eigen::SparseMatrix<double> stiffness;    // U^T S U
+  Eigen::SparseMatrix<double> bilaplacian;  // U^T B U
+  Eigen::SparseMatrix<double> mass_matrix;  // U^T M U
 };
 
 // The per-basis precomputation of the subspace methods (paper section 5; docs/conventions.md,
@@ -63,6 +77,14 @@ class ReducedSystem {
   // positive definite (linearly dependent or zero columns of U); Cancelled (options.cancel).
   static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Build(
       std::shared_ptr<const Basis> basis, const FieldOperator& op,
+      const ReducedSystemOptions& options = {});
+  // The same from the reduced matrices computed earlier for this basis and operator (e.g. by
+  // DecodeReducedMatrices from a store): no product pass, the rest as above. The caller vouches
+  // that they belong to `basis` and `op` (a store ties them to the basis file's checksum).
+  // InvalidArgument also when they are not d x d on one symmetric pattern with every diagonal
+  // entry, or not finite.
+  static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Build(
+      std::shared_ptr<const Basis> basis, const FieldOperator& op, ReducedMatrices matrices,
       const ReducedSystemOptions& options = {});
 
   const Basis& basis() const { return *basis_; }
@@ -90,6 +112,12 @@ class ReducedSystem {
 
  private:
   ReducedSystem() = default;
+  // The part of both Builds after the matrices: counts, analysis, U^T M U's factorization, the
+  // lift plan.
+  static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Complete(
+      std::shared_ptr<ReducedSystem> sys, std::shared_ptr<const Basis> basis,
+      const FieldOperator& op, const ReducedSystemOptions& options,
+      std::chrono::steady_clock::time_point t_start);
 
   std::shared_ptr<const Basis> basis_;
   Eigen::VectorXd mass_;
@@ -101,6 +129,15 @@ class ReducedSystem {
   LiftPlan lift_plan_;
   ReducedSystemStats stats_;
 };
+
+// The reduced matrices of `system` as bytes, format version 1 (little-endian): magic
+// "FSREDUC" 0x01, u32 version, u32 0, i64 d, i64 nnz, the shared pattern's column pointers
+// (int32 x (d + 1)) and row indices (int32 x nnz), then the values of U^T S U, U^T B U and U^T M U
+// (float64 x nnz each). No checksum of its own: the store's container has one.
+std::string EncodeReducedMatrices(const ReducedSystem& system);
+// The matrices of those bytes: DataLoss when the magic, version or sizes do not match (the bytes
+// must be exactly as long as the header implies). The pattern itself is checked by Build.
+absl::StatusOr<ReducedMatrices> DecodeReducedMatrices(std::string_view bytes);
 
 struct WeightedMassOptions {
   // As ReducedSystemOptions::accumulator_budget_bytes; used only in the degenerate case below

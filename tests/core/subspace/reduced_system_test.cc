@@ -161,5 +161,113 @@ TEST(ReducedSystemTest, InvalidInputs) {
               StatusIs(absl::StatusCode::kFailedPrecondition));
 }
 
+// A store keeps the reduced matrices (EncodeReducedMatrices) so that a basis loaded again skips
+// the product pass: the bytes give back the same matrices bit for bit, and a system built from
+// them equals one built from U (same matrices, same factorization, same lift).
+TEST(ReducedSystemTest, EncodedMatricesBuildTheSameSystem) {
+  const TriangleMesh mesh = Torus(24, 12);
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
+    const FieldOperator op = MustBuildOperator(mesh, type);
+    auto basis = RandomBasis(type, op.dofs(), 48, 10, 3);
+    auto built = ReducedSystem::Build(basis, op);
+    ASSERT_TRUE(built.ok()) << built.status();
+    EXPECT_FALSE((*built)->stats().products_given);
+    const std::string bytes = EncodeReducedMatrices(**built);
+    auto decoded = DecodeReducedMatrices(bytes);
+    ASSERT_TRUE(decoded.ok()) << decoded.status();
+    auto given = ReducedSystem::Build(basis, op, *std::move(decoded));
+    ASSERT_TRUE(given.ok()) << given.status();
+    const ReducedSystem& a = **built;
+    const ReducedSystem& b = **given;
+    EXPECT_TRUE(b.stats().products_given);
+    EXPECT_EQ(b.stats().products_seconds, 0.0);
+    for (auto [x, y] :
+         {std::pair{&a.stiffness(), &b.stiffness()}, std::pair{&a.bilaplacian(), &b.bilaplacian()},
+          std::pair{&a.mass_matrix(), &b.mass_matrix()}}) {
+      EXPECT_EQ(Eigen::MatrixXd(*x), Eigen::MatrixXd(*y));
+    }
+    EXPECT_EQ(b.stats().pattern_nonzeros, a.stats().pattern_nonzeros);
+    EXPECT_EQ(b.stats().stiffness_nonzeros, a.stats().stiffness_nonzeros);
+    EXPECT_EQ(b.stats().factor_nonzeros, a.stats().factor_nonzeros);
+    const Eigen::VectorXd rhs = Eigen::VectorXd::LinSpaced(48, -1.0, 2.0);
+    EXPECT_EQ(a.mass_factor().Solve(rhs), b.mass_factor().Solve(rhs));
+    // The given system is a full one: it still matches the dense products.
+    ExpectMatchesReference(b, Reference(op, *basis));
+  }
+}
+
+TEST(ReducedSystemTest, DamagedOrForeignMatricesAreRefused) {
+  const TriangleMesh mesh = Icosphere(2);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  auto basis = RandomBasis(FieldType::Vector(), op.dofs(), 40, 10, 5);
+  auto sys = ReducedSystem::Build(basis, op);
+  ASSERT_TRUE(sys.ok()) << sys.status();
+  const std::string bytes = EncodeReducedMatrices(**sys);
+  // Bytes: another magic, another version, one byte short or long, a header that lies about d.
+  std::string bad = bytes;
+  bad[0] = 'X';
+  EXPECT_THAT(DecodeReducedMatrices(bad), StatusIs(absl::StatusCode::kDataLoss));
+  bad = bytes;
+  bad[8] = 2;
+  EXPECT_THAT(DecodeReducedMatrices(bad), StatusIs(absl::StatusCode::kDataLoss));
+  EXPECT_THAT(DecodeReducedMatrices(bytes.substr(0, bytes.size() - 1)),
+              StatusIs(absl::StatusCode::kDataLoss));
+  EXPECT_THAT(DecodeReducedMatrices(bytes + "x"), StatusIs(absl::StatusCode::kDataLoss));
+  EXPECT_THAT(DecodeReducedMatrices(bytes.substr(0, 20)), StatusIs(absl::StatusCode::kDataLoss));
+  bad = bytes;
+  bad[16] = static_cast<char>(bad[16] + 1);
+  EXPECT_THAT(DecodeReducedMatrices(bad), StatusIs(absl::StatusCode::kDataLoss));
+  // Matrices that decode but are not a reduced system's: for another dimension, a row index out
+  // of range, rows out of order, a missing diagonal, an asymmetric pattern, a NaN.
+  auto other = RandomBasis(FieldType::Vector(), op.dofs(), 41, 10, 5);
+  EXPECT_THAT(ReducedSystem::Build(other, op, *DecodeReducedMatrices(bytes)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  const auto edited = [&](const auto& edit) {
+    ReducedMatrices m = *DecodeReducedMatrices(bytes);
+    edit(m);
+    return ReducedSystem::Build(basis, op, std::move(m));
+  };
+  const auto all_patterns = [](ReducedMatrices& m, const auto& edit) {
+    for (auto* a : {&m.stiffness, &m.bilaplacian, &m.mass_matrix}) edit(*a);
+  };
+  EXPECT_THAT(edited([&](ReducedMatrices& m) {
+                all_patterns(m, [](auto& a) { a.innerIndexPtr()[3] = 1000; });
+              }),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(edited([&](ReducedMatrices& m) {
+                all_patterns(m, [](auto& a) {
+                  std::swap(a.innerIndexPtr()[a.outerIndexPtr()[1]],
+                            a.innerIndexPtr()[a.outerIndexPtr()[1] + 1]);
+                });
+              }),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(edited([&](ReducedMatrices& m) {
+                all_patterns(m, [](auto& a) {
+                  a.prune([](Eigen::Index row, Eigen::Index col, double) {
+                    return !(row == 5 && col == 5);
+                  });
+                });
+              }),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(edited([&](ReducedMatrices& m) {
+                // Entry (r, 0) dropped, (0, r) kept (r: column 0's largest row).
+                const int r = m.stiffness.innerIndexPtr()[m.stiffness.outerIndexPtr()[1] - 1];
+                ASSERT_GT(r, 0);
+                all_patterns(m, [r](auto& a) {
+                  a.prune([r](Eigen::Index row, Eigen::Index col, double) {
+                    return !(row == r && col == 0);
+                  });
+                });
+              }),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(edited([&](ReducedMatrices& m) {
+                m.bilaplacian.valuePtr()[7] = std::numeric_limits<double>::quiet_NaN();
+              }),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  // Patterns that differ between the matrices.
+  EXPECT_THAT(edited([&](ReducedMatrices& m) { m.stiffness.innerIndexPtr()[1] += 1; }),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
 }  // namespace
 }  // namespace fieldspace
