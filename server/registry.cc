@@ -591,9 +591,43 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std
     return absl::DataLossError(
         absl::StrCat("stored basis ", id, " does not match its mesh or field type"));
   }
+  // The reduced matrices kept beside the basis, if any and sound: a cache, so any problem with
+  // it only means computing them (and writing them again).
+  std::optional<ReducedMatrices> matrices;
+  absl::StatusOr<std::string> reduced = store_->LoadReduced(id, file.payload_hash);
+  if (reduced.ok()) {
+    absl::StatusOr<ReducedMatrices> m = DecodeReducedMatrices(*reduced);
+    std::string().swap(*reduced);
+    if (m.ok()) {
+      matrices = *std::move(m);
+    } else {
+      reduced = m.status();
+    }
+  }
+  if (!reduced.ok() && !absl::IsNotFound(reduced.status())) {
+    std::cerr << "fieldspaced: not using the stored reduced matrices of basis " << id << " ("
+              << reduced.status().message() << "); computing them" << std::endl;
+  }
   BuildContext context;
   context.threads = options_.build_threads;
-  return ServeBasis(file.record, std::move(mesh), std::move(basis), nullptr, context);
+  ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> served,
+                   ServeBasis(file.record, std::move(mesh), std::move(basis), nullptr, context,
+                              std::move(matrices)));
+  if (!served->system->stats().products_given) {
+    SaveReducedMatrices(id, file.payload_hash, *served->system);
+  }
+  return served;
+}
+
+void Registry::SaveReducedMatrices(const std::string& id, uint64_t basis_payload_hash,
+                                   const ReducedSystem& system) const {
+  const absl::Status saved =
+      store_->SaveReduced(id, basis_payload_hash, EncodeReducedMatrices(system));
+  if (!saved.ok()) {
+    std::cerr << "fieldspaced: could not store the reduced matrices of basis " << id << " ("
+              << saved.message() << "); they are computed again when it is next loaded"
+              << std::endl;
+  }
 }
 
 }  // namespace fieldspace::server

@@ -171,6 +171,10 @@ class Registry final : public WorkAccount {
   // `grant`: the build's admitted working memory, released when the basis is published.
   void RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest request, WorkGrant grant);
   absl::StatusOr<std::shared_ptr<const ServedBasis>> LoadBasis(const std::string& id);
+  // Stores the reduced matrices of basis `id` beside its file (Store::SaveReduced), which a later
+  // LoadBasis uses instead of the product pass; a failure is only logged.
+  void SaveReducedMatrices(const std::string& id, uint64_t basis_payload_hash,
+                           const ReducedSystem& system) const;
   // Stops counting a loaded artifact of `bytes` leaving the index, once nothing holds it any
   // more (at once if nothing does now). Requires mu_.
   void ReleaseLocked(std::shared_ptr<const void> loaded, int64_t bytes) const;

@@ -199,7 +199,10 @@ void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest reque
     record.build_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     ASSIGN_OR_RETURN(std::string payload, EncodeBasis(basis, record.key.mesh_id));
-    RETURN_IF_ERROR(store_->SaveBasis(record, {payload}));
+    uint64_t payload_hash = 0;
+    RETURN_IF_ERROR(store_->SaveBasis(record, {payload}, &payload_hash));
+    std::string().swap(payload);
+    SaveReducedMatrices(record.id, payload_hash, *served->system);
     builds_run_.fetch_add(1);
     auto published = std::make_shared<ServedBasis>(*served);
     published->record = record;  // with the figures known only now

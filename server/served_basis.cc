@@ -1,6 +1,7 @@
 #include "server/served_basis.h"
 
 #include <algorithm>
+#include <iostream>
 #include <iterator>
 #include <utility>
 
@@ -93,7 +94,8 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
 
 absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
-    std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context) {
+    std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context,
+    std::optional<ReducedMatrices> matrices) {
   FieldOperator assembled;
   if (op == nullptr) {
     ASSIGN_OR_RETURN(assembled, BuildFieldOperator(*mesh, basis->type));
@@ -104,8 +106,17 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
   ReducedSystemOptions options;
   options.threads = context.threads;
   options.cancel = context.cancel;
+  absl::StatusOr<std::shared_ptr<const ReducedSystem>> given;
+  if (matrices.has_value()) {
+    given = ReducedSystem::Build(basis, *op, *std::move(matrices), options);
+    if (!given.ok() && !absl::IsCancelled(given.status())) {
+      std::cerr << "fieldspaced: the stored reduced matrices of basis " << record.id
+                << " do not fit it (" << given.status().message() << "); computing them"
+                << std::endl;
+    }
+  }
   ASSIGN_OR_RETURN(std::shared_ptr<const ReducedSystem> system,
-                   ReducedSystem::Build(basis, *op, options));
+                   given.ok() ? std::move(given) : ReducedSystem::Build(basis, *op, options));
   auto served = std::make_shared<ServedBasis>();
   served->record = std::move(record);
   served->mesh = std::move(mesh);

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "Eigen/Core"
@@ -76,10 +77,13 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
                                             const BuildContext& context);
 
 // The per-basis precomputation (core's ReducedSystem) and the served handle. `op`: the basis's
-// operator, or null to assemble it here (after a load from the store).
+// operator, or null to assemble it here (after a load from the store). `matrices`: the reduced
+// matrices kept in the store for this basis (Store::LoadReduced), which spare the product pass;
+// should they not fit the basis, the pass runs after all (and says so on stderr).
 absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
-    std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context);
+    std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context,
+    std::optional<ReducedMatrices> matrices = std::nullopt);
 
 }  // namespace fieldspace::server
 

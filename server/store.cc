@@ -26,11 +26,13 @@ namespace fs = std::filesystem;
 
 constexpr char kMeshMagic[8] = {'F', 'S', 'M', 'E', 'S', 'H', '\0', '\1'};
 constexpr char kBasisMagic[8] = {'F', 'S', 'B', 'A', 'S', 'I', 'S', '\1'};
+constexpr char kReducedMagic[8] = {'F', 'S', 'R', 'E', 'D', 'S', 'Y', '\1'};
 constexpr uint32_t kFormatVersion = 1;
 constexpr size_t kHeaderBytes = 40;
 constexpr uint32_t kMaxMetaBytes = 1 << 20;
 constexpr char kMeshExt[] = ".fsmesh";
 constexpr char kBasisExt[] = ".fsbasis";
+constexpr char kReducedExt[] = ".fsreduced";
 
 // Little-endian metadata encoding: fixed-width values and length-prefixed strings.
 class MetaWriter {
@@ -373,6 +375,14 @@ absl::StatusOr<std::unique_ptr<Store>> Store::Open(const std::string& dir,
       fs::remove(entry.path(), ec);
     }
   }
+  // Reduced matrices whose basis is gone (deleted by another daemon while this one was saving
+  // them): a cache of nothing. Their basis is always written first, so none is lost here.
+  for (const auto& entry : fs::directory_iterator(fs::path(dir) / "bases", ec)) {
+    const std::string name = entry.path().filename().string();
+    if (!absl::EndsWith(name, kReducedExt) || absl::StartsWith(name, ".")) continue;
+    const std::string stem = name.substr(0, name.size() - std::strlen(kReducedExt));
+    if (!fs::exists(fs::path(dir) / "bases" / (stem + kBasisExt), ec)) fs::remove(entry.path(), ec);
+  }
   return std::unique_ptr<Store>(new Store(fs::absolute(dir).lexically_normal().string(), options));
 }
 
@@ -382,6 +392,10 @@ std::string Store::MeshPath(const std::string& id) const {
 
 std::string Store::BasisPath(const std::string& id) const {
   return absl::StrCat(dir_, "/bases/", id, kBasisExt);
+}
+
+std::string Store::ReducedPath(const std::string& id) const {
+  return absl::StrCat(dir_, "/bases/", id, kReducedExt);
 }
 
 StoreContents Store::Scan() const {
@@ -445,7 +459,8 @@ absl::Status Store::VerifyMesh(const std::string& id, const VertexMatrix& V,
 }
 
 absl::Status Store::SaveBasis(const BasisRecord& record,
-                              const std::vector<std::string_view>& payload) const {
+                              const std::vector<std::string_view>& payload,
+                              uint64_t* payload_hash) const {
   if (!ValidId(record.id, 'b')) return absl::InvalidArgumentError("bad basis id " + record.id);
   Hasher hasher;
   uint64_t total = 0;
@@ -453,9 +468,13 @@ absl::Status Store::SaveBasis(const BasisRecord& record,
     hasher.Update(piece);
     total += piece.size();
   }
+  const uint64_t digest = hasher.Digest();
   const std::string meta = EncodeBasisRecord(record);
-  const std::string header = EncodeHeader(kBasisMagic, meta, total, hasher.Digest());
-  return WriteAtomically(BasisPath(record.id), header, meta, payload, options_.save_pause_ms);
+  const std::string header = EncodeHeader(kBasisMagic, meta, total, digest);
+  RETURN_IF_ERROR(
+      WriteAtomically(BasisPath(record.id), header, meta, payload, options_.save_pause_ms));
+  if (payload_hash != nullptr) *payload_hash = digest;
+  return absl::OkStatus();
 }
 
 absl::StatusOr<Store::LoadedBasisFile> Store::LoadBasis(const std::string& id) const {
@@ -465,7 +484,39 @@ absl::StatusOr<Store::LoadedBasisFile> Store::LoadBasis(const std::string& id) c
                    OpenRecordFile(id, 'b', path, kBasisMagic, DecodeBasisRecord, &out.record));
   out.payload.resize(f.header.payload_len);
   RETURN_IF_ERROR(ReadPayload(f, {{out.payload.data(), out.payload.size()}}, path));
+  out.payload_hash = f.header.payload_hash;
   return out;
+}
+
+absl::Status Store::SaveReduced(const std::string& id, uint64_t basis_payload_hash,
+                                std::string_view payload) const {
+  if (!ValidId(id, 'b')) return absl::InvalidArgumentError("bad basis id " + id);
+  MetaWriter w;
+  w.PutString(id);
+  w.Put<uint64_t>(basis_payload_hash);
+  const std::string meta = std::move(w.bytes());
+  Hasher hasher;
+  hasher.Update(payload);
+  const std::string header = EncodeHeader(kReducedMagic, meta, payload.size(), hasher.Digest());
+  return WriteAtomically(ReducedPath(id), header, meta, {payload}, options_.save_pause_ms);
+}
+
+absl::StatusOr<std::string> Store::LoadReduced(const std::string& id,
+                                               uint64_t basis_payload_hash) const {
+  if (!ValidId(id, 'b')) return absl::NotFoundError(absl::StrCat("no basis ", ShownId(id)));
+  const std::string path = ReducedPath(id);
+  ASSIGN_OR_RETURN(OpenedFile f, OpenContainer(path, kReducedMagic));
+  MetaReader in(f.meta);
+  const std::string meta_id = in.GetString();
+  const uint64_t hash = in.Get<uint64_t>();
+  if (!in.Done() || meta_id != id) return absl::DataLossError(path + ": corrupt metadata");
+  if (hash != basis_payload_hash) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(path, ": computed from another file of basis ", id, " (stale)"));
+  }
+  std::string payload(f.header.payload_len, '\0');
+  RETURN_IF_ERROR(ReadPayload(f, {{payload.data(), payload.size()}}, path));
+  return payload;
 }
 
 absl::StatusOr<MeshRecord> Store::ReadMeshRecord(const std::string& id) const {
@@ -500,6 +551,11 @@ absl::Status Store::DeleteMesh(const std::string& id) const {
 
 absl::Status Store::DeleteBasis(const std::string& id) const {
   if (!IsFileStem(id)) return absl::OkStatus();
+  // The cache first: a crash in between leaves a basis without it (recomputed when loaded), never
+  // a cache without its basis.
+  if (::unlink(ReducedPath(id).c_str()) != 0 && errno != ENOENT) {
+    return ErrnoStatus(errno, "deleting " + ReducedPath(id));
+  }
   if (::unlink(BasisPath(id).c_str()) != 0 && errno != ENOENT) {
     return ErrnoStatus(errno, "deleting " + BasisPath(id));
   }

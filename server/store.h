@@ -38,7 +38,8 @@ struct StoreContents {
   std::vector<DamagedEntry> damaged;
 };
 
-// The on-disk store (docs/api.md, Store): DIR/meshes/<id>.fsmesh and DIR/bases/<id>.fsbasis.
+// The on-disk store (docs/api.md, Store): DIR/meshes/<id>.fsmesh and DIR/bases/<id>.fsbasis, with
+// DIR/bases/<id>.fsreduced beside a basis (its reduced matrices, a cache).
 //
 // Every file is one container: a 40-byte header (magic, format version, metadata and payload
 // lengths, XXH64 of the payload, XXH64 of header + metadata), the metadata (the record), the
@@ -69,14 +70,28 @@ class Store {
   absl::Status VerifyMesh(const std::string& id, const VertexMatrix& V, const FaceMatrix& F) const;
 
   // Basis payload: opaque serialized bytes (see registry.cc), possibly in several pieces that are
-  // concatenated.
-  absl::Status SaveBasis(const BasisRecord& record,
-                         const std::vector<std::string_view>& payload) const;
+  // concatenated. `payload_hash`, if not null, receives the payload's checksum (what SaveReduced
+  // ties a reduced-matrices file to).
+  absl::Status SaveBasis(const BasisRecord& record, const std::vector<std::string_view>& payload,
+                         uint64_t* payload_hash = nullptr) const;
   struct LoadedBasisFile {
     BasisRecord record;
     std::string payload;
+    uint64_t payload_hash = 0;  // the payload's checksum (XXH64)
   };
   absl::StatusOr<LoadedBasisFile> LoadBasis(const std::string& id) const;
+
+  // The reduced matrices of a stored basis (core's EncodeReducedMatrices):
+  // DIR/bases/<id>.fsreduced, a cache beside the basis file that spares a basis loaded again the
+  // product pass over U. Its metadata holds the id and the basis payload's checksum it was computed
+  // from, so a basis file replaced since (another build of the id) makes it stale. Same container,
+  // atomic write and checksums as the other files; Scan ignores these files, DeleteBasis removes
+  // them.
+  absl::Status SaveReduced(const std::string& id, uint64_t basis_payload_hash,
+                           std::string_view payload) const;
+  // NotFound if absent; DataLoss if damaged; FailedPrecondition if computed from another basis
+  // file (a stale cache).
+  absl::StatusOr<std::string> LoadReduced(const std::string& id, uint64_t basis_payload_hash) const;
 
   // The record of one file (header and metadata only): NotFound if absent, DataLoss if damaged.
   // For lookups on a miss in a shared store.
@@ -95,6 +110,7 @@ class Store {
 
   std::string MeshPath(const std::string& id) const;
   std::string BasisPath(const std::string& id) const;
+  std::string ReducedPath(const std::string& id) const;
 
  private:
   Store(std::string dir, const StoreOptions& options) : dir_(std::move(dir)), options_(options) {}

@@ -203,6 +203,59 @@ TEST_F(StoreTest, BasisRoundTripConcatenatesPieces) {
   }
 }
 
+// The reduced matrices beside a basis: tied to the basis payload's checksum, checked like the
+// other files, removed with the basis.
+TEST_F(StoreTest, ReducedMatricesAreTiedToTheirBasisFile) {
+  BasisRecord r;
+  r.id = "b-00000000000000aa";
+  r.key.mesh_id = "m-0123456789abcdef";
+  r.key.field = FieldType::Vector();
+  r.key.dimension = 4;
+  uint64_t hash = 0;
+  ASSERT_TRUE(store_->SaveBasis(r, {"basis v1"}, &hash).ok());
+  auto loaded = store_->LoadBasis(r.id);
+  ASSERT_TRUE(loaded.ok()) << loaded.status();
+  EXPECT_EQ(loaded->payload_hash, hash);
+  EXPECT_THAT(store_->LoadReduced(r.id, hash), StatusIs(absl::StatusCode::kNotFound));
+  ASSERT_TRUE(store_->SaveReduced(r.id, hash, "reduced v1").ok());
+  auto reduced = store_->LoadReduced(r.id, hash);
+  ASSERT_TRUE(reduced.ok()) << reduced.status();
+  EXPECT_EQ(*reduced, "reduced v1");
+  // Not a basis of the store, and not in the Scan.
+  EXPECT_EQ(store_->Scan().bases.size(), 1u);
+  EXPECT_TRUE(store_->Scan().damaged.empty());
+  // The basis file rewritten with other content: the cache is stale.
+  uint64_t hash2 = 0;
+  ASSERT_TRUE(store_->SaveBasis(r, {"basis v2"}, &hash2).ok());
+  ASSERT_NE(hash2, hash);
+  EXPECT_THAT(store_->LoadReduced(r.id, hash2), StatusIs(absl::StatusCode::kFailedPrecondition));
+  // A flipped byte anywhere: DataLoss.
+  ASSERT_TRUE(store_->SaveReduced(r.id, hash2, "reduced v2").ok());
+  FlipByte(store_->ReducedPath(r.id), 3);
+  EXPECT_THAT(store_->LoadReduced(r.id, hash2), StatusIs(absl::StatusCode::kDataLoss));
+  ASSERT_TRUE(store_->SaveReduced(r.id, hash2, "reduced v2").ok());
+  fs::resize_file(store_->ReducedPath(r.id), fs::file_size(store_->ReducedPath(r.id)) - 1);
+  EXPECT_THAT(store_->LoadReduced(r.id, hash2), StatusIs(absl::StatusCode::kDataLoss));
+  EXPECT_THAT(store_->SaveReduced("not an id", hash2, "x"),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(store_->LoadReduced("../x", hash2), StatusIs(absl::StatusCode::kNotFound));
+  // Deleting the basis deletes its cache.
+  ASSERT_TRUE(store_->SaveReduced(r.id, hash2, "reduced v2").ok());
+  ASSERT_TRUE(store_->DeleteBasis(r.id).ok());
+  EXPECT_FALSE(fs::exists(store_->ReducedPath(r.id)));
+  EXPECT_FALSE(fs::exists(store_->BasisPath(r.id)));
+  // A cache whose basis went while it was being written is removed when the store opens; a
+  // cache with its basis stays.
+  ASSERT_TRUE(store_->SaveReduced(r.id, hash2, "orphan").ok());
+  r.id = "b-00000000000000ab";
+  ASSERT_TRUE(store_->SaveBasis(r, {"kept"}, &hash).ok());
+  ASSERT_TRUE(store_->SaveReduced(r.id, hash, "kept").ok());
+  auto reopened = Store::Open(dir_.string());
+  ASSERT_TRUE(reopened.ok()) << reopened.status();
+  EXPECT_FALSE(fs::exists(store_->ReducedPath("b-00000000000000aa")));
+  EXPECT_EQ(*(*reopened)->LoadReduced(r.id, hash), "kept");
+}
+
 TEST(BasisIdTest, KernelColumnsEnterTheIdOnlyWhenOn) {
   BasisKey key;
   key.mesh_id = "m-0123456789abcdef";
@@ -408,6 +461,58 @@ TEST_F(RegistryRepairTest, DeletedBasisStaysCountedWhileHeld) {
   const int64_t before = again->memory_in_use();
   ASSERT_TRUE(again->DeleteBasis(basis_id2).ok());
   EXPECT_LT(again->memory_in_use(), before);
+}
+
+// A built basis leaves its reduced matrices in the store; a restarted registry serves the basis
+// from them (no product pass) with the very matrices and solutions of the build; a damaged cache
+// is only recomputed (and written again).
+TEST_F(RegistryRepairTest, RestartServesTheStoredReducedMatrices) {
+  const auto [mesh_id, basis_id] = MeshAndBasis();
+  ASSERT_TRUE(fs::exists(store_->ReducedPath(basis_id)));
+  auto first = Start();
+  auto computed_basis = first->GetBasis(basis_id);  // the file as stored
+  ASSERT_TRUE(computed_basis.ok()) << computed_basis.status();
+  const ReducedSystem& from_store = *(*computed_basis)->system;
+  EXPECT_TRUE(from_store.stats().products_given);
+  // The same matrices as a product pass over the loaded basis computes.
+  auto mesh = first->GetMesh(mesh_id);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  auto op = BuildFieldOperator(**mesh, FieldType::Vector());
+  ASSERT_TRUE(op.ok()) << op.status();
+  ReducedSystemOptions one_thread;  // as the registry's (build_threads 1): the same sums
+  one_thread.threads = 1;
+  auto recomputed = ReducedSystem::Build(from_store.shared_basis(), *op, one_thread);
+  ASSERT_TRUE(recomputed.ok()) << recomputed.status();
+  EXPECT_EQ(Eigen::MatrixXd(from_store.stiffness()), Eigen::MatrixXd((*recomputed)->stiffness()));
+  EXPECT_EQ(Eigen::MatrixXd(from_store.bilaplacian()),
+            Eigen::MatrixXd((*recomputed)->bilaplacian()));
+  EXPECT_EQ(Eigen::MatrixXd(from_store.mass_matrix()),
+            Eigen::MatrixXd((*recomputed)->mass_matrix()));
+  first.reset();
+  computed_basis->reset();
+  // Damaged: served all the same, from a product pass, and the file is good again.
+  FlipByte(store_->ReducedPath(basis_id), 10);
+  auto second = Start();
+  auto served = second->GetBasis(basis_id);
+  ASSERT_TRUE(served.ok()) << served.status();
+  EXPECT_FALSE((*served)->system->stats().products_given);
+  EXPECT_EQ(Eigen::MatrixXd((*served)->system->bilaplacian()),
+            Eigen::MatrixXd((*recomputed)->bilaplacian()));
+  second.reset();
+  served->reset();
+  auto third = Start();
+  auto again = third->GetBasis(basis_id);
+  ASSERT_TRUE(again.ok()) << again.status();
+  EXPECT_TRUE((*again)->system->stats().products_given);
+  // Absent (an older store): computed, and written.
+  third.reset();
+  again->reset();
+  fs::remove(store_->ReducedPath(basis_id));
+  auto fourth = Start();
+  auto absent = fourth->GetBasis(basis_id);
+  ASSERT_TRUE(absent.ok()) << absent.status();
+  EXPECT_FALSE((*absent)->system->stats().products_given);
+  EXPECT_TRUE(fs::exists(store_->ReducedPath(basis_id)));
 }
 
 TEST_F(RegistryRepairTest, TruncatedMeshRepairedByUploadServesItsUndamagedBasisAgain) {
