@@ -96,33 +96,38 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
     std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context,
     std::optional<ReducedMatrices> matrices) {
-  FieldOperator assembled;
-  if (op == nullptr) {
-    ASSIGN_OR_RETURN(assembled, BuildFieldOperator(*mesh, basis->type));
-    op = &assembled;
-  }
-  if (IsCancelled(context.cancel)) return absl::CancelledError("cancelled");
-  if (context.progress) context.progress(BuildStage::kPrecompute, 0.5);
   ReducedSystemOptions options;
   options.threads = context.threads;
   options.cancel = context.cancel;
-  absl::StatusOr<std::shared_ptr<const ReducedSystem>> given;
+  absl::StatusOr<std::shared_ptr<const ReducedSystem>> system;
   if (matrices.has_value()) {
-    given = ReducedSystem::Build(basis, *op, *std::move(matrices), options);
-    if (!given.ok() && !absl::IsCancelled(given.status())) {
+    // Only M is needed then: S, whose assembly is most of a load's remaining time, is not.
+    Eigen::VectorXd mass =
+        op != nullptr ? op->mass : BuildFaceMass(*mesh, basis->type.dofs_per_face());
+    system = ReducedSystem::Build(basis, std::move(mass), *std::move(matrices), options);
+    if (!system.ok() && !absl::IsCancelled(system.status())) {
       std::cerr << "fieldspaced: the stored reduced matrices of basis " << record.id
-                << " do not fit it (" << given.status().message() << "); computing them"
+                << " do not fit it (" << system.status().message() << "); computing them"
                 << std::endl;
     }
   }
-  ASSIGN_OR_RETURN(std::shared_ptr<const ReducedSystem> system,
-                   given.ok() ? std::move(given) : ReducedSystem::Build(basis, *op, options));
+  if (!system.ok()) {
+    FieldOperator assembled;
+    if (op == nullptr) {
+      ASSIGN_OR_RETURN(assembled, BuildFieldOperator(*mesh, basis->type));
+      op = &assembled;
+    }
+    if (IsCancelled(context.cancel)) return absl::CancelledError("cancelled");
+    if (context.progress) context.progress(BuildStage::kPrecompute, 0.5);
+    system = ReducedSystem::Build(basis, *op, options);
+  }
+  if (!system.ok()) return system.status();
   auto served = std::make_shared<ServedBasis>();
   served->record = std::move(record);
   served->mesh = std::move(mesh);
-  served->memory_bytes = basis->MemoryBytes() + system->stats().memory_bytes;
+  served->memory_bytes = basis->MemoryBytes() + (*system)->stats().memory_bytes;
   served->basis = std::move(basis);
-  served->system = std::move(system);
+  served->system = *std::move(system);
   served->energy_cache = std::make_shared<EnergyFactorCache>();
   served->alignment_cache = std::make_shared<AlignmentCache>();
   return std::shared_ptr<const ServedBasis>(std::move(served));

@@ -559,36 +559,45 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   }
   std::vector<Entry>().swap(entries);
   sys->stats_.products_seconds = SecondsSince(t_start);
-  return Complete(std::move(sys), std::move(basis), op, options, t_start);
+  return Complete(std::move(sys), std::move(basis), op.mass, options, t_start);
 }
 
 absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
-    std::shared_ptr<const Basis> basis, const FieldOperator& op, ReducedMatrices matrices,
+    std::shared_ptr<const Basis> basis, Eigen::VectorXd mass, ReducedMatrices matrices,
     const ReducedSystemOptions& options) {
   const auto t_start = std::chrono::steady_clock::now();
-  RETURN_IF_ERROR(CheckBuildInputs(basis.get(), op, options));
+  if (basis == nullptr) return absl::InvalidArgumentError("ReducedSystem: no basis");
+  const int64_t d = basis->U.cols();
+  if (d < 1 || d >= (int64_t{1} << 31) / 2) {
+    return absl::InvalidArgumentError("ReducedSystem: basis has no columns or too many");
+  }
+  if (basis->U.rows() % basis->type.dofs_per_face() != 0) {
+    return absl::InvalidArgumentError(
+        "ReducedSystem: DOF count is not a multiple of the DOFs per face");
+  }
+  if (options.threads < 0) return absl::InvalidArgumentError("ReducedSystem: threads must be >= 0");
   if (options.threads > 0) {
     return InArena(options, [&](const ReducedSystemOptions& inner) {
-      return Build(std::move(basis), op, std::move(matrices), inner);
+      return Build(std::move(basis), std::move(mass), std::move(matrices), inner);
     });
   }
-  RETURN_IF_ERROR(CheckPositiveVector(op.mass, basis->U.rows(), "ReducedSystem: operator mass"));
-  RETURN_IF_ERROR(CheckReducedMatrices(matrices, basis->U.cols()));
+  RETURN_IF_ERROR(CheckPositiveVector(mass, basis->U.rows(), "ReducedSystem: operator mass"));
+  RETURN_IF_ERROR(CheckReducedMatrices(matrices, d));
   auto sys = std::shared_ptr<ReducedSystem>(new ReducedSystem());
   sys->stiffness_ = std::move(matrices.stiffness);
   sys->bilaplacian_ = std::move(matrices.bilaplacian);
   sys->mass_matrix_ = std::move(matrices.mass_matrix);
   sys->stats_.products_given = true;
-  return Complete(std::move(sys), std::move(basis), op, options, t_start);
+  return Complete(std::move(sys), std::move(basis), std::move(mass), options, t_start);
 }
 
 absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Complete(
-    std::shared_ptr<ReducedSystem> sys, std::shared_ptr<const Basis> basis, const FieldOperator& op,
+    std::shared_ptr<ReducedSystem> sys, std::shared_ptr<const Basis> basis, Eigen::VectorXd mass,
     const ReducedSystemOptions& options, std::chrono::steady_clock::time_point t_start) {
   const BasisMatrix& U = basis->U;
   const int64_t k = U.rows();
   const int64_t d = U.cols();
-  sys->mass_ = op.mass;
+  sys->mass_ = std::move(mass);
   const int64_t nnz = sys->mass_matrix_.nonZeros();
   int64_t nnz_s = 0, nnz_b = 0, nnz_m = 0;
   for (int64_t p = 0; p < nnz; ++p) {
@@ -622,7 +631,7 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Complete(
   }
   sys->mass_factor_ = std::make_unique<SupernodalFactor>(*std::move(mass_factor));
   sys->stats_.mass_factor_seconds = SecondsSince(t_mass);
-  sys->lift_plan_ = LiftPlan::Build(U, op.type.dofs_per_face());
+  sys->lift_plan_ = LiftPlan::Build(U, basis->type.dofs_per_face());
   const int64_t pattern_bytes = 3 * (sys->stats_.pattern_nonzeros * 12 + (d + 1) * 4);
   sys->stats_.memory_bytes = pattern_bytes + sys->lift_plan_.memory_bytes() + k * 8 +
                              sys->symbolic_->memory_bytes() + sys->symbolic_->factor_nonzeros() * 8;

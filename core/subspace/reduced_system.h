@@ -79,12 +79,12 @@ class ReducedSystem {
       std::shared_ptr<const Basis> basis, const FieldOperator& op,
       const ReducedSystemOptions& options = {});
   // The same from the reduced matrices computed earlier for this basis and operator (e.g. by
-  // DecodeReducedMatrices from a store): no product pass, the rest as above. The caller vouches
-  // that they belong to `basis` and `op` (a store ties them to the basis file's checksum).
-  // InvalidArgument also when they are not d x d on one symmetric pattern with every diagonal
-  // entry, or not finite.
+  // DecodeReducedMatrices from a store) and the operator's mass alone (`mass`: k positive values,
+  // BuildFaceMass): no product pass and no stiffness, the rest as above. The caller vouches that
+  // they belong to `basis` (a store ties them to the basis file's checksum). InvalidArgument also
+  // when they are not d x d on one symmetric pattern with every diagonal entry, or not finite.
   static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Build(
-      std::shared_ptr<const Basis> basis, const FieldOperator& op, ReducedMatrices matrices,
+      std::shared_ptr<const Basis> basis, Eigen::VectorXd mass, ReducedMatrices matrices,
       const ReducedSystemOptions& options = {});
 
   const Basis& basis() const { return *basis_; }
@@ -115,9 +115,8 @@ class ReducedSystem {
   // The part of both Builds after the matrices: counts, analysis, U^T M U's factorization, the
   // lift plan.
   static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Complete(
-      std::shared_ptr<ReducedSystem> sys, std::shared_ptr<const Basis> basis,
-      const FieldOperator& op, const ReducedSystemOptions& options,
-      std::chrono::steady_clock::time_point t_start);
+      std::shared_ptr<ReducedSystem> sys, std::shared_ptr<const Basis> basis, Eigen::VectorXd mass,
+      const ReducedSystemOptions& options, std::chrono::steady_clock::time_point t_start);
 
   std::shared_ptr<const Basis> basis_;
   Eigen::VectorXd mass_;

@@ -175,7 +175,7 @@ TEST(ReducedSystemTest, EncodedMatricesBuildTheSameSystem) {
     const std::string bytes = EncodeReducedMatrices(**built);
     auto decoded = DecodeReducedMatrices(bytes);
     ASSERT_TRUE(decoded.ok()) << decoded.status();
-    auto given = ReducedSystem::Build(basis, op, *std::move(decoded));
+    auto given = ReducedSystem::Build(basis, op.mass, *std::move(decoded));
     ASSERT_TRUE(given.ok()) << given.status();
     const ReducedSystem& a = **built;
     const ReducedSystem& b = **given;
@@ -217,15 +217,23 @@ TEST(ReducedSystemTest, DamagedOrForeignMatricesAreRefused) {
   bad = bytes;
   bad[16] = static_cast<char>(bad[16] + 1);
   EXPECT_THAT(DecodeReducedMatrices(bad), StatusIs(absl::StatusCode::kDataLoss));
+  // A mass of another size, or not positive.
+  EXPECT_THAT(
+      ReducedSystem::Build(basis, op.mass.head(op.dofs() - 2), *DecodeReducedMatrices(bytes)),
+      StatusIs(absl::StatusCode::kInvalidArgument));
+  Eigen::VectorXd zero_mass = op.mass;
+  zero_mass[4] = 0.0;
+  EXPECT_THAT(ReducedSystem::Build(basis, zero_mass, *DecodeReducedMatrices(bytes)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // Matrices that decode but are not a reduced system's: for another dimension, a row index out
   // of range, rows out of order, a missing diagonal, an asymmetric pattern, a NaN.
   auto other = RandomBasis(FieldType::Vector(), op.dofs(), 41, 10, 5);
-  EXPECT_THAT(ReducedSystem::Build(other, op, *DecodeReducedMatrices(bytes)),
+  EXPECT_THAT(ReducedSystem::Build(other, op.mass, *DecodeReducedMatrices(bytes)),
               StatusIs(absl::StatusCode::kInvalidArgument));
   const auto edited = [&](const auto& edit) {
     ReducedMatrices m = *DecodeReducedMatrices(bytes);
     edit(m);
-    return ReducedSystem::Build(basis, op, std::move(m));
+    return ReducedSystem::Build(basis, op.mass, std::move(m));
   };
   const auto all_patterns = [](ReducedMatrices& m, const auto& edit) {
     for (auto* a : {&m.stiffness, &m.bilaplacian, &m.mass_matrix}) edit(*a);
