@@ -364,7 +364,7 @@ class SolveAndDesignTest(unittest.TestCase):
         scale = np.linalg.norm(mixed.coefficients)
         self.assertGreater(np.linalg.norm(mixed.coefficients - exact.coefficients), 1e-3 * scale)
         self.assertLessEqual(mixed.backward_error, 1e-12)
-        self.assertGreater(mixed.iterations, exact.iterations)
+        self.assertLessEqual(mixed.iterations, 2)  # refinement steps: the partial fractions
         for form in ("mixed", None):  # None: the default
             kwargs = {} if form is None else {"biharmonic": form}
             with CLIENT.design(VECTOR, weights, **kwargs) as s:
