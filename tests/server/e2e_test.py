@@ -140,7 +140,8 @@ def main():
         check(max(abs(a - b) for a, b in zip(mixed["coefficients"], exact["coefficients"])) >
               1e-6, "mixed and exact forms give different minimizers")
         check(mixed["backward_error"] <= 1e-12 and exact["backward_error"] <= 1e-12 and
-              mixed["iterations"] > exact["iterations"], "solve reports its convergence: %s %s"
+              mixed["iterations"] <= 2 and exact["iterations"] <= 2,
+              "solve reports its convergence (refinement steps): %s %s"
               % ((mixed["backward_error"], mixed["iterations"]),
                  (exact["backward_error"], exact["iterations"])))
         rc, _, err = cli("solve", vector["id"], "--constraints", constraints, "--biharmonic",

@@ -323,13 +323,18 @@ TEST_F(HostileInputTest, ExpiredSolveFreesItsThread) {
   }
   const double full_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // A deadline well inside the Solve's own time (a fixed 100 ms was met by a fast run now and
+  // then, and the Solve then rightly answered OK).
+  const int deadline_ms = std::clamp(static_cast<int>(1000 * full_s / 4), 5, 100);
   for (int round = 0; round < 3; ++round) {
     {
       grpc::ClientContext context;
-      context.set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(100));
+      context.set_deadline(std::chrono::system_clock::now() +
+                           std::chrono::milliseconds(deadline_ms));
       v1::SolveResponse response;
       EXPECT_EQ(stub_->Solve(&context, big, &response).error_code(),
-                grpc::StatusCode::DEADLINE_EXCEEDED);
+                grpc::StatusCode::DEADLINE_EXCEEDED)
+          << "deadline " << deadline_ms << " ms; the full Solve took " << full_s << " s";
     }
     grpc::ClientContext context;
     // Generous for a loaded machine, and still well below the abandoned Solve's time.
