@@ -573,28 +573,38 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std:
 }
 
 absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std::string& id) {
-  ASSIGN_OR_RETURN(Store::LoadedBasisFile file, store_->LoadBasis(id));
-  absl::StatusOr<LoadedBasis> decoded = DecodeBasis(file.payload);
+  // Straight from the file into the basis's arrays, the store's checksum taken on the way.
+  ASSIGN_OR_RETURN(std::unique_ptr<Store::BasisPayloadReader> reader, store_->OpenBasisPayload(id));
+  absl::StatusOr<LoadedBasis> decoded = DecodeBasisFrom(*reader);
   if (!decoded.ok()) {
-    return absl::DataLossError(
-        absl::StrCat("stored basis ", id, " is unreadable: ", decoded.status().message()));
+    if (absl::IsDataLoss(decoded.status()) || absl::IsInvalidArgument(decoded.status())) {
+      return absl::DataLossError(
+          absl::StrCat("stored basis ", id, " is unreadable: ", decoded.status().message()));
+    }
+    return decoded.status();  // e.g. a read error of the file system
   }
-  std::string().swap(file.payload);
-  if (decoded->mesh_id != file.record.key.mesh_id) {
+  absl::StatusOr<uint64_t> payload_hash = reader->Finish();
+  if (!payload_hash.ok()) {
+    return absl::DataLossError(
+        absl::StrCat("stored basis ", id, " is unreadable: ", payload_hash.status().message()));
+  }
+  const BasisRecord record = reader->record();
+  reader.reset();
+  if (decoded->mesh_id != record.key.mesh_id) {
     return absl::DataLossError(absl::StrCat("stored basis ", id, " names mesh ", decoded->mesh_id,
-                                            ", its record ", file.record.key.mesh_id));
+                                            ", its record ", record.key.mesh_id));
   }
   auto basis = std::make_shared<const Basis>(std::move(decoded->basis));
-  ASSIGN_OR_RETURN(std::shared_ptr<const TriangleMesh> mesh, GetMesh(file.record.key.mesh_id));
-  const int64_t dofs = int64_t{file.record.key.field.dofs_per_face()} * mesh->num_faces();
-  if (basis->U.rows() != dofs || !(basis->type == file.record.key.field)) {
+  ASSIGN_OR_RETURN(std::shared_ptr<const TriangleMesh> mesh, GetMesh(record.key.mesh_id));
+  const int64_t dofs = int64_t{record.key.field.dofs_per_face()} * mesh->num_faces();
+  if (basis->U.rows() != dofs || !(basis->type == record.key.field)) {
     return absl::DataLossError(
         absl::StrCat("stored basis ", id, " does not match its mesh or field type"));
   }
   // The reduced matrices kept beside the basis, if any and sound: a cache, so any problem with
   // it only means computing them (and writing them again).
   std::optional<ReducedMatrices> matrices;
-  absl::StatusOr<std::string> reduced = store_->LoadReduced(id, file.payload_hash);
+  absl::StatusOr<std::string> reduced = store_->LoadReduced(id, *payload_hash);
   if (reduced.ok()) {
     absl::StatusOr<ReducedMatrices> m = DecodeReducedMatrices(*reduced);
     std::string().swap(*reduced);
@@ -610,11 +620,11 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std
   }
   BuildContext context;
   context.threads = options_.build_threads;
-  ASSIGN_OR_RETURN(std::shared_ptr<const ServedBasis> served,
-                   ServeBasis(file.record, std::move(mesh), std::move(basis), nullptr, context,
-                              std::move(matrices)));
+  ASSIGN_OR_RETURN(
+      std::shared_ptr<const ServedBasis> served,
+      ServeBasis(record, std::move(mesh), std::move(basis), nullptr, context, std::move(matrices)));
   if (!served->system->stats().products_given) {
-    SaveReducedMatrices(id, file.payload_hash, *served->system);
+    SaveReducedMatrices(id, *payload_hash, *served->system);
   }
   return served;
 }

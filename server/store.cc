@@ -478,14 +478,48 @@ absl::Status Store::SaveBasis(const BasisRecord& record,
 }
 
 absl::StatusOr<Store::LoadedBasisFile> Store::LoadBasis(const std::string& id) const {
-  const std::string path = BasisPath(id);
+  ASSIGN_OR_RETURN(std::unique_ptr<BasisPayloadReader> reader, OpenBasisPayload(id));
   LoadedBasisFile out;
-  ASSIGN_OR_RETURN(OpenedFile f,
-                   OpenRecordFile(id, 'b', path, kBasisMagic, DecodeBasisRecord, &out.record));
-  out.payload.resize(f.header.payload_len);
-  RETURN_IF_ERROR(ReadPayload(f, {{out.payload.data(), out.payload.size()}}, path));
-  out.payload_hash = f.header.payload_hash;
+  out.record = reader->record();
+  out.payload.resize(reader->size());
+  constexpr size_t kSlice = size_t{8} << 20;  // hashed while still in cache
+  for (uint64_t done = 0; done < out.payload.size(); done += kSlice) {
+    const size_t n = static_cast<size_t>(std::min<uint64_t>(kSlice, out.payload.size() - done));
+    RETURN_IF_ERROR(reader->ReadAt(done, out.payload.data() + done, n));
+  }
+  ASSIGN_OR_RETURN(out.payload_hash, reader->Finish());
   return out;
+}
+
+absl::StatusOr<std::unique_ptr<Store::BasisPayloadReader>> Store::OpenBasisPayload(
+    const std::string& id) const {
+  auto reader = std::unique_ptr<BasisPayloadReader>(new BasisPayloadReader());
+  reader->path_ = BasisPath(id);
+  ASSIGN_OR_RETURN(OpenedFile f, OpenRecordFile(id, 'b', reader->path_, kBasisMagic,
+                                                DecodeBasisRecord, &reader->record_));
+  reader->start_ = kHeaderBytes + f.header.meta_len;
+  reader->length_ = f.header.payload_len;
+  reader->expected_hash_ = f.header.payload_hash;
+  reader->file_ = std::move(f.file);
+  return reader;
+}
+
+absl::Status Store::BasisPayloadReader::ReadAt(uint64_t offset, void* dst, size_t size) {
+  if (offset != next_ || size > length_ - offset) {
+    return absl::DataLossError(absl::StrCat(path_, ": payload read out of order"));
+  }
+  RETURN_IF_ERROR(ReadExactlyAt(file_.fd.get(), start_ + offset, dst, size, path_));
+  hasher_.Update(dst, size);
+  next_ = offset + size;
+  return absl::OkStatus();
+}
+
+absl::StatusOr<uint64_t> Store::BasisPayloadReader::Finish() const {
+  if (next_ != length_) return absl::DataLossError(path_ + ": payload not read to its end");
+  if (hasher_.Digest() != expected_hash_) {
+    return absl::DataLossError(absl::StrCat(path_, ": payload checksum mismatch"));
+  }
+  return expected_hash_;
 }
 
 absl::Status Store::SaveReduced(const std::string& id, uint64_t basis_payload_hash,

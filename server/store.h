@@ -10,7 +10,10 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "core/basis/basis_io.h"
+#include "core/common/file_util.h"
 #include "core/mesh/triangle_mesh.h"
+#include "server/hash.h"
 #include "server/records.h"
 
 namespace fieldspace::server {
@@ -80,6 +83,32 @@ class Store {
     uint64_t payload_hash = 0;  // the payload's checksum (XXH64)
   };
   absl::StatusOr<LoadedBasisFile> LoadBasis(const std::string& id) const;
+  // The payload of a basis file, read in order and checksummed on the way, for core's
+  // DecodeBasisFrom: the bytes go straight into the basis's arrays, no copy of the payload is
+  // held beside them. Finish() after the last read: DataLoss unless every byte was read exactly
+  // once, in order, and the checksum matches; otherwise the payload's checksum.
+  class BasisPayloadReader final : public BasisByteSource {
+   public:
+    const BasisRecord& record() const { return record_; }
+    uint64_t size() const override { return length_; }
+    absl::Status ReadAt(uint64_t offset, void* dst, size_t size) override;
+    absl::StatusOr<uint64_t> Finish() const;
+
+   private:
+    friend class Store;
+    BasisPayloadReader() = default;
+    BasisRecord record_;
+    std::string path_;
+    ReadableFile file_;
+    uint64_t start_ = 0;   // of the payload in the file
+    uint64_t length_ = 0;  // of the payload
+    uint64_t next_ = 0;    // the offset the next read must start at
+    uint64_t expected_hash_ = 0;
+    Hasher hasher_;
+  };
+  // NotFound if absent, DataLoss if the header or record is damaged (the payload is checked as
+  // it is read).
+  absl::StatusOr<std::unique_ptr<BasisPayloadReader>> OpenBasisPayload(const std::string& id) const;
 
   // The reduced matrices of a stored basis (core's EncodeReducedMatrices):
   // DIR/bases/<id>.fsreduced, a cache beside the basis file that spares a basis loaded again the

@@ -209,19 +209,13 @@ class FileSink final : public Sink {
   AtomicFileWriter& out_;
 };
 
-class Source {
- public:
-  virtual ~Source() = default;
-  virtual uint64_t size() const = 0;
-  // Reads exactly `size` bytes at `offset` (the caller has checked the range).
-  virtual absl::Status ReadAt(uint64_t offset, void* dst, size_t size) const = 0;
-};
+using Source = BasisByteSource;
 
 class StringSource final : public Source {
  public:
   explicit StringSource(std::string_view bytes) : bytes_(bytes) {}
   uint64_t size() const override { return bytes_.size(); }
-  absl::Status ReadAt(uint64_t offset, void* dst, size_t size) const override {
+  absl::Status ReadAt(uint64_t offset, void* dst, size_t size) override {
     std::memcpy(dst, bytes_.data() + offset, size);
     return absl::OkStatus();
   }
@@ -235,7 +229,7 @@ class FileSource final : public Source {
   FileSource(ReadableFile file, std::string path)
       : file_(std::move(file)), path_(std::move(path)) {}
   uint64_t size() const override { return static_cast<uint64_t>(file_.size); }
-  absl::Status ReadAt(uint64_t offset, void* dst, size_t size) const override {
+  absl::Status ReadAt(uint64_t offset, void* dst, size_t size) override {
     return ReadExactlyAt(file_.fd.get(), offset, dst, size, path_);
   }
 
@@ -339,7 +333,7 @@ absl::Status Encode(const Basis& basis, std::string_view mesh_id, Sink& sink) {
 
 // ---------------------------------------------------------------- decode
 
-absl::StatusOr<Header> ReadHeader(const Source& src, uint64_t* header_end) {
+absl::StatusOr<Header> ReadHeader(Source& src, uint64_t* header_end) {
   const uint64_t size = src.size();
   if (size < kPreambleBytes) {
     return DataLoss(absl::StrFormat("truncated: %d bytes, shorter than the %d-byte preamble", size,
@@ -380,7 +374,7 @@ struct SectionPlan {
   uint64_t bytes;
 };
 
-absl::Status ReadSection(const Source& src, uint64_t* offset, const SectionPlan& plan) {
+absl::Status ReadSection(Source& src, uint64_t* offset, const SectionPlan& plan) {
   uint8_t head[kSectionHeadBytes];
   if (absl::Status s = src.ReadAt(*offset, head, sizeof(head)); !s.ok()) return s;
   uint32_t tag, reserved;
@@ -409,7 +403,7 @@ absl::Status ReadSection(const Source& src, uint64_t* offset, const SectionPlan&
   return absl::OkStatus();
 }
 
-absl::StatusOr<LoadedBasis> Decode(const Source& src) {
+absl::StatusOr<LoadedBasis> Decode(Source& src) {
   uint64_t offset = 0;
   absl::StatusOr<Header> hs = ReadHeader(src, &offset);
   if (!hs.ok()) return hs.status();
@@ -512,6 +506,8 @@ absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes) {
   StringSource src(bytes);
   return Decode(src);
 }
+
+absl::StatusOr<LoadedBasis> DecodeBasisFrom(BasisByteSource& src) { return Decode(src); }
 
 absl::Status SaveBasisFile(const std::string& path, const Basis& basis, std::string_view mesh_id) {
   absl::StatusOr<AtomicFileWriter> out = AtomicFileWriter::Create(path);

@@ -58,6 +58,19 @@ absl::StatusOr<BasisFileInfo> ReadBasisFileInfo(const std::string& path);
 absl::StatusOr<std::string> EncodeBasis(const Basis& basis, std::string_view mesh_id);
 absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes);
 
+// Where DecodeBasisFrom reads a basis's bytes. It reads them once, in order, each read starting
+// where the previous one ended (so a source may checksum them as they pass), straight into the
+// basis's arrays.
+class BasisByteSource {
+ public:
+  virtual ~BasisByteSource() = default;
+  virtual uint64_t size() const = 0;
+  // Exactly `size` bytes at `offset` (the caller has checked the range).
+  virtual absl::Status ReadAt(uint64_t offset, void* dst, size_t size) = 0;
+};
+// The format from `src`, as DecodeBasis: no copy of the bytes beside the basis.
+absl::StatusOr<LoadedBasis> DecodeBasisFrom(BasisByteSource& src);
+
 }  // namespace fieldspace
 
 #endif  // FIELDSPACE_CORE_BASIS_BASIS_IO_H_

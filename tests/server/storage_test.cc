@@ -256,6 +256,51 @@ TEST_F(StoreTest, ReducedMatricesAreTiedToTheirBasisFile) {
   EXPECT_EQ(*(*reopened)->LoadReduced(r.id, hash), "kept");
 }
 
+// A basis payload read in order straight into its destination, checksummed on the way; any
+// other order, a read short of the end or a changed byte is DataLoss at Finish.
+TEST_F(StoreTest, BasisPayloadReaderChecksumsInOrder) {
+  BasisRecord r;
+  r.id = "b-00000000000000bb";
+  r.key.mesh_id = "m-0123456789abcdef";
+  r.key.field = FieldType::Vector();
+  r.key.dimension = 4;
+  const std::string payload = "0123456789abcdefghij";
+  uint64_t hash = 0;
+  ASSERT_TRUE(store_->SaveBasis(r, {payload}, &hash).ok());
+  const auto read_all = [&](std::vector<size_t> pieces,
+                            bool intact = true) -> absl::StatusOr<uint64_t> {
+    auto reader = store_->OpenBasisPayload(r.id);
+    if (!reader.ok()) return reader.status();
+    EXPECT_EQ((*reader)->record().id, r.id);
+    EXPECT_EQ((*reader)->size(), payload.size());
+    std::string got(payload.size(), '\0');
+    uint64_t at = 0;
+    for (size_t n : pieces) {
+      absl::Status read = (*reader)->ReadAt(at, got.data() + at, n);
+      if (!read.ok()) return read;
+      at += n;
+    }
+    if (intact && at == payload.size()) EXPECT_EQ(got, payload);
+    return (*reader)->Finish();
+  };
+  EXPECT_EQ(*read_all({20}), hash);
+  EXPECT_EQ(*read_all({3, 0, 10, 7}), hash);
+  EXPECT_THAT(read_all({3, 10}), StatusIs(absl::StatusCode::kDataLoss));  // not to the end
+  EXPECT_THAT(read_all({21}), StatusIs(absl::StatusCode::kDataLoss));     // past the end
+  {
+    auto reader = store_->OpenBasisPayload(r.id);
+    ASSERT_TRUE(reader.ok()) << reader.status();
+    char buffer[8];
+    EXPECT_THAT((*reader)->ReadAt(4, buffer, 4), StatusIs(absl::StatusCode::kDataLoss));  // skip
+    ASSERT_TRUE((*reader)->ReadAt(0, buffer, 8).ok());
+    EXPECT_THAT((*reader)->ReadAt(0, buffer, 8), StatusIs(absl::StatusCode::kDataLoss));  // again
+  }
+  FlipByte(store_->BasisPath(r.id), 5);
+  EXPECT_THAT(read_all({20}, /*intact=*/false), StatusIs(absl::StatusCode::kDataLoss));
+  EXPECT_THAT(store_->OpenBasisPayload("b-00000000000000bc"),
+              StatusIs(absl::StatusCode::kNotFound));
+}
+
 TEST(BasisIdTest, KernelColumnsEnterTheIdOnlyWhenOn) {
   BasisKey key;
   key.mesh_id = "m-0123456789abcdef";
