@@ -19,6 +19,7 @@
 #include "core/basis/basis_io.h"
 #include "core/common/file_util.h"
 #include "core/mesh/mesh_io.h"
+#include "core/subspace/reduced_system.h"
 #include "fieldspace/v1/fieldspace.pb.h"
 #include "fuzz/tiny_bases.h"
 #include "server/store.h"
@@ -111,6 +112,16 @@ void StoreSeeds(const fs::path& root, const fs::path& scratch) {
     d.Write(absl::StrCat("basis", which, "_fix.fsbasis"), {0x81}, basis_file);
     d.Write(absl::StrCat("basis", which, ".basis"), {2}, *encoded);
     d.Write(absl::StrCat("basis", which, "_fix.basis"), {0x82}, *encoded);
+    uint64_t hash = 0;
+    if (absl::Status s = (*store)->SaveBasis(b, {*encoded}, &hash); !s.ok()) Die(s);
+    if (absl::Status s =
+            (*store)->SaveReduced(kStoreBasisId, hash, EncodeReducedMatrices(*served.system));
+        !s.ok()) {
+      Die(s);
+    }
+    const std::string reduced_file = Read((*store)->ReducedPath(kStoreBasisId));
+    d.Write(absl::StrCat("reduced", which, ".fsreduced"), {3}, reduced_file);
+    d.Write(absl::StrCat("reduced", which, "_fix.fsreduced"), {0x83}, reduced_file);
   }
 }
 

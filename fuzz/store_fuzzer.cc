@@ -1,12 +1,15 @@
 // The decoders of what the daemon reads from disk: store containers (server/store.h: header,
 // metadata records, payload checksums), the basis format inside a basis container
 // (core/basis/basis_io.h) and the served basis made from it, as Registry::GetMesh and
-// Registry::LoadBasis do.
+// Registry::LoadBasis do, and the reduced matrices kept beside a basis
+// (core/subspace/reduced_system.h) with the system built from them.
 //
-// Input: one mode byte, then the file. mode % 3: 0 a mesh store file, 1 a basis store file,
-// 2 a basis file alone (DecodeBasis). Mode bit 0x80: the harness first rewrites the checksums
-// (XXH64 of the container, CRC-32C of the basis format's preamble, header and sections) to match
-// the bytes, so that the fuzzer gets past them to the decoders behind; lengths stay the input's.
+// Input: one mode byte, then the file. mode % 4: 0 a mesh store file, 1 a basis store file (read
+// whole, and streamed into the basis as LoadBasis does), 2 a basis file alone (DecodeBasis), 3 a
+// reduced-matrices store file (served on the fixture's first tiny basis when its dimension fits).
+// Mode bit 0x80: the harness first rewrites the checksums (XXH64 of the container, CRC-32C of the
+// basis format's preamble, header and sections) to match the bytes, so that the fuzzer gets past
+// them to the decoders behind; lengths stay the input's.
 
 #include <unistd.h>
 
@@ -19,6 +22,7 @@
 
 #include "core/basis/basis_io.h"
 #include "core/basis/crc32c.h"
+#include "core/subspace/reduced_system.h"
 #include "fuzz/tiny_bases.h"
 #include "server/hash.h"
 #include "server/store.h"
@@ -121,7 +125,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const bool fix = (mode & 0x80) != 0;
   std::string bytes(reinterpret_cast<const char*>(data) + 1, size - 1);
   const server::Store& store = TheStore();
-  switch (mode % 3) {
+  switch (mode % 4) {
     case 0: {
       if (fix) FixContainer(bytes, false);
       WriteFile(store.MeshPath(kStoreMeshId), bytes);
@@ -142,7 +146,36 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         absl::StatusOr<LoadedBasis> loaded = DecodeBasis(file->payload);
         if (loaded.ok()) Serve(*loaded);
       }
+      auto reader = store.OpenBasisPayload(kStoreBasisId);
+      if (reader.ok()) {
+        absl::StatusOr<LoadedBasis> streamed = DecodeBasisFrom(**reader);
+        if (streamed.ok() && (*reader)->Finish().ok()) Serve(*streamed);
+      }
       unlink(store.BasisPath(kStoreBasisId).c_str());
+      break;
+    }
+    case 3: {
+      if (fix) FixContainer(bytes, false);
+      WriteFile(store.ReducedPath(kStoreBasisId), bytes);
+      // The basis checksum the file claims (its metadata: the id, then the u64), so that the
+      // fuzzer gets past the staleness check too.
+      uint64_t claimed = 0;
+      if (bytes.size() >= 44) {
+        const uint32_t meta = LoadAt<uint32_t>(bytes, 12);
+        const uint32_t id_len = LoadAt<uint32_t>(bytes, 40);
+        if (meta <= bytes.size() - 40 && id_len <= meta && meta - id_len >= 12) {
+          claimed = LoadAt<uint64_t>(bytes, 44 + id_len);
+        }
+      }
+      absl::StatusOr<std::string> payload = store.LoadReduced(kStoreBasisId, claimed);
+      if (payload.ok()) {
+        absl::StatusOr<ReducedMatrices> matrices = DecodeReducedMatrices(*payload);
+        const server::ServedBasis& tiny = *TinyBasis(0);
+        if (matrices.ok()) {
+          (void)ReducedSystem::Build(tiny.basis, tiny.system->mass(), *std::move(matrices));
+        }
+      }
+      unlink(store.ReducedPath(kStoreBasisId).c_str());
       break;
     }
     default: {
