@@ -731,8 +731,9 @@ TEST(BasisTest, DimensionEqualToDofCountIsAllowed) {
 // The admission estimate covers the peaks measured with `fieldspace-bench basis ... --stats`
 // (bench/RESULTS.md, "Session 22": the peaks of today's build, which copies neither a basis when
 // it moves it nor the kernel when it appends it): a vector build with kernel columns on
-// fertility_loop3_1789k (1,789,056 faces, d = 2000) peaked at 3938 MiB, a two-level build (--coarse-dim 200) on armadillo_86k
-// (86,482 faces) at 258 MiB and a low-modes one at 295 MiB; one-level armadillo at 146 MiB.
+// fertility_loop3_1789k (1,789,056 faces, d = 2000) peaked at 3938 MiB, a two-level build
+// (--coarse-dim 200) on armadillo_86k (86,482 faces) at 258 MiB and a low-modes one at 295 MiB;
+// one-level armadillo at 146 MiB.
 TEST(BasisTest, BuildPeakEstimateCoversMeasuredPeaks) {
   constexpr int64_t kMiB = int64_t{1} << 20;
   const FieldType vector = FieldType::Vector();
