@@ -27,8 +27,10 @@ namespace {
 constexpr int32_t kMaxConstraints = 1 << 20;
 // Up to this many constraints, a Solve with the mixed biharmonic goes through a design session
 // (SolveThroughSession); beyond, the constraints' dense Woodbury and Schur blocks cost more than
-// core's conjugate gradients, which take any number.
-constexpr int64_t kSessionSolveMaxConstraints = 1024;
+// core's conjugate gradients, which take any number (1.38M faces, d = 2000: 100 constraints
+// 49-58 ms against 229-234 ms, 300 about even at 107-136 ms, 1000 850-930 ms against
+// 123-178 ms; bench/RESULTS.md, Session 22).
+constexpr int64_t kSessionSolveMaxConstraints = 256;
 
 double SecondsSince(Clock::time_point start) { return MsSince(start) / 1000; }
 

@@ -152,7 +152,7 @@ class Solution:
     """The answer of solve, smooth and align: d coefficients, the lifted field when asked for
     (``return_field=True``), the server's timings in ms, the backward error against the true
     reduced system, the result's singularities when asked for (``singularities=True``) and (solve)
-    the refinement steps or, with ``biharmonic="mixed"`` past 1024 constraints, conjugate gradient
+    the refinement steps or, with ``biharmonic="mixed"`` past 256 constraints, conjugate gradient
     iterations."""
 
     coefficients: np.ndarray
