@@ -36,8 +36,8 @@ double SecondsSince(Clock::time_point start) { return MsSince(start) / 1000; }
 
 // A Solve with the mixed biharmonic (mu_B > 0) as a design session with all its constraints in
 // one group: the mixed energy inverted through its partial fractions (two sparse factorizations,
-// the second per weights, both kept in the basis's energy cache for the next Solve and the
-// sessions), as every design edit is, instead of core's conjugate gradients preconditioned by the
+// the second per weights, shared through the basis's energy cache with the design sessions open
+// on it), as every design edit is, instead of core's conjugate gradients preconditioned by the
 // exact form (~370 iterations, ~0.3 s at d = 2000 on 1.38M faces). The same minimizer
 // (DesignSession's contract, tested against SolveReducedModelProblem in core). Not applicable
 // (nullopt): other forms, mu_B = 0, no or too many constraints, weights a session refuses
