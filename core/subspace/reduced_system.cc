@@ -581,6 +581,7 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
     });
   }
   RETURN_IF_ERROR(CheckPositiveVector(mass, basis->U.rows(), "ReducedSystem: operator mass"));
+  RETURN_IF_ERROR(CheckBasisMatrix(basis->U, "ReducedSystem"));
   RETURN_IF_ERROR(CheckReducedMatrices(matrices, d));
   auto sys = std::shared_ptr<ReducedSystem>(new ReducedSystem());
   sys->stiffness_ = std::move(matrices.stiffness);

@@ -217,6 +217,11 @@ TEST(ReducedSystemTest, DamagedOrForeignMatricesAreRefused) {
   bad = bytes;
   bad[16] = static_cast<char>(bad[16] + 1);
   EXPECT_THAT(DecodeReducedMatrices(bad), StatusIs(absl::StatusCode::kDataLoss));
+  // A basis with a non-finite value (the matrices themselves sound).
+  auto nan_basis = std::make_shared<Basis>(*basis);
+  nan_basis->U.valuePtr()[3] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_THAT(ReducedSystem::Build(nan_basis, op.mass, *DecodeReducedMatrices(bytes)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
   // A mass of another size, or not positive.
   EXPECT_THAT(
       ReducedSystem::Build(basis, op.mass.head(op.dofs() - 2), *DecodeReducedMatrices(bytes)),
