@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstring>
 #include <limits>
 #include <optional>
 #include <vector>
@@ -97,8 +98,38 @@ absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
       *values++ = v;
     }
   };
-  ASSIGN_OR_RETURN(RowMajorU U, AppendColumns(basis->U, q, count, write, "AppendKernelColumns"));
-  basis->U.swap(U);
+  RowMajorU& U = basis->U;
+  const int64_t old_nnz = U.nonZeros();
+  std::vector<int32_t> added(k);
+  int64_t new_nnz = old_nnz;
+  for (int64_t row = 0; row < k; ++row) {
+    added[row] = count(row);
+    new_nnz += added[row];
+  }
+  if (new_nnz <= std::numeric_limits<int32_t>::max() && U.data().allocatedSize() >= new_nnz) {
+    // In place, in the room the layout left (BuildBasis): the rows move up by the kernel entries
+    // of the rows before them, the last row first, so that no row is overwritten before it moved.
+    const int32_t d1 = static_cast<int32_t>(U.cols());
+    U.resizeNonZeros(static_cast<Eigen::Index>(new_nnz));  // within the capacity: no reallocation
+    U.conservativeResize(k, d1 + q);                       // only the column count changes
+    int32_t* outer = U.outerIndexPtr();
+    int32_t* columns = U.innerIndexPtr();
+    float* values = U.valuePtr();
+    int64_t shift = new_nnz - old_nnz;
+    for (int64_t row = k - 1; row >= 0; --row) {
+      shift -= added[row];
+      const int32_t begin = outer[row], end = outer[row + 1];
+      std::memmove(columns + begin + shift, columns + begin, sizeof(int32_t) * (end - begin));
+      std::memmove(values + begin + shift, values + begin, sizeof(float) * (end - begin));
+      write(row, columns + end + shift, values + end + shift);
+      for (int32_t i = 0; i < added[row]; ++i) columns[end + shift + i] += d1;
+      outer[row + 1] = static_cast<int32_t>(end + shift + added[row]);
+    }
+  } else {
+    std::vector<int32_t>().swap(added);
+    ASSIGN_OR_RETURN(RowMajorU appended, AppendColumns(U, q, count, write, "AppendKernelColumns"));
+    U.swap(appended);
+  }
   basis->params.dimension = static_cast<int32_t>(basis->U.cols());
   basis->local_eigenvalues.resize(basis->U.cols(), 0.0);
   basis->kernel_columns += q;

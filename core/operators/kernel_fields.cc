@@ -632,4 +632,16 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh, co
   return ComputeKernelFields(mesh, op, options);
 }
 
+int64_t KernelEntriesBound(const TriangleMesh& mesh, const FieldType& type) {
+  const int64_t p = type.dofs_per_face();
+  int64_t entries = 0;
+  for (const MeshComponent& c : mesh.components()) {
+    const int64_t fields = type.kind != FieldKind::kVector ? p
+                           : c.num_boundary_loops > 0      ? std::max(0, 1 - c.euler_characteristic)
+                                                           : 2 - c.euler_characteristic;
+    entries += p * c.num_faces * std::max<int64_t>(fields, 0);
+  }
+  return entries;
+}
+
 }  // namespace fieldspace

@@ -94,6 +94,12 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
 absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh, const FieldType& type,
                                                     const KernelFieldOptions& options = {});
 
+// An upper bound of the nonzeros ComputeKernelFields' columns have (each is nonzero only on its
+// component's faces, and a component has at most as many kernel fields as candidates: 2 g closed,
+// 1 - chi with a boundary, for vector fields; p parallel fields otherwise), so that a basis can
+// leave room for them when it lays out U (BuildBasis).
+int64_t KernelEntriesBound(const TriangleMesh& mesh, const FieldType& type);
+
 // Z^T S Z (q x q) for the vector Hodge Laplacian S of `mesh` and a k x q matrix Z in its DOF order,
 // without S: the Rayleigh-Ritz step of ComputeKernelFields. Internal; exposed for its test.
 Eigen::MatrixXd HodgeGram(const TriangleMesh& mesh, const MultigridRowMatrix& Z);

@@ -12,6 +12,7 @@
 #include "Eigen/Eigenvalues"
 #include "core/basis/basis_io.h"
 #include "core/mesh/shapes.h"
+#include "core/operators/kernel_fields.h"
 #include "core/operators/reference_solvers.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -574,6 +575,51 @@ TEST(BasisTest, MultiLevelBasisOnATorusEndsWithTheKernelColumns) {
   ASSERT_TRUE(basis.ok()) << basis.status();
   EXPECT_EQ(basis->kernel_columns, 2);  // 2 g
   EXPECT_EQ(basis->dimension(), 82);
+}
+
+// The kernel columns go into the room BuildBasis leaves in U's layout (the build's peak then
+// holds one U, not two): the same matrix, bit for bit, as appending them to a basis built without
+// that room (AppendColumns into a new U), and U keeps the arrays it was written to.
+TEST(BasisTest, KernelColumnsFillTheRoomLeftInU) {
+  const TriangleMesh mesh = testing::Torus(24, 12, 1.0, 0.4);  // genus 1: 2 harmonic fields
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  EXPECT_EQ(KernelEntriesBound(mesh, FieldType::Vector()), 2 * 2 * int64_t{mesh.num_faces()});
+  BasisOptions options;
+  options.params.dimension = 60;
+  options.kernel_columns = true;
+  auto with_room = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(with_room.ok()) << with_room.status();
+  ASSERT_EQ(with_room->kernel_columns, 2);
+  options.kernel_columns = false;
+  auto local = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(local.ok()) << local.status();
+  auto K = ComputeKernelFields(mesh, op);
+  ASSERT_TRUE(K.ok()) << K.status();
+  const auto same_matrix = [](const Eigen::SparseMatrix<float, Eigen::RowMajor>& a,
+                              const Eigen::SparseMatrix<float, Eigen::RowMajor>& b) {
+    ASSERT_EQ(a.rows(), b.rows());
+    ASSERT_EQ(a.cols(), b.cols());
+    ASSERT_EQ(a.nonZeros(), b.nonZeros());
+    EXPECT_TRUE(std::equal(a.outerIndexPtr(), a.outerIndexPtr() + a.rows() + 1, b.outerIndexPtr()));
+    EXPECT_TRUE(std::equal(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros(), b.innerIndexPtr()));
+    EXPECT_TRUE(std::equal(a.valuePtr(), a.valuePtr() + a.nonZeros(), b.valuePtr()));
+  };
+  // A copy has no room: a new U.
+  Basis copied = *local;
+  ASSERT_LT(copied.U.data().allocatedSize(), copied.U.nonZeros() + 2 * copied.U.rows());
+  ASSERT_TRUE(AppendKernelColumns(*K, &copied).ok());
+  same_matrix(copied.U, with_room->U);
+  // With room: the same arrays, the same result.
+  Basis roomy = *local;
+  roomy.U.data().reserve(2 * roomy.U.rows());
+  const float* values = roomy.U.valuePtr();
+  const int32_t* columns = roomy.U.innerIndexPtr();
+  ASSERT_TRUE(AppendKernelColumns(*K, &roomy).ok());
+  EXPECT_EQ(roomy.U.valuePtr(), values);
+  EXPECT_EQ(roomy.U.innerIndexPtr(), columns);
+  same_matrix(roomy.U, with_room->U);
+  EXPECT_EQ(roomy.kernel_columns, 2);
+  EXPECT_EQ(roomy.dimension(), 62);
 }
 
 TEST(BasisTest, QualityLevels) {
