@@ -29,6 +29,14 @@ constexpr double kPoissonTolerance = 1e-12;
 
 absl::Status Cancelled() { return absl::CancelledError("kernel field computation cancelled"); }
 
+// The kernel candidates of one component (at most its kernel fields): for vector fields the
+// tree-cotree generators, 1 - chi with a boundary and 2 - chi = 2 g without; p parallel fields
+// otherwise.
+int64_t ComponentCandidates(const MeshComponent& c, const FieldType& type) {
+  if (type.kind != FieldKind::kVector) return type.dofs_per_face();
+  return (c.num_boundary_loops > 0 ? 1 : 2) - c.euler_characteristic;
+}
+
 // Face f's edge vectors (TriangleMesh::EdgeVectorInFrame) as columns.
 Eigen::Matrix<double, 2, 3> FrameEdges(const TriangleMesh& mesh, int32_t f) {
   Eigen::Matrix<double, 2, 3> t;
@@ -163,10 +171,9 @@ absl::StatusOr<RowMatrix> HarmonicCandidates(const TriangleMesh& mesh,
   for (int32_t e = 0; e < ne; ++e) {
     if (!in_tree[e] && !in_cotree[e]) generators.push_back(e);
   }
-  // Per component: 1 - chi generators with a boundary, 2 - chi = 2 g without.
   int64_t expected = 0;
-  for (int32_t c = 0; c < nc; ++c) {
-    expected += (has_boundary[c] ? 1 : 2) - mesh.components()[c].euler_characteristic;
+  for (const MeshComponent& c : mesh.components()) {
+    expected += ComponentCandidates(c, FieldType::Vector());
   }
   if (static_cast<int64_t>(generators.size()) != expected) {
     return absl::InternalError(
@@ -636,10 +643,7 @@ int64_t KernelEntriesBound(const TriangleMesh& mesh, const FieldType& type) {
   const int64_t p = type.dofs_per_face();
   int64_t entries = 0;
   for (const MeshComponent& c : mesh.components()) {
-    const int64_t fields = type.kind != FieldKind::kVector ? p
-                           : c.num_boundary_loops > 0      ? std::max(0, 1 - c.euler_characteristic)
-                                                           : 2 - c.euler_characteristic;
-    entries += p * c.num_faces * std::max<int64_t>(fields, 0);
+    entries += p * c.num_faces * std::max<int64_t>(ComponentCandidates(c, type), 0);
   }
   return entries;
 }
