@@ -126,8 +126,9 @@ absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
       outer[row + 1] = static_cast<int32_t>(end + shift + added[row]);
     }
   } else {
-    std::vector<int32_t>().swap(added);
-    ASSIGN_OR_RETURN(RowMajorU appended, AppendColumns(U, q, count, write, "AppendKernelColumns"));
+    const auto counted = [&](int64_t row) { return added[row]; };
+    ASSIGN_OR_RETURN(RowMajorU appended,
+                     AppendColumns(U, q, counted, write, "AppendKernelColumns"));
     U.swap(appended);
   }
   basis->params.dimension = static_cast<int32_t>(basis->U.cols());
