@@ -373,35 +373,40 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
 
 namespace {
 
-// The checks both Builds make before any work.
-absl::Status CheckBuildInputs(const Basis* basis, const FieldOperator& op,
-                              const ReducedSystemOptions& options) {
+// The checks both Builds make before any work: the basis and the options.
+absl::Status CheckBasisAndOptions(const Basis* basis, const ReducedSystemOptions& options) {
   if (basis == nullptr) return absl::InvalidArgumentError("ReducedSystem: no basis");
-  const int64_t k = basis->U.rows();
   const int64_t d = basis->U.cols();
-  if (!(basis->type == op.type)) {
-    return absl::InvalidArgumentError(absl::StrCat("ReducedSystem: basis is for ",
-                                                   basis->type.ToString(), ", operator for ",
-                                                   op.type.ToString()));
-  }
   if (d < 1) return absl::InvalidArgumentError("ReducedSystem: basis has no columns");
   if (d >= (int64_t{1} << 31) / 2) {
     return absl::InvalidArgumentError("ReducedSystem: basis dimension too large");
   }
-  if (k != op.dofs() || op.stiffness.rows() != k || op.stiffness.cols() != k) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "ReducedSystem: basis has ", k, " rows but the operator has ", op.dofs(), " DOFs and a ",
-        op.stiffness.rows(), " x ", op.stiffness.cols(), " stiffness"));
-  }
-  if (k % op.type.dofs_per_face() != 0) {
+  if (basis->U.rows() % basis->type.dofs_per_face() != 0) {
     return absl::InvalidArgumentError(
-        "ReducedSystem: DOF count is not a multiple of the DOFs "
-        "per face");
+        "ReducedSystem: DOF count is not a multiple of the DOFs per face");
   }
   if (options.threads < 0 || options.accumulator_budget_bytes <= 0) {
     return absl::InvalidArgumentError(
         "ReducedSystem: threads must be >= 0 and the "
         "accumulator budget > 0");
+  }
+  return absl::OkStatus();
+}
+
+// The product pass's: those, and the operator against the basis.
+absl::Status CheckBuildInputs(const Basis* basis, const FieldOperator& op,
+                              const ReducedSystemOptions& options) {
+  RETURN_IF_ERROR(CheckBasisAndOptions(basis, options));
+  const int64_t k = basis->U.rows();
+  if (!(basis->type == op.type)) {
+    return absl::InvalidArgumentError(absl::StrCat("ReducedSystem: basis is for ",
+                                                   basis->type.ToString(), ", operator for ",
+                                                   op.type.ToString()));
+  }
+  if (k != op.dofs() || op.stiffness.rows() != k || op.stiffness.cols() != k) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "ReducedSystem: basis has ", k, " rows but the operator has ", op.dofs(), " DOFs and a ",
+        op.stiffness.rows(), " x ", op.stiffness.cols(), " stiffness"));
   }
   return absl::OkStatus();
 }
@@ -565,16 +570,8 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
     std::shared_ptr<const Basis> basis, Eigen::VectorXd mass, ReducedMatrices matrices,
     const ReducedSystemOptions& options) {
   const auto t_start = std::chrono::steady_clock::now();
-  if (basis == nullptr) return absl::InvalidArgumentError("ReducedSystem: no basis");
+  RETURN_IF_ERROR(CheckBasisAndOptions(basis.get(), options));
   const int64_t d = basis->U.cols();
-  if (d < 1 || d >= (int64_t{1} << 31) / 2) {
-    return absl::InvalidArgumentError("ReducedSystem: basis has no columns or too many");
-  }
-  if (basis->U.rows() % basis->type.dofs_per_face() != 0) {
-    return absl::InvalidArgumentError(
-        "ReducedSystem: DOF count is not a multiple of the DOFs per face");
-  }
-  if (options.threads < 0) return absl::InvalidArgumentError("ReducedSystem: threads must be >= 0");
   if (options.threads > 0) {
     return InArena(options, [&](const ReducedSystemOptions& inner) {
       return Build(std::move(basis), std::move(mass), std::move(matrices), inner);
