@@ -97,6 +97,15 @@ class StoreTest : public ::testing::Test {
     r.created_unix_ms = 42;
     return r;
   }
+  // The record of a vector basis (d 4) on Record's mesh, for payloads that are not real bases.
+  static BasisRecord SmallBasisRecord(const std::string& id) {
+    BasisRecord r;
+    r.id = id;
+    r.key.mesh_id = "m-0123456789abcdef";
+    r.key.field = FieldType::Vector();
+    r.key.dimension = 4;
+    return r;
+  }
   static void Tetrahedron(VertexMatrix* V, FaceMatrix* F) {
     V->resize(4, 3);
     *V << 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 1.0 / 3.0;
@@ -206,11 +215,7 @@ TEST_F(StoreTest, BasisRoundTripConcatenatesPieces) {
 // The reduced matrices beside a basis: tied to the basis payload's checksum, checked like the
 // other files, removed with the basis.
 TEST_F(StoreTest, ReducedMatricesAreTiedToTheirBasisFile) {
-  BasisRecord r;
-  r.id = "b-00000000000000aa";
-  r.key.mesh_id = "m-0123456789abcdef";
-  r.key.field = FieldType::Vector();
-  r.key.dimension = 4;
+  BasisRecord r = SmallBasisRecord("b-00000000000000aa");
   uint64_t hash = 0;
   ASSERT_TRUE(store_->SaveBasis(r, {"basis v1"}, &hash).ok());
   auto loaded = store_->LoadBasis(r.id);
@@ -259,11 +264,7 @@ TEST_F(StoreTest, ReducedMatricesAreTiedToTheirBasisFile) {
 // A basis payload read in order straight into its destination, checksummed on the way; any
 // other order, a read short of the end or a changed byte is DataLoss at Finish.
 TEST_F(StoreTest, BasisPayloadReaderChecksumsInOrder) {
-  BasisRecord r;
-  r.id = "b-00000000000000bb";
-  r.key.mesh_id = "m-0123456789abcdef";
-  r.key.field = FieldType::Vector();
-  r.key.dimension = 4;
+  const BasisRecord r = SmallBasisRecord("b-00000000000000bb");
   const std::string payload = "0123456789abcdefghij";
   uint64_t hash = 0;
   ASSERT_TRUE(store_->SaveBasis(r, {payload}, &hash).ok());
