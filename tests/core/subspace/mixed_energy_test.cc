@@ -147,9 +147,11 @@ TEST(MixedEnergyInverseTest, InvertsAndAppliesTheMixedEnergy) {
       // about kKernelColumnShift relative; refinement removes it in a session.
       EXPECT_LT((X - expected).norm() / expected.norm(), mu_s > 0 ? 1e-8 : 10 * kKernelColumnShift)
           << type.ToString() << " " << mu_s;
-      // Symmetric: u^T A^-1 w = w^T A^-1 u.
+      // Symmetric: u^T A^-1 w = w^T A^-1 u, to the rounding of partial fractions whose terms
+      // cancel (with mu_S = 0.3 the asymmetry reaches 1.03e-10 of the norms in ~5% of runs, as
+      // the threads' summation order varies; a non-symmetric inverse is off by O(1)).
       EXPECT_NEAR(B.col(0).dot(X.col(1)), B.col(1).dot(X.col(0)),
-                  1e-10 * B.col(0).norm() * X.col(1).norm());
+                  1e-9 * B.col(0).norm() * X.col(1).norm());
     }
   }
 }
