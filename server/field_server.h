@@ -77,6 +77,9 @@ class FieldServer {
   // HOST:PORT with the port actually bound.
   const std::string& address() const { return address_; }
   Registry* registry() const { return registry_.get(); }
+  // The store the daemon writes (for tests and tools that read its files; Store's reads are
+  // const and safe beside the daemon's writes).
+  const Store* store() const { return store_.get(); }
 
   // Graceful shutdown: health NOT_SERVING, new RPCs refused, open design sessions ended, running
   // builds cancelled, in-flight RPCs drained for at most `drain` (then cancelled), compute pool

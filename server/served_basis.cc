@@ -99,6 +99,9 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
   ReducedSystemOptions options;
   options.threads = context.threads;
   options.cancel = context.cancel;
+  // The daemon serves U's rows from the LiftPlan: the caller's Basis (with U) is dropped once
+  // the build has saved it.
+  options.release_basis_rows = true;
   absl::StatusOr<std::shared_ptr<const ReducedSystem>> system;
   if (matrices.has_value()) {
     // Only M is needed then: S, whose assembly is most of a load's remaining time, is not.
@@ -125,8 +128,8 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
   auto served = std::make_shared<ServedBasis>();
   served->record = std::move(record);
   served->mesh = std::move(mesh);
-  served->memory_bytes = basis->MemoryBytes() + (*system)->stats().memory_bytes;
-  served->basis = std::move(basis);
+  served->basis = (*system)->shared_basis();  // without U's rows
+  served->memory_bytes = served->basis->MemoryBytes() + (*system)->stats().memory_bytes;
   served->system = *std::move(system);
   served->energy_cache = std::make_shared<EnergyFactorCache>();
   served->alignment_cache = std::make_shared<AlignmentCache>();

@@ -46,7 +46,7 @@ double OverallFraction(BuildStage stage, double fraction);
 struct ServedBasis {
   BasisRecord record;
   std::shared_ptr<const TriangleMesh> mesh;
-  std::shared_ptr<const Basis> basis;               // the same object as system->basis()
+  std::shared_ptr<const Basis> basis;  // system->shared_basis(): its metadata, U without rows
   std::shared_ptr<const ReducedSystem> system;      // U^T S U, U^T B U, U^T M U, LiftPlan, ...
   std::shared_ptr<EnergyFactorCache> energy_cache;  // shared by this basis's design sessions
   int64_t memory_bytes = 0;  // basis + system, as core counts them (for the memory budget)

@@ -16,8 +16,9 @@ namespace fieldspace {
 std::vector<SparseRow> BasisRowsOfFace(const ReducedSystem& system, int32_t face) {
   const int32_t p = system.dofs_per_face();
   std::vector<SparseRow> rows(p);
+  BasisRowScratch scratch;
   for (int32_t c = 0; c < p; ++c) {
-    const BasisRow row = GetBasisRow(system.basis().U, static_cast<int64_t>(face) * p + c);
+    const BasisRow row = system.BasisRowOf(static_cast<int64_t>(face) * p + c, &scratch);
     rows[c].cols.assign(row.cols, row.cols + row.size);
     rows[c].vals.resize(row.size);
     for (int64_t q = 0; q < row.size; ++q) rows[c].vals[q] = static_cast<double>(row.vals[q]);

@@ -72,6 +72,17 @@ LiftPlan LiftPlan::Build(const BasisMatrix& U, int32_t dofs_per_face) {
   return plan;
 }
 
+void LiftPlan::AppendRow(int64_t face, int32_t c, std::vector<int>* cols,
+                         std::vector<float>* vals) const {
+  const int64_t b = begin_[face], e = begin_[face + 1];
+  for (int64_t j = b; j < e; ++j) {
+    const float v = vals_[j * p_ + c];
+    if (v == 0.0f) continue;
+    cols->push_back(cols16_.empty() ? cols32_[j] : static_cast<int>(cols16_[j]));
+    vals->push_back(v);
+  }
+}
+
 void LiftPlan::LiftAll(const double* x, double* out) const {
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, num_faces(), 4096),
                     [&](const tbb::blocked_range<int64_t>& r) {

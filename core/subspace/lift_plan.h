@@ -35,6 +35,19 @@ class LiftPlan {
       LiftFaceImpl(cols16_.data(), x, face, out);
     }
   }
+  // Row c of `face` (row p face + c of U, c < p) appended to cols / vals: ascending columns,
+  // without the zeros the face's shared column list holds for columns the row lacks. What a
+  // served ReducedSystem reads once it released U (ReducedSystemOptions::release_basis_rows).
+  void AppendRow(int64_t face, int32_t c, std::vector<int>* cols, std::vector<float>* vals) const;
+  // Calls fn(column, values) for each entry of `face`'s column list, ascending: values points to
+  // its p values, one per row of the face (0 where a row lacks the column).
+  template <typename Fn>
+  void ForEachEntry(int64_t face, Fn&& fn) const {
+    const int64_t b = begin_[face], e = begin_[face + 1];
+    for (int64_t j = b; j < e; ++j) {
+      fn(cols16_.empty() ? cols32_[j] : static_cast<int>(cols16_[j]), vals_.data() + j * p_);
+    }
+  }
   // All faces into out (k values), parallel over faces.
   void LiftAll(const double* x, double* out) const;
   // The same narrowed to float in the same pass (half the bytes written: what the wire sends).

@@ -58,8 +58,10 @@ struct SoftFaceSums {
 };
 
 SoftFaceSums SumSoftConstraintsPerFace(const std::vector<FieldConstraint>& constraints,
-                                       const BasisMatrix& U, int32_t p) {
-  const int32_t num_faces = static_cast<int32_t>(U.rows() / p);
+                                       const ReducedSystem& system) {
+  const int32_t p = system.dofs_per_face();
+  const int32_t num_faces = system.num_faces();
+  BasisRowScratch scratch;
   std::vector<int32_t> slot(num_faces, -1);
   for (const FieldConstraint& c : constraints) {
     if (!c.hard()) slot[c.face] = 0;
@@ -81,8 +83,8 @@ SoftFaceSums SumSoftConstraintsPerFace(const std::vector<FieldConstraint>& const
   std::vector<Keyed> keyed(sums.faces.size());
   for (size_t j = 0; j < keyed.size(); ++j) {
     const int32_t f = sums.faces[j];
-    const BasisRow row = GetBasisRow(U, static_cast<int64_t>(f) * p);
-    keyed[j] = {U.cols(), -1, f};
+    const BasisRow row = system.BasisRowOf(static_cast<int64_t>(f) * p, &scratch);
+    keyed[j] = {system.dimension(), -1, f};
     for (int64_t q = 0; q < row.size; ++q) {
       keyed[j].first = std::min<int64_t>(keyed[j].first, row.cols[q]);
       keyed[j].last = std::max<int64_t>(keyed[j].last, row.cols[q]);
@@ -250,8 +252,7 @@ absl::StatusOr<ReducedAssembly> AssembleReducedModelProblem(const ReducedSystem&
   const bool any_soft = std::any_of(problem.constraints.begin(), problem.constraints.end(),
                                     [](const FieldConstraint& c) { return !c.hard(); });
   if (!any_soft || !(w.mu_c > 0)) return out;
-  const SoftFaceSums sums =
-      SumSoftConstraintsPerFace(problem.constraints, system.basis().U, system.dofs_per_face());
+  const SoftFaceSums sums = SumSoftConstraintsPerFace(problem.constraints, system);
   // Scale-free: each face's weight is divided by its stiffness under the energy alone.
   std::optional<SupernodalFactor> energy;
   if (problem.scale_free) {

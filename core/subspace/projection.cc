@@ -42,6 +42,18 @@ absl::Status CheckFields(const ReducedSystem& system,
   return absl::OkStatus();
 }
 
+// The lifts that read U itself (those taking a Basis): a served system's basis has no rows left
+// (ReducedSystemOptions::release_basis_rows), and its lifts go through the system's LiftPlan.
+absl::Status CheckRows(const Basis& basis, const char* what) {
+  if (basis.U.nonZeros() == 0 && basis.U.rows() > 0) {
+    return absl::FailedPreconditionError(
+        absl::StrCat(what,
+                     ": the basis has no rows in memory (its ReducedSystem released them); "
+                     "lift through the ReducedSystem"));
+  }
+  return absl::OkStatus();
+}
+
 absl::Status CancelledError(absl::string_view what) {
   return absl::CancelledError(absl::StrCat(what, ": cancelled"));
 }
@@ -59,26 +71,47 @@ absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
     const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields,
     const CancelFlag* cancel) {
   RETURN_IF_ERROR(CheckFields(system, fields, "MassWeightedProducts"));
-  const BasisMatrix& U = system.basis().U;
-  const int64_t d = U.cols();
+  const int64_t d = system.dimension();
   const int64_t m = fields.cols();
   const Eigen::VectorXd& mass = system.mass();
   tbb::enumerable_thread_specific<RowMajorMatrix> partial(
       [&] { return RowMajorMatrix::Zero(d, m).eval(); });
-  tbb::parallel_for(tbb::blocked_range<int64_t>(0, U.rows(), 4096),
-                    [&](const tbb::blocked_range<int64_t>& r) {
-                      if (IsCancelled(cancel)) return;
-                      RowMajorMatrix& acc = partial.local();
-                      Eigen::RowVectorXd w(m);
-                      for (int64_t i = r.begin(); i < r.end(); ++i) {
-                        const BasisRow row = GetBasisRow(U, i);
-                        if (row.size == 0) continue;
-                        w = mass[i] * fields.row(i);
-                        for (int64_t q = 0; q < row.size; ++q) {
-                          acc.row(row.cols[q]) += static_cast<double>(row.vals[q]) * w;
+  if (system.basis_rows_released()) {
+    // Face by face through the LiftPlan: each entry's p values against the face's p weighted rows.
+    const LiftPlan& plan = system.lift_plan();
+    const int64_t p = system.dofs_per_face();
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, system.num_faces(), 2048),
+                      [&](const tbb::blocked_range<int64_t>& r) {
+                        if (IsCancelled(cancel)) return;
+                        RowMajorMatrix& acc = partial.local();
+                        RowMajorMatrix w(p, m);
+                        for (int64_t f = r.begin(); f < r.end(); ++f) {
+                          for (int64_t c = 0; c < p; ++c) {
+                            w.row(c) = mass[f * p + c] * fields.row(f * p + c);
+                          }
+                          plan.ForEachEntry(f, [&](int col, const float* v) {
+                            for (int64_t c = 0; c < p; ++c) {
+                              acc.row(col) += static_cast<double>(v[c]) * w.row(c);
+                            }
+                          });
                         }
-                      }
-                    });
+                      });
+  } else {
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, system.dofs(), 4096),
+                      [&](const tbb::blocked_range<int64_t>& r) {
+                        if (IsCancelled(cancel)) return;
+                        RowMajorMatrix& acc = partial.local();
+                        Eigen::RowVectorXd w(m);
+                        for (int64_t i = r.begin(); i < r.end(); ++i) {
+                          const BasisRow row = GetBasisRow(system.basis().U, i);
+                          if (row.size == 0) continue;
+                          w = mass[i] * fields.row(i);
+                          for (int64_t q = 0; q < row.size; ++q) {
+                            acc.row(row.cols[q]) += static_cast<double>(row.vals[q]) * w;
+                          }
+                        }
+                      });
+  }
   if (IsCancelled(cancel)) return CancelledError("MassWeightedProducts");
   Eigen::MatrixXd result = Eigen::MatrixXd::Zero(d, m);
   for (const RowMajorMatrix& acc : partial) result += acc;
@@ -89,11 +122,10 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
     const ReducedSystem& system, const Eigen::Ref<const Eigen::MatrixXd>& fields,
     const Eigen::Ref<const Eigen::MatrixXd>& coefficients, const CancelFlag* cancel) {
   RETURN_IF_ERROR(CheckFields(system, fields, "RelativeResiduals"));
-  const BasisMatrix& U = system.basis().U;
-  if (coefficients.rows() != U.cols() || coefficients.cols() != fields.cols()) {
+  if (coefficients.rows() != system.dimension() || coefficients.cols() != fields.cols()) {
     return absl::InvalidArgumentError(
-        absl::StrCat("RelativeResiduals: coefficients must be ", U.cols(), " x ", fields.cols(),
-                     ", got ", coefficients.rows(), " x ", coefficients.cols()));
+        absl::StrCat("RelativeResiduals: coefficients must be ", system.dimension(), " x ",
+                     fields.cols(), ", got ", coefficients.rows(), " x ", coefficients.cols()));
   }
   const int64_t m = fields.cols();
   // Row-major coefficients: U_i x for all m columns reads contiguous rows of x.
@@ -105,22 +137,48 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
   tbb::combinable<Sums> sums([&] {
     return Sums{Eigen::VectorXd::Zero(m), Eigen::VectorXd::Zero(m)};
   });
-  tbb::parallel_for(tbb::blocked_range<int64_t>(0, U.rows(), 4096),
-                    [&](const tbb::blocked_range<int64_t>& r) {
-                      if (IsCancelled(cancel)) return;
-                      Sums& s = sums.local();
-                      Eigen::RowVectorXd v(m);
-                      for (int64_t i = r.begin(); i < r.end(); ++i) {
-                        const BasisRow row = GetBasisRow(U, i);
-                        v.setZero();
-                        for (int64_t q = 0; q < row.size; ++q) {
-                          v += static_cast<double>(row.vals[q]) * x.row(row.cols[q]);
+  if (system.basis_rows_released()) {
+    // Face by face through the LiftPlan: the face's p lifted rows, then their residuals.
+    const LiftPlan& plan = system.lift_plan();
+    const int64_t p = system.dofs_per_face();
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, system.num_faces(), 2048),
+                      [&](const tbb::blocked_range<int64_t>& r) {
+                        if (IsCancelled(cancel)) return;
+                        Sums& s = sums.local();
+                        RowMajorMatrix v(p, m);
+                        for (int64_t f = r.begin(); f < r.end(); ++f) {
+                          v.setZero();
+                          plan.ForEachEntry(f, [&](int col, const float* vals) {
+                            for (int64_t c = 0; c < p; ++c) {
+                              v.row(c) += static_cast<double>(vals[c]) * x.row(col);
+                            }
+                          });
+                          for (int64_t c = 0; c < p; ++c) {
+                            const int64_t i = f * p + c;
+                            s.residual +=
+                                mass[i] * (fields.row(i) - v.row(c)).cwiseAbs2().transpose();
+                            s.norm += mass[i] * fields.row(i).cwiseAbs2().transpose();
+                          }
                         }
-                        const double mi = mass[i];
-                        s.residual += mi * (fields.row(i) - v).cwiseAbs2().transpose();
-                        s.norm += mi * fields.row(i).cwiseAbs2().transpose();
-                      }
-                    });
+                      });
+  } else {
+    tbb::parallel_for(tbb::blocked_range<int64_t>(0, system.dofs(), 4096),
+                      [&](const tbb::blocked_range<int64_t>& r) {
+                        if (IsCancelled(cancel)) return;
+                        Sums& s = sums.local();
+                        Eigen::RowVectorXd v(m);
+                        for (int64_t i = r.begin(); i < r.end(); ++i) {
+                          const BasisRow row = GetBasisRow(system.basis().U, i);
+                          v.setZero();
+                          for (int64_t q = 0; q < row.size; ++q) {
+                            v += static_cast<double>(row.vals[q]) * x.row(row.cols[q]);
+                          }
+                          const double mi = mass[i];
+                          s.residual += mi * (fields.row(i) - v).cwiseAbs2().transpose();
+                          s.norm += mi * fields.row(i).cwiseAbs2().transpose();
+                        }
+                      });
+  }
   if (IsCancelled(cancel)) return CancelledError("RelativeResiduals");
   Sums total{Eigen::VectorXd::Zero(m), Eigen::VectorXd::Zero(m)};
   sums.combine_each([&](const Sums& s) {
@@ -158,6 +216,7 @@ absl::StatusOr<ProjectionResult> Project(const ReducedSystem& system,
 absl::Status LiftInto(const Basis& basis, const Eigen::Ref<const Eigen::VectorXd>& coefficients,
                       absl::Span<double> out) {
   RETURN_IF_ERROR(CheckCoefficients(basis, coefficients, "Lift"));
+  RETURN_IF_ERROR(CheckRows(basis, "Lift"));
   const BasisMatrix& U = basis.U;
   if (static_cast<int64_t>(out.size()) != U.rows()) {
     return absl::InvalidArgumentError(
@@ -184,6 +243,7 @@ absl::Status LiftFacesInto(const Basis& basis,
                            const Eigen::Ref<const Eigen::VectorXd>& coefficients,
                            absl::Span<const int32_t> faces, absl::Span<double> out) {
   RETURN_IF_ERROR(CheckCoefficients(basis, coefficients, "LiftFaces"));
+  RETURN_IF_ERROR(CheckRows(basis, "LiftFaces"));
   const BasisMatrix& U = basis.U;
   const int64_t p = basis.type.dofs_per_face();
   const int64_t num_faces = U.rows() / p;

@@ -46,6 +46,7 @@ struct ProductWorkspace {
   std::vector<int32_t> local_of;
   std::vector<int32_t> local_cols;
   std::vector<double> ls, lb, lm;
+  BasisRowScratch row_scratch;
 };
 
 struct Entry {
@@ -57,6 +58,9 @@ struct Entry {
 // (S U)^T diag(row_mass)^-1 (S U) (then row_mass must be positive).
 struct ProductPass {
   const BasisMatrix* U = nullptr;
+  // Instead of U (mass product only): the rows of this system's basis (ReducedSystem::BasisRowOf),
+  // also once it released U.
+  const ReducedSystem* rows_of = nullptr;
   const Eigen::SparseMatrix<double>* S = nullptr;  // symmetric k x k, or null: mass product only
   const double* row_mass = nullptr;                // k values, >= 0 (> 0 with S)
   int64_t accumulator_budget_bytes = 0;
@@ -83,12 +87,15 @@ struct ProductOutput {
 // the band accumulators (pattern mode: of the pattern's values, per thread). Returns false when
 // cancelled.
 bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
-  const BasisMatrix& U = *pass.U;
-  const Eigen::SparseMatrix<double>* S = pass.S;
+  const ReducedSystem* source = pass.rows_of;
+  const Eigen::SparseMatrix<double>* S = source != nullptr ? nullptr : pass.S;
   const bool with_s = S != nullptr;
   const double* row_mass = pass.row_mass;
-  const int64_t k = U.rows();
-  const int64_t d = U.cols();
+  const int64_t k = source != nullptr ? source->dofs() : pass.U->rows();
+  const int64_t d = source != nullptr ? source->dimension() : pass.U->cols();
+  const auto row_of = [&](int64_t i, BasisRowScratch* scratch) {
+    return source != nullptr ? source->BasisRowOf(i, scratch) : GetBasisRow(*pass.U, i);
+  };
   const int products = with_s ? 3 : 1;
   const Eigen::SparseMatrix<double>* pattern = with_s ? nullptr : pass.pattern;
   const int64_t pattern_nnz = pattern != nullptr ? pattern->nonZeros() : 0;
@@ -107,8 +114,9 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
   std::vector<int32_t> key(k);
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, k, 8192),
                     [&](const tbb::blocked_range<int64_t>& r) {
+                      BasisRowScratch scratch;
                       for (int64_t i = r.begin(); i < r.end(); ++i) {
-                        const BasisRow u = GetBasisRow(U, i);
+                        const BasisRow u = row_of(i, &scratch);
                         int32_t best = static_cast<int32_t>(d);  // "no entry" bucket
                         float best_abs = -1;
                         for (int64_t q = 0; q < u.size; ++q) {
@@ -197,7 +205,7 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
             };
             for (int64_t t = group_begin[g]; t < group_begin[g + 1]; ++t) {
               const int64_t i = order[t];
-              const BasisRow u = GetBasisRow(U, i);
+              const BasisRow u = row_of(i, &w.row_scratch);
               for (int64_t q = 0; q < u.size; ++q) {
                 w.u_cols.push_back(u.cols[q]);
                 w.u_vals.push_back(static_cast<double>(u.vals[q]));
@@ -209,7 +217,7 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
               // Row i of S U (S symmetric: row i = column i).
               w.su_row.clear();
               for (Eigen::SparseMatrix<double>::InnerIterator it(*S, i); it; ++it) {
-                const BasisRow uj = GetBasisRow(U, it.row());
+                const BasisRow uj = GetBasisRow(*pass.U, it.row());
                 const double sij = it.value();
                 for (int64_t q = 0; q < uj.size; ++q) {
                   const int32_t c = uj.cols[q];
@@ -374,6 +382,25 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
 namespace {
 
 // The checks both Builds make before any work: the basis and the options.
+// `basis` without U's nonzeros (U keeps its k x d dimensions), for a system that serves the rows
+// from its LiftPlan. Copies only the per-column and per-face arrays.
+Basis WithoutRows(const Basis& basis) {
+  Basis out;
+  out.type = basis.type;
+  out.params = basis.params;
+  out.radius = basis.radius;
+  out.U.resize(basis.U.rows(), basis.U.cols());
+  out.U.makeCompressed();
+  out.sample_faces = basis.sample_faces;
+  out.local_eigenvalues = basis.local_eigenvalues;
+  out.coverage_radius = basis.coverage_radius;
+  out.uncovered_faces = basis.uncovered_faces;
+  out.kernel_columns = basis.kernel_columns;
+  out.timings = basis.timings;
+  out.stats = basis.stats;
+  return out;
+}
+
 absl::Status CheckBasisAndOptions(const Basis* basis, const ReducedSystemOptions& options) {
   if (basis == nullptr) return absl::InvalidArgumentError("ReducedSystem: no basis");
   const int64_t d = basis->U.cols();
@@ -632,7 +659,12 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Complete(
   const int64_t pattern_bytes = 3 * (sys->stats_.pattern_nonzeros * 12 + (d + 1) * 4);
   sys->stats_.memory_bytes = pattern_bytes + sys->lift_plan_.memory_bytes() + k * 8 +
                              sys->symbolic_->memory_bytes() + sys->symbolic_->factor_nonzeros() * 8;
-  sys->basis_ = std::move(basis);
+  if (options.release_basis_rows) {
+    sys->basis_ = std::make_shared<const Basis>(WithoutRows(*basis));
+    sys->rows_released_ = true;
+  } else {
+    sys->basis_ = std::move(basis);
+  }
   sys->stats_.total_seconds = SecondsSince(t_start);
   return std::shared_ptr<const ReducedSystem>(std::move(sys));
 }
@@ -701,9 +733,8 @@ absl::StatusOr<ReducedMatrices> DecodeReducedMatrices(std::string_view bytes) {
 absl::StatusOr<Eigen::SparseMatrix<double>> WeightedMassMatrix(
     const ReducedSystem& system, const Eigen::Ref<const Eigen::VectorXd>& dof_weights,
     const WeightedMassOptions& options) {
-  const BasisMatrix& U = system.basis().U;
-  const int64_t k = U.rows();
-  const int64_t d = U.cols();
+  const int64_t k = system.dofs();
+  const int64_t d = system.dimension();
   if (dof_weights.size() != k) {
     return absl::InvalidArgumentError(
         absl::StrCat("WeightedMassMatrix: ", dof_weights.size(), " weights for ", k, " DOFs"));
@@ -721,7 +752,7 @@ absl::StatusOr<Eigen::SparseMatrix<double>> WeightedMassMatrix(
   const Eigen::VectorXd row_mass = system.mass().cwiseProduct(dof_weights);
   Eigen::SparseMatrix<double> C = system.mass_matrix();
   ProductPass pass;
-  pass.U = &U;
+  pass.rows_of = &system;
   pass.row_mass = row_mass.data();
   pass.accumulator_budget_bytes = options.accumulator_budget_bytes;
   pass.cancel = options.cancel;

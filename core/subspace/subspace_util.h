@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <string_view>
+#include <vector>
 
 #include "Eigen/SparseCore"
 #include "absl/status/status.h"
@@ -27,6 +28,13 @@ inline BasisRow GetBasisRow(const BasisMatrix& U, int64_t i) {
   const int64_t end = U.isCompressed() ? U.outerIndexPtr()[i + 1] : begin + U.innerNonZeroPtr()[i];
   return {U.innerIndexPtr() + begin, U.valuePtr() + begin, end - begin};
 }
+
+// Where a row read from a basis's LiftPlan is copied (ReducedSystem::BasisRowOf): one per
+// thread, reused row after row.
+struct BasisRowScratch {
+  std::vector<int> cols;
+  std::vector<float> vals;
+};
 
 // InvalidArgument (prefixed with `what`) unless every stored value of U is finite. Parallel.
 absl::Status CheckBasisMatrix(const BasisMatrix& U, std::string_view what);

@@ -17,6 +17,7 @@
 
 #include "Eigen/Dense"
 #include "absl/strings/str_format.h"
+#include "core/basis/basis_io.h"
 #include "core/mesh/shapes.h"
 #include "core/operators/field_operator.h"
 #include "fieldspace/v1/fieldspace.grpc.pb.h"
@@ -27,6 +28,7 @@
 #include "server/field_server.h"
 #include "server/registry.h"
 #include "server/served_basis.h"
+#include "server/store.h"
 #include "tests/testing/server_fixture.h"
 
 namespace fieldspace::server {
@@ -270,6 +272,17 @@ class ServiceTest : public ::testing::Test {
     auto b = h_->server->registry()->GetBasis(id);
     EXPECT_TRUE(b.ok()) << b.status();
     return *b;
+  }
+  // U of basis `id` as the daemon's store holds it: the served basis keeps only its LiftPlan
+  // (ReducedSystemOptions::release_basis_rows), so the file is the independent copy.
+  static Eigen::SparseMatrix<float, Eigen::RowMajor> StoredU(const std::string& id) {
+    auto file = h_->server->store()->LoadBasis(id);
+    EXPECT_TRUE(file.ok()) << file.status();
+    if (!file.ok()) return {};
+    auto decoded = DecodeBasis(file->payload);
+    EXPECT_TRUE(decoded.ok()) << decoded.status();
+    if (!decoded.ok()) return {};
+    return std::move(decoded->basis.U);
   }
 
   static TestServer* h_;
@@ -621,7 +634,8 @@ TEST_F(ServiceTest, BuildStreamsProgressAndIsIdempotent) {
   EXPECT_EQ(low.basis().columns(), 60);
   auto loaded_low = Loaded(low.basis().id());
   ASSERT_NE(loaded_low, nullptr);
-  const Eigen::MatrixXf low_u(loaded_low->basis->U);
+  const Eigen::MatrixXf low_u(StoredU(low.basis().id()));
+  EXPECT_EQ(loaded_low->basis->U.nonZeros(), 0);  // served from its LiftPlan
   const auto same = [](const Eigen::MatrixXf& a, const Eigen::MatrixXf& b) {
     return a.rows() == b.rows() && a.cols() == b.cols() && a == b;
   };
@@ -638,7 +652,7 @@ TEST_F(ServiceTest, BuildStreamsProgressAndIsIdempotent) {
   EXPECT_EQ(smooth.basis().nnz(), low.basis().nnz());
   auto loaded_smooth = Loaded(smooth.basis().id());
   ASSERT_NE(loaded_smooth, nullptr);
-  const Eigen::MatrixXf smooth_u(loaded_smooth->basis->U);
+  const Eigen::MatrixXf smooth_u(StoredU(smooth.basis().id()));
   EXPECT_TRUE(same(smooth_u, core_build(BasisQuality::kSmooth)));
   EXPECT_FALSE(same(smooth_u, low_u));
   // Listed, and removable.
@@ -846,7 +860,7 @@ TEST_F(ServiceTest, LiftMatchesUTimesXInChunksAndSubsets) {
   EXPECT_EQ(all.chunks[0].total_faces(), 1280);
   // Independent: U x with Eigen.
   const Eigen::VectorXd X =
-      loaded->basis->U.cast<double>() * Eigen::Map<const Eigen::VectorXd>(x.data(), d);
+      StoredU(*vector_id_).cast<double>() * Eigen::Map<const Eigen::VectorXd>(x.data(), d);
   const std::vector<float> values = all.values();
   ASSERT_EQ(values.size(), static_cast<size_t>(X.size()));
   for (Eigen::Index i = 0; i < X.size(); ++i) {
@@ -1100,7 +1114,7 @@ TEST_F(ServiceTest, EigenfieldsApproximateTheSphereSpectrumFromAbove) {
   auto loaded = Loaded(*vector_id_);
   auto op = BuildFieldOperator(*loaded->mesh, loaded->basis->type);
   ASSERT_TRUE(op.ok()) << op.status();
-  const Eigen::MatrixXd U = Eigen::MatrixXd(loaded->basis->U.cast<double>());
+  const Eigen::MatrixXd U = Eigen::MatrixXd(StoredU(*vector_id_).cast<double>());
   const Eigen::MatrixXd K = U.transpose() * (op->stiffness * U);
   const Eigen::MatrixXd Mr = U.transpose() * op->mass.asDiagonal() * U;
   Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> dense(K, Mr);

@@ -5,6 +5,9 @@
 #include <memory>
 
 #include "Eigen/Dense"
+#include "core/subspace/model_problem.h"
+#include "core/subspace/projection.h"
+#include "core/subspace/subspace_util.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/testing/fixtures.h"
@@ -18,6 +21,7 @@ using ::fieldspace::testing::DenseU;
 using ::fieldspace::testing::Icosphere;
 using ::fieldspace::testing::MustBuildOperator;
 using ::fieldspace::testing::RandomBasis;
+using ::fieldspace::testing::RandomVector;
 using ::fieldspace::testing::RelativeDifference;
 using ::fieldspace::testing::StatusIs;
 using ::fieldspace::testing::Torus;
@@ -193,6 +197,85 @@ TEST(ReducedSystemTest, EncodedMatricesBuildTheSameSystem) {
     EXPECT_EQ(a.mass_factor().Solve(rhs), b.mass_factor().Solve(rhs));
     // The given system is a full one: it still matches the dense products.
     ExpectMatchesReference(b, Reference(op, *basis));
+  }
+}
+
+// A served system keeps only the LiftPlan (ReducedSystemOptions::release_basis_rows): its basis
+// has U's dimensions and none of its nonzeros, it holds no reference to the caller's Basis, and
+// everything that reads U's rows (projections, weighted masses, constraint rows, solves, lifts)
+// gives what the system with U gives.
+TEST(ReducedSystemTest, ReleasedRowsServeTheSameResults) {
+  const TriangleMesh mesh = Torus(24, 12);
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
+    SCOPED_TRACE(type.ToString());
+    const FieldOperator op = MustBuildOperator(mesh, type);
+    std::shared_ptr<const Basis> basis = RandomBasis(type, op.dofs(), 48, 10, 3);
+    auto full = ReducedSystem::Build(basis, op);
+    ReducedSystemOptions release;
+    release.release_basis_rows = true;
+    auto served = ReducedSystem::Build(basis, op, release);
+    ASSERT_TRUE(full.ok() && served.ok());
+    const ReducedSystem& a = **full;
+    const ReducedSystem& b = **served;
+    EXPECT_FALSE(a.basis_rows_released());
+    EXPECT_TRUE(b.basis_rows_released());
+    EXPECT_EQ(b.basis().U.nonZeros(), 0);
+    EXPECT_EQ(b.dofs(), a.dofs());
+    EXPECT_EQ(b.dimension(), a.dimension());
+    EXPECT_EQ(b.basis().sample_faces, basis->sample_faces);
+    // U's 8 bytes a nonzero are gone (its k + 1 row offsets stay).
+    EXPECT_LE(b.basis().MemoryBytes(), basis->MemoryBytes() - 8 * basis->U.nonZeros());
+    EXPECT_EQ(basis.use_count(), 2);  // here and in `full`: `served` holds no reference
+
+    // Every row, from the LiftPlan, equals U's.
+    BasisRowScratch scratch;
+    for (int64_t i = 0; i < a.dofs(); ++i) {
+      const BasisRow u = GetBasisRow(basis->U, i);
+      const BasisRow r = b.BasisRowOf(i, &scratch);
+      ASSERT_EQ(r.size, u.size) << i;
+      for (int64_t q = 0; q < u.size; ++q) {
+        ASSERT_EQ(r.cols[q], u.cols[q]) << i;
+        ASSERT_EQ(r.vals[q], u.vals[q]) << i;
+      }
+    }
+
+    // Projections, a weighted mass, a solve with soft (scale-free) and hard constraints, lifts.
+    Eigen::MatrixXd fields(a.dofs(), 2);
+    fields.col(0) = RandomVector(a.dofs(), 5);
+    fields.col(1) = RandomVector(a.dofs(), 6);
+    auto pa = ProjectMany(a, fields);
+    auto pb = ProjectMany(b, fields);
+    ASSERT_TRUE(pa.ok() && pb.ok());
+    EXPECT_LT(RelativeDifference(pb->coefficients, pa->coefficients), 1e-12);
+    EXPECT_LT(RelativeDifference(pb->relative_errors, pa->relative_errors), 1e-12);
+    const Eigen::VectorXd weights = Eigen::VectorXd::LinSpaced(a.dofs(), 0.5, 2.0);
+    auto wa = WeightedMassMatrix(a, weights);
+    auto wb = WeightedMassMatrix(b, weights);
+    ASSERT_TRUE(wa.ok() && wb.ok());
+    EXPECT_LT(RelativeDifference(Eigen::MatrixXd(*wb), Eigen::MatrixXd(*wa)), 1e-13);
+    ModelProblem problem;
+    problem.weights.mu_s = 1.0;
+    problem.weights.mu_c = 10.0;
+    problem.scale_free = true;
+    const int32_t p = type.dofs_per_face();
+    for (int32_t face : {3, 100, 401}) {
+      problem.constraints.push_back({face, Eigen::VectorXd::Ones(p), 1.0, ConstraintKind::kSoft});
+    }
+    problem.constraints.push_back(
+        {250, Eigen::VectorXd::LinSpaced(p, -1.0, 1.0), 1.0, ConstraintKind::kHard});
+    auto sa = SolveReducedModelProblem(a, problem);
+    auto sb = SolveReducedModelProblem(b, problem);
+    ASSERT_TRUE(sa.ok()) << sa.status();
+    ASSERT_TRUE(sb.ok()) << sb.status();
+    EXPECT_LT(RelativeDifference(sb->coefficients, sa->coefficients), 1e-10);
+    auto la = Lift(a, sa->coefficients);
+    auto lb = Lift(b, sa->coefficients);
+    ASSERT_TRUE(la.ok() && lb.ok());
+    EXPECT_EQ(*lb, *la);
+    // The basis alone cannot lift any more: its rows are gone.
+    EXPECT_THAT(Lift(b.basis(), sa->coefficients), StatusIs(absl::StatusCode::kFailedPrecondition));
+    EXPECT_THAT(LiftFaces(b.basis(), sa->coefficients, std::vector<int32_t>{0}),
+                StatusIs(absl::StatusCode::kFailedPrecondition));
   }
 }
 
