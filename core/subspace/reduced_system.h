@@ -38,8 +38,8 @@ struct ReducedSystemOptions {
   std::function<void(double fraction)> progress;
   // Keep only the LiftPlan, a face-major copy of U (see lift_plan.h), and serve every row of U
   // from it: basis() then has U's dimensions but none of its nonzeros, and the caller's Basis may
-  // be dropped. A daemon's served basis saves U's 8 bytes a nonzero (595 MB of 1.6 GB on 1.38M
-  // faces at d = 2000). Results are those of U up to the summation order.
+  // be dropped. A daemon's served basis saves U's 8 bytes a nonzero (595 MB on 1.38M faces at
+  // d = 2000: bench/RESULTS.md, Session 23). Results are those of U up to the summation order.
   bool release_basis_rows = false;
 };
 
