@@ -463,8 +463,12 @@ absl::StatusOr<LoadedBasis> Decode(Source& src) {
   const int32_t* outer = b.U.outerIndexPtr();
   const int32_t* inner = b.U.innerIndexPtr();
   if (outer[0] != 0 || outer[h.rows] != h.nnz) return DataLoss("row pointers inconsistent");
+  // All row pointers first: one past nnz in the middle (say 0, 5, 0 with nnz 0) would send the
+  // column check below past the end of the arrays.
   for (int64_t r = 0; r < h.rows; ++r) {
     if (outer[r + 1] < outer[r]) return DataLoss("row pointers decrease");
+  }
+  for (int64_t r = 0; r < h.rows; ++r) {
     for (int32_t q = outer[r]; q < outer[r + 1]; ++q) {
       if (inner[q] < 0 || inner[q] >= h.cols || (q > outer[r] && inner[q] <= inner[q - 1])) {
         return DataLoss(absl::StrFormat("row %d: column indices invalid", r));

@@ -126,6 +126,19 @@ TEST_F(BasisIoTest, EveryFlippedByteIsDetected) {
   EXPECT_THAT(LoadBasisFile(path), StatusIs(absl::StatusCode::kDataLoss));
 }
 
+// Found by the store fuzzer: intact checksums, no nonzeros, and row pointers 0, 5, 0, ..., 0.
+// The structure check read the first row's five columns from the empty arrays before it saw the
+// pointers decrease; every pointer is now checked before any column.
+TEST_F(BasisIoTest, RowPointersPastTheEndAreDataLossNotARead) {
+  Basis b = basis_;
+  b.U.resize(basis_.U.rows(), basis_.U.cols());
+  b.U.resizeNonZeros(0);
+  b.U.outerIndexPtr()[1] = 5;
+  auto bytes = EncodeBasis(b, "mesh");
+  ASSERT_TRUE(bytes.ok()) << bytes.status();
+  EXPECT_THAT(DecodeBasis(*bytes), StatusIs(absl::StatusCode::kDataLoss));
+}
+
 TEST_F(BasisIoTest, TruncatedAndExtendedFilesAreDetected) {
   auto bytes = EncodeBasis(basis_, "id");
   ASSERT_TRUE(bytes.ok());
