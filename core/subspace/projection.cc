@@ -89,6 +89,17 @@ absl::StatusOr<Eigen::MatrixXd> MassWeightedProducts(
                           for (int64_t c = 0; c < p; ++c) {
                             w.row(c) = mass[f * p + c] * fields.row(f * p + c);
                           }
+                          if (m == 1) {
+                            // One field (a Project, a smooth's right-hand side): plain sums.
+                            double* a = acc.data();
+                            const double* wf = w.data();
+                            plan.ForEachEntry(f, [&](int col, const float* v) {
+                              double sum = 0;
+                              for (int64_t c = 0; c < p; ++c) sum += v[c] * wf[c];
+                              a[col] += sum;
+                            });
+                            continue;
+                          }
                           plan.ForEachEntry(f, [&](int col, const float* v) {
                             for (int64_t c = 0; c < p; ++c) {
                               acc.row(col) += static_cast<double>(v[c]) * w.row(c);

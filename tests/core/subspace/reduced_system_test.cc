@@ -248,6 +248,11 @@ TEST(ReducedSystemTest, ReleasedRowsServeTheSameResults) {
     ASSERT_TRUE(pa.ok() && pb.ok());
     EXPECT_LT(RelativeDifference(pb->coefficients, pa->coefficients), 1e-12);
     EXPECT_LT(RelativeDifference(pb->relative_errors, pa->relative_errors), 1e-12);
+    auto qa = Project(a, fields.col(0));  // one field: its own loop over the plan
+    auto qb = Project(b, fields.col(0));
+    ASSERT_TRUE(qa.ok() && qb.ok());
+    EXPECT_LT(RelativeDifference(qb->coefficients, qa->coefficients), 1e-12);
+    EXPECT_LT(RelativeDifference(qb->coefficients, pa->coefficients.col(0)), 1e-12);
     const Eigen::VectorXd weights = Eigen::VectorXd::LinSpaced(a.dofs(), 0.5, 2.0);
     auto wa = WeightedMassMatrix(a, weights);
     auto wb = WeightedMassMatrix(b, weights);
