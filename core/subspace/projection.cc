@@ -157,6 +157,23 @@ absl::StatusOr<Eigen::VectorXd> RelativeResiduals(
                         if (IsCancelled(cancel)) return;
                         Sums& s = sums.local();
                         RowMajorMatrix v(p, m);
+                        if (m == 1) {
+                          // One field: the plan's own lift of the face, plain sums.
+                          double lifted[8];
+                          double residual = 0, norm = 0;
+                          for (int64_t f = r.begin(); f < r.end(); ++f) {
+                            plan.LiftFace(x.data(), f, lifted);
+                            for (int64_t c = 0; c < p; ++c) {
+                              const int64_t i = f * p + c;
+                              const double fi = fields(i, 0);
+                              residual += mass[i] * (fi - lifted[c]) * (fi - lifted[c]);
+                              norm += mass[i] * fi * fi;
+                            }
+                          }
+                          s.residual[0] += residual;
+                          s.norm[0] += norm;
+                          return;
+                        }
                         for (int64_t f = r.begin(); f < r.end(); ++f) {
                           v.setZero();
                           plan.ForEachEntry(f, [&](int col, const float* vals) {
