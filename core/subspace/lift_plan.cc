@@ -74,13 +74,11 @@ LiftPlan LiftPlan::Build(const BasisMatrix& U, int32_t dofs_per_face) {
 
 void LiftPlan::AppendRow(int64_t face, int32_t c, std::vector<int>* cols,
                          std::vector<float>* vals) const {
-  const int64_t b = begin_[face], e = begin_[face + 1];
-  for (int64_t j = b; j < e; ++j) {
-    const float v = vals_[j * p_ + c];
-    if (v == 0.0f) continue;
-    cols->push_back(cols16_.empty() ? cols32_[j] : static_cast<int>(cols16_[j]));
-    vals->push_back(v);
-  }
+  ForEachEntry(face, [&](int col, const float* v) {
+    if (v[c] == 0.0f) return;
+    cols->push_back(col);
+    vals->push_back(v[c]);
+  });
 }
 
 void LiftPlan::LiftAll(const double* x, double* out) const {

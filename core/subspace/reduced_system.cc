@@ -58,11 +58,12 @@ struct Entry {
 // (S U)^T diag(row_mass)^-1 (S U) (then row_mass must be positive).
 struct ProductPass {
   const BasisMatrix* U = nullptr;
-  // Instead of U (mass product only): the rows of this system's basis (ReducedSystem::BasisRowOf),
-  // also once it released U.
+  // Instead of U, for the mass product only (S null): the rows of this system's basis
+  // (ReducedSystem::BasisRowOf), also once it released U.
   const ReducedSystem* rows_of = nullptr;
-  const Eigen::SparseMatrix<double>* S = nullptr;  // symmetric k x k, or null: mass product only
-  const double* row_mass = nullptr;                // k values, >= 0 (> 0 with S)
+  // Symmetric k x k, or null: mass product only. The S products read U (never rows_of).
+  const Eigen::SparseMatrix<double>* S = nullptr;
+  const double* row_mass = nullptr;  // k values, >= 0 (> 0 with S)
   int64_t accumulator_budget_bytes = 0;
   const CancelFlag* cancel = nullptr;
   const std::function<void(double fraction)>* progress = nullptr;  // may be null
@@ -88,7 +89,7 @@ struct ProductOutput {
 // cancelled.
 bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
   const ReducedSystem* source = pass.rows_of;
-  const Eigen::SparseMatrix<double>* S = source != nullptr ? nullptr : pass.S;
+  const Eigen::SparseMatrix<double>* S = pass.S;
   const bool with_s = S != nullptr;
   const double* row_mass = pass.row_mass;
   const int64_t k = source != nullptr ? source->dofs() : pass.U->rows();
@@ -381,7 +382,6 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
 
 namespace {
 
-// The checks both Builds make before any work: the basis and the options.
 // `basis` without U's nonzeros (U keeps its k x d dimensions), for a system that serves the rows
 // from its LiftPlan. Copies only the per-column and per-face arrays.
 Basis WithoutRows(const Basis& basis) {
@@ -401,6 +401,7 @@ Basis WithoutRows(const Basis& basis) {
   return out;
 }
 
+// The checks both Builds make before any work: the basis and the options.
 absl::Status CheckBasisAndOptions(const Basis* basis, const ReducedSystemOptions& options) {
   if (basis == nullptr) return absl::InvalidArgumentError("ReducedSystem: no basis");
   const int64_t d = basis->U.cols();

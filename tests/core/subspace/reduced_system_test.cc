@@ -222,7 +222,17 @@ TEST(ReducedSystemTest, ReleasedRowsServeTheSameResults) {
     EXPECT_EQ(b.basis().U.nonZeros(), 0);
     EXPECT_EQ(b.dofs(), a.dofs());
     EXPECT_EQ(b.dimension(), a.dimension());
+    // Everything but U's nonzeros is kept.
+    EXPECT_TRUE(b.basis().type == basis->type);
+    EXPECT_EQ(b.basis().params.dimension, basis->params.dimension);
+    EXPECT_EQ(b.basis().params.sigma, basis->params.sigma);
+    EXPECT_EQ(b.basis().params.face_weights, basis->params.face_weights);
+    EXPECT_EQ(b.basis().radius, basis->radius);
     EXPECT_EQ(b.basis().sample_faces, basis->sample_faces);
+    EXPECT_EQ(b.basis().local_eigenvalues, basis->local_eigenvalues);
+    EXPECT_EQ(b.basis().coverage_radius, basis->coverage_radius);
+    EXPECT_EQ(b.basis().uncovered_faces, basis->uncovered_faces);
+    EXPECT_EQ(b.basis().kernel_columns, basis->kernel_columns);
     // U's 8 bytes a nonzero are gone (its k + 1 row offsets stay).
     EXPECT_LE(b.basis().MemoryBytes(), basis->MemoryBytes() - 8 * basis->U.nonZeros());
     EXPECT_EQ(basis.use_count(), 2);  // here and in `full`: `served` holds no reference
