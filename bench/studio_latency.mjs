@@ -20,7 +20,7 @@
 // Without --daemon it starts fieldspaced on a free port with --store DIR (default: a temporary
 // one); the mesh (by file name and face count) and a vector basis of dimension --dim already in the
 // store are reused, so reruns with the same --store skip the upload and the build.
-import { readFileSync, writeFileSync } from "node:fs";
+import { readdirSync, readFileSync, writeFileSync } from "node:fs";
 import { cpus, loadavg } from "node:os";
 import { basename, dirname, extname, join, resolve } from "node:path";
 import { fileURLToPath } from "node:url";
@@ -48,6 +48,41 @@ const intervalMs = Number(args["interval-ms"]);
 const radiusPx = Number(args["radius-px"]);
 const log = (text) => console.error(`[bench] ${text}`);
 const load = { start: loadavg() };
+
+// CPU seconds (user + system) of this bench's process tree by role, from /proc (Linux): the
+// daemon, the gateway, Chromium's GPU process (where SwiftShader draws), its renderers, the rest of
+// Chromium, and this process (the synthetic mouse).
+function cpuByRole() {
+  const tick = 100;  // USER_HZ
+  const procs = new Map();
+  for (const entry of readdirSync("/proc")) {
+    if (!/^\d+$/.test(entry)) continue;
+    try {
+      const stat = readFileSync(`/proc/${entry}/stat`, "utf8");
+      const fields = stat.slice(stat.lastIndexOf(")") + 2).split(" ");
+      procs.set(Number(entry), { ppid: Number(fields[1]),
+        cpu: (Number(fields[11]) + Number(fields[12])) / tick,
+        cmd: readFileSync(`/proc/${entry}/cmdline`, "utf8") });
+    } catch {
+      // gone meanwhile
+    }
+  }
+  const ours = (pid) => {
+    for (let p = pid; p > 1; p = procs.get(p)?.ppid ?? 0) if (p === process.pid) return true;
+    return false;
+  };
+  const roles = { daemon: 0, gateway: 0, gpuProcess: 0, renderers: 0, otherChromium: 0, bench: 0 };
+  for (const [pid, { cpu, cmd }] of procs) {
+    if (pid === process.pid) roles.bench += cpu;
+    else if (!ours(pid)) continue;
+    else if (cmd.includes("fieldspaced")) roles.daemon += cpu;
+    else if (cmd.includes("gateway")) roles.gateway += cpu;
+    else if (cmd.includes("--type=gpu-process")) roles.gpuProcess += cpu;
+    else if (cmd.includes("--type=renderer")) roles.renderers += cpu;
+    else if (cmd.includes("chrom")) roles.otherChromium += cpu;
+  }
+  return roles;
+}
 
 const { chromium, daemonClient, pb } = await webModules(args["web-dir"]);
 let address = args.daemon;
@@ -194,6 +229,7 @@ const path = Array.from({ length: steps }, (_, i) => {
   return toPage(center[0] + radiusPx * Math.cos(angle), center[1] + radiusPx * Math.sin(angle));
 });
 const framesBefore = frames.length;
+const cpuAtDrag = {};
 const gestureEvent = await page.evaluate(() => window.__studio.gestureEvent);
 await page.evaluate((gestureEvent) => {
   // The bench's own view of the input and of the frames: each pointer event's time, and
@@ -214,6 +250,8 @@ await page.evaluate((gestureEvent) => {
   const start = toPage(...marker);
   await mouse("mouseMoved", start, false);
   await mouse("mousePressed", start, true);
+  cpuAtDrag.start = cpuByRole();
+  cpuAtDrag.pageStart = await page.evaluate(() => performance.now());
   const t0 = performance.now();
   const acknowledged = [];
   for (let i = 0; i < steps; i++) {
@@ -224,6 +262,9 @@ await page.evaluate((gestureEvent) => {
   log(`${steps} moves sent in ${((performance.now() - t0) / 1000).toFixed(1)} s`);
   await Promise.all(acknowledged);
   log(`acknowledged after ${((performance.now() - t0) / 1000).toFixed(1)} s`);
+  cpuAtDrag.end = cpuByRole();
+  cpuAtDrag.seconds = (performance.now() - t0) / 1000;
+  cpuAtDrag.pageEnd = await page.evaluate(() => performance.now());
   await mouse("mouseReleased", path.at(-1), false);
 }
 state = await probe.checkAgainstSolve(`after ${steps} drag steps`);
@@ -270,6 +311,11 @@ for (const u of updates) {
 }
 const server = updates.filter((u) => u.timings);
 const intervals = record.frames.slice(1).map((t, i) => t - record.frames[i]);
+// CPU during the drag (press to the last move's acknowledgement), per role, as a share of one core.
+const dragCpu = Object.fromEntries(Object.keys(cpuAtDrag.start).map((role) => [role,
+  (cpuAtDrag.end[role] - cpuAtDrag.start[role]) / cpuAtDrag.seconds]));
+const dragFrameCount = record.frames.filter((t) => t >= cpuAtDrag.pageStart &&
+  t <= cpuAtDrag.pageEnd).length;
 const result = {
   bench: "studio_latency",
   mesh: basename(args.mesh), faces: mesh.numFaces, basis: basis.id, dimension,
@@ -297,7 +343,13 @@ const result = {
   bytesPerUpdate: { page: stats(updates.map((u) => u.bytes)), websocket: stats(dragFrames) },
   // The page's handler of an update (glyphs, markers, panels; not the frame, which is requested).
   handleUpdateMs: stats(updates.filter((u) => u.handled !== null).map((u) => u.handled - u.decoded)),
-  frameMs: { rafInterval: stats(intervals), render: stats(record.renderMs) },
+  frameMs: { rafInterval: stats(intervals), render: stats(record.renderMs),
+    // The GPU process's CPU over the drag divided by the page's frames in it: what a frame costs
+    // under software GL (with a GPU the GPU does that work).
+    gpuProcessCpuPerFrame: dragFrameCount > 0
+      ? 1000 * dragCpu.gpuProcess * cpuAtDrag.seconds / dragFrameCount : null },
+  // Cores busy during the drag, by process (Linux /proc; 2 cores here).
+  dragCpuCores: dragCpu,
   firstFieldMs: { fromChoosingTheBasis: firstOpen.fromChoiceMs,
     fromNavigationOnReload: reload.fromNavigationMs },
   solveCheck: "coefficients equal a one-shot Solve to 1e-9 relative",
@@ -328,6 +380,10 @@ console.log([
     `${result.bytesPerUpdate.websocket.n})`,
   line("frame interval (page, ms)", result.frameMs.rafInterval),
   line("render call (ms)", result.frameMs.render),
+  `GPU process CPU per frame: ${ms(result.frameMs.gpuProcessCpuPerFrame)} ms ` +
+    `(${dragFrameCount} frames in the drag)`,
+  `cores busy during the drag: ${Object.entries(dragCpu).map(([role, cores]) =>
+    `${role} ${cores.toFixed(2)}`).join(", ")}`,
   line("update handler (ms)", result.handleUpdateMs),
   `first field drawn: ${ms(result.firstFieldMs.fromChoosingTheBasis)} ms after choosing the ` +
     `basis; ${ms(result.firstFieldMs.fromNavigationOnReload)} ms from navigation on a reload`,
