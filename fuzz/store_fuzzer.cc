@@ -18,10 +18,13 @@
 #include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <optional>
 #include <string>
+#include <vector>
 
 #include "core/basis/basis_io.h"
 #include "core/basis/crc32c.h"
+#include "core/subspace/lift_plan.h"
 #include "core/subspace/reduced_system.h"
 #include "fuzz/tiny_bases.h"
 #include "server/hash.h"
@@ -147,9 +150,35 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         if (loaded.ok()) Serve(*loaded);
       }
       auto reader = store.OpenBasisPayload(kStoreBasisId);
+      std::optional<LiftPlan> plan_of_u;
       if (reader.ok()) {
         absl::StatusOr<LoadedBasis> streamed = DecodeBasisFrom(**reader);
-        if (streamed.ok() && (*reader)->Finish().ok()) Serve(*streamed);
+        if (streamed.ok() && (*reader)->Finish().ok()) {
+          plan_of_u = LiftPlan::Build(streamed->basis.U, streamed->basis.type.dofs_per_face());
+          Serve(*streamed);
+        }
+      }
+      // Streamed into a LiftPlan, as LoadBasis does when the reduced matrices are kept: it must
+      // decode exactly when the whole read does, into the plan of the same U.
+      auto plan_reader = store.OpenBasisPayload(kStoreBasisId);
+      if (plan_reader.ok()) {
+        LiftPlan::StreamBuilder rows;
+        absl::StatusOr<LoadedBasis> streamed = DecodeBasisFrom(**plan_reader, rows);
+        const bool ok = streamed.ok() && (*plan_reader)->Finish().ok();
+        if (ok != plan_of_u.has_value()) std::abort();
+        if (ok) {
+          absl::StatusOr<LiftPlan> plan = std::move(rows).Finish();
+          if (!plan.ok() || plan->memory_bytes() != plan_of_u->memory_bytes() ||
+              plan->num_faces() != plan_of_u->num_faces()) {
+            std::abort();
+          }
+          const std::vector<double> x(streamed->basis.U.cols(), 1.0);
+          const size_t k = static_cast<size_t>(plan->num_faces()) * plan->dofs_per_face();
+          std::vector<double> a(k), b(k);
+          plan->LiftAll(x.data(), a.data());
+          plan_of_u->LiftAll(x.data(), b.data());
+          if (std::memcmp(a.data(), b.data(), k * sizeof(double)) != 0) std::abort();
+        }
       }
       unlink(store.BasisPath(kStoreBasisId).c_str());
       break;

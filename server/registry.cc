@@ -573,38 +573,12 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::GetBasis(const std:
 }
 
 absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std::string& id) {
-  // Straight from the file into the basis's arrays, the store's checksum taken on the way.
+  // Straight from the file, the store's checksum taken on the way.
   ASSIGN_OR_RETURN(std::unique_ptr<Store::BasisPayloadReader> reader, store_->OpenBasisPayload(id));
-  absl::StatusOr<LoadedBasis> decoded = DecodeBasisFrom(*reader);
-  if (!decoded.ok()) {
-    if (absl::IsDataLoss(decoded.status()) || absl::IsInvalidArgument(decoded.status())) {
-      return absl::DataLossError(
-          absl::StrCat("stored basis ", id, " is unreadable: ", decoded.status().message()));
-    }
-    return decoded.status();  // e.g. a read error of the file system
-  }
-  absl::StatusOr<uint64_t> payload_hash = reader->Finish();
-  if (!payload_hash.ok()) {
-    return absl::DataLossError(
-        absl::StrCat("stored basis ", id, " is unreadable: ", payload_hash.status().message()));
-  }
-  const BasisRecord record = reader->record();
-  reader.reset();
-  if (decoded->mesh_id != record.key.mesh_id) {
-    return absl::DataLossError(absl::StrCat("stored basis ", id, " names mesh ", decoded->mesh_id,
-                                            ", its record ", record.key.mesh_id));
-  }
-  auto basis = std::make_shared<const Basis>(std::move(decoded->basis));
-  ASSIGN_OR_RETURN(std::shared_ptr<const TriangleMesh> mesh, GetMesh(record.key.mesh_id));
-  const int64_t dofs = int64_t{record.key.field.dofs_per_face()} * mesh->num_faces();
-  if (basis->U.rows() != dofs || !(basis->type == record.key.field)) {
-    return absl::DataLossError(
-        absl::StrCat("stored basis ", id, " does not match its mesh or field type"));
-  }
   // The reduced matrices kept beside the basis, if any and sound: a cache, so any problem with
   // it only means computing them (and writing them again).
   std::optional<ReducedMatrices> matrices;
-  absl::StatusOr<std::string> reduced = store_->LoadReduced(id, *payload_hash);
+  absl::StatusOr<std::string> reduced = store_->LoadReduced(id, reader->expected_payload_hash());
   if (reduced.ok()) {
     absl::StatusOr<ReducedMatrices> m = DecodeReducedMatrices(*reduced);
     std::string().swap(*reduced);
@@ -618,14 +592,67 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> Registry::LoadBasis(const std
     std::cerr << "fieldspaced: not using the stored reduced matrices of basis " << id << " ("
               << reduced.status().message() << "); computing them" << std::endl;
   }
+  // What was decoded, checked against its record and mesh.
+  struct Checked {
+    BasisRecord record;
+    std::shared_ptr<const TriangleMesh> mesh;
+    std::shared_ptr<const Basis> basis;
+    uint64_t payload_hash = 0;
+  };
+  const auto checked = [&](absl::StatusOr<LoadedBasis> decoded,
+                           Store::BasisPayloadReader& in) -> absl::StatusOr<Checked> {
+    if (!decoded.ok()) {
+      if (absl::IsDataLoss(decoded.status()) || absl::IsInvalidArgument(decoded.status())) {
+        return absl::DataLossError(
+            absl::StrCat("stored basis ", id, " is unreadable: ", decoded.status().message()));
+      }
+      return decoded.status();  // e.g. a read error of the file system
+    }
+    Checked out;
+    absl::StatusOr<uint64_t> payload_hash = in.Finish();
+    if (!payload_hash.ok()) {
+      return absl::DataLossError(
+          absl::StrCat("stored basis ", id, " is unreadable: ", payload_hash.status().message()));
+    }
+    out.payload_hash = *payload_hash;
+    out.record = in.record();
+    if (decoded->mesh_id != out.record.key.mesh_id) {
+      return absl::DataLossError(absl::StrCat("stored basis ", id, " names mesh ", decoded->mesh_id,
+                                              ", its record ", out.record.key.mesh_id));
+    }
+    out.basis = std::make_shared<const Basis>(std::move(decoded->basis));
+    ASSIGN_OR_RETURN(out.mesh, GetMesh(out.record.key.mesh_id));
+    const int64_t dofs = int64_t{out.record.key.field.dofs_per_face()} * out.mesh->num_faces();
+    if (out.basis->U.rows() != dofs || !(out.basis->type == out.record.key.field)) {
+      return absl::DataLossError(
+          absl::StrCat("stored basis ", id, " does not match its mesh or field type"));
+    }
+    return out;
+  };
   BuildContext context;
   context.threads = options_.build_threads;
+  if (matrices.has_value()) {
+    // U straight into its LiftPlan, the only copy of U a served basis keeps: the load never holds
+    // U's CSR arrays beside it (bench/RESULTS.md, Session 24).
+    LiftPlan::StreamBuilder rows;
+    absl::StatusOr<LoadedBasis> decoded = DecodeBasisFrom(*reader, rows);
+    ASSIGN_OR_RETURN(Checked c, checked(std::move(decoded), *reader));
+    ASSIGN_OR_RETURN(LiftPlan plan, std::move(rows).Finish());
+    absl::StatusOr<std::shared_ptr<const ServedBasis>> served =
+        ServeBasis(c.record, std::move(c.mesh), std::move(c.basis), nullptr, context,
+                   std::move(matrices), std::move(plan));
+    // Matrices that do not fit the basis after all (ServeBasis said why): U is read again whole
+    // below for the product pass.
+    if (served.ok() || absl::IsCancelled(served.status())) return served;
+    ASSIGN_OR_RETURN(reader, store_->OpenBasisPayload(id));
+  }
+  absl::StatusOr<LoadedBasis> decoded = DecodeBasisFrom(*reader);
+  ASSIGN_OR_RETURN(Checked c, checked(std::move(decoded), *reader));
+  reader.reset();
   ASSIGN_OR_RETURN(
       std::shared_ptr<const ServedBasis> served,
-      ServeBasis(record, std::move(mesh), std::move(basis), nullptr, context, std::move(matrices)));
-  if (!served->system->stats().products_given) {
-    SaveReducedMatrices(id, *payload_hash, *served->system);
-  }
+      ServeBasis(c.record, std::move(c.mesh), std::move(c.basis), nullptr, context, std::nullopt));
+  SaveReducedMatrices(id, c.payload_hash, *served->system);
   return served;
 }
 

@@ -95,7 +95,7 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
 absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
     std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context,
-    std::optional<ReducedMatrices> matrices) {
+    std::optional<ReducedMatrices> matrices, std::optional<LiftPlan> plan) {
   ReducedSystemOptions options;
   options.threads = context.threads;
   options.cancel = context.cancel;
@@ -107,12 +107,19 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     // Only M is needed then: S, whose assembly is most of a load's remaining time, is not.
     Eigen::VectorXd mass =
         op != nullptr ? op->mass : BuildFaceMass(*mesh, basis->type.dofs_per_face());
-    system = ReducedSystem::Build(basis, std::move(mass), *std::move(matrices), options);
+    const bool rows_in_plan = plan.has_value();
+    system = rows_in_plan
+                 ? ReducedSystem::Build(basis, *std::move(plan), std::move(mass),
+                                        *std::move(matrices), options)
+                 : ReducedSystem::Build(basis, std::move(mass), *std::move(matrices), options);
     if (!system.ok() && !absl::IsCancelled(system.status())) {
       std::cerr << "fieldspaced: the stored reduced matrices of basis " << record.id
                 << " do not fit it (" << system.status().message() << "); computing them"
                 << std::endl;
     }
+    if (!system.ok() && rows_in_plan) return system.status();
+  } else if (plan.has_value()) {
+    return absl::InvalidArgumentError("ServeBasis: a basis read as a LiftPlan needs its matrices");
   }
   if (!system.ok()) {
     FieldOperator assembled;

@@ -79,11 +79,15 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
 // The per-basis precomputation (core's ReducedSystem) and the served handle. `op`: the basis's
 // operator, or null to assemble it here (after a load from the store). `matrices`: the reduced
 // matrices kept in the store for this basis (Store::LoadReduced), which spare the product pass;
-// should they not fit the basis, the pass runs after all (and says so on stderr).
+// should they not fit the basis, the pass runs after all (and says so on stderr). `plan`: U read
+// from the store as a LiftPlan (LiftPlan::StreamBuilder), `basis` then without rows; needs
+// `matrices`, and should they not fit, the error is returned (the pass needs U's rows: the
+// caller reads them).
 absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     BasisRecord record, std::shared_ptr<const TriangleMesh> mesh,
     std::shared_ptr<const Basis> basis, const FieldOperator* op, const BuildContext& context,
-    std::optional<ReducedMatrices> matrices = std::nullopt);
+    std::optional<ReducedMatrices> matrices = std::nullopt,
+    std::optional<LiftPlan> plan = std::nullopt);
 
 }  // namespace fieldspace::server
 

@@ -90,6 +90,9 @@ class Store {
   class BasisPayloadReader final : public BasisByteSource {
    public:
     const BasisRecord& record() const { return record_; }
+    // The checksum the file says its payload has (Finish confirms it): what LoadReduced takes
+    // before the payload is read.
+    uint64_t expected_payload_hash() const { return expected_hash_; }
     uint64_t size() const override { return length_; }
     absl::Status ReadAt(uint64_t offset, void* dst, size_t size) override;
     absl::StatusOr<uint64_t> Finish() const;

@@ -374,36 +374,159 @@ struct SectionPlan {
   uint64_t bytes;
 };
 
-absl::Status ReadSection(Source& src, uint64_t* offset, const SectionPlan& plan) {
+constexpr size_t kReadChunk = size_t{1} << 22;
+
+using BasisU = decltype(Basis::U);
+
+// Reads the section `tag` of `bytes` payload bytes at *offset: its head, the payload in chunks
+// of kReadChunk bytes (a multiple of every element size) to `into(off, n)`, each then passed to
+// `consume(chunk, n)`, and its checksum. An error of consume's is returned after the checksum
+// matched (so a damaged section reads as a checksum mismatch); consume is not called after it.
+template <typename Into, typename Consume>
+absl::Status ReadSectionWith(Source& src, uint64_t* offset, uint32_t expected_tag, uint64_t bytes,
+                             Into&& into, Consume&& consume) {
   uint8_t head[kSectionHeadBytes];
   if (absl::Status s = src.ReadAt(*offset, head, sizeof(head)); !s.ok()) return s;
   uint32_t tag, reserved;
-  uint64_t bytes;
+  uint64_t stored_bytes;
   std::memcpy(&tag, head, 4);
   std::memcpy(&reserved, head + 4, 4);
-  std::memcpy(&bytes, head + 8, 8);
-  const std::string name(reinterpret_cast<const char*>(&plan.tag), 4);
-  if (tag != plan.tag || reserved != 0)
+  std::memcpy(&stored_bytes, head + 8, 8);
+  const std::string name(reinterpret_cast<const char*>(&expected_tag), 4);
+  if (tag != expected_tag || reserved != 0)
     return DataLoss(absl::StrCat("section ", name, ": bad tag"));
-  if (bytes != plan.bytes) return DataLoss(absl::StrCat("section ", name, ": bad size"));
+  if (stored_bytes != bytes) return DataLoss(absl::StrCat("section ", name, ": bad size"));
   *offset += kSectionHeadBytes;
-  constexpr size_t kChunk = size_t{1} << 22;
-  char* p = static_cast<char*>(plan.dst);
   uint32_t crc = 0;
-  for (uint64_t off = 0; off < bytes; off += kChunk) {
-    const size_t n = static_cast<size_t>(std::min<uint64_t>(kChunk, bytes - off));
-    if (absl::Status s = src.ReadAt(*offset + off, p + off, n); !s.ok()) return s;
-    crc = Crc32cExtend(crc, p + off, n);
+  absl::Status consumed;
+  for (uint64_t off = 0; off < bytes; off += kReadChunk) {
+    const size_t n = static_cast<size_t>(std::min<uint64_t>(kReadChunk, bytes - off));
+    char* p = into(off, n);
+    if (absl::Status s = src.ReadAt(*offset + off, p, n); !s.ok()) return s;
+    crc = Crc32cExtend(crc, p, n);
+    if (consumed.ok()) consumed = consume(p, n);
   }
   *offset += bytes;
   uint32_t stored;
   if (absl::Status s = src.ReadAt(*offset, &stored, 4); !s.ok()) return s;
   *offset += kSectionTailBytes;
   if (stored != crc) return DataLoss(absl::StrCat("section ", name, ": checksum mismatch"));
-  return absl::OkStatus();
+  return consumed;
 }
 
-absl::StatusOr<LoadedBasis> Decode(Source& src) {
+// A section read whole into plan.dst.
+absl::Status ReadSection(Source& src, uint64_t* offset, const SectionPlan& plan) {
+  char* dst = static_cast<char*>(plan.dst);
+  return ReadSectionWith(
+      src, offset, plan.tag, plan.bytes, [dst](uint64_t off, size_t) { return dst + off; },
+      [](const char*, size_t) { return absl::OkStatus(); });
+}
+
+// U's structure (a damaged-but-checksummed file must not crash later users of U), checked as
+// its arrays pass: the row pointers whole, then the column indices and then the values, each in
+// pieces of any size, in order.
+class RowsCheck {
+ public:
+  // 0 first, nnz last, none decreasing. All of them before any column: one past nnz in the
+  // middle (say 0, 5, 0 with nnz 0) would send the column check past the end of the arrays.
+  static absl::Status RowPointers(const int32_t* outer, int64_t rows, int64_t nnz) {
+    if (outer[0] != 0 || outer[rows] != nnz) return DataLoss("row pointers inconsistent");
+    for (int64_t r = 0; r < rows; ++r) {
+      if (outer[r + 1] < outer[r]) return DataLoss("row pointers decrease");
+    }
+    return absl::OkStatus();
+  }
+
+  // `outer`: checked row pointers, alive while columns are checked.
+  RowsCheck(const int32_t* outer, int64_t cols) : outer_(outer), cols_(cols) {}
+
+  // Each in [0, cols) and ascending within its row.
+  absl::Status Columns(const int32_t* cols, int64_t n) {
+    for (int64_t i = 0; i < n; ++i, ++q_) {
+      while (outer_[row_ + 1] <= q_) ++row_;
+      const int32_t c = cols[i];
+      if (c < 0 || c >= cols_ || (q_ > outer_[row_] && c <= previous_)) {
+        return DataLoss(absl::StrFormat("row %d: column indices invalid", row_));
+      }
+      previous_ = c;
+    }
+    return absl::OkStatus();
+  }
+
+  static absl::Status Values(const float* values, int64_t n) {
+    for (int64_t q = 0; q < n; ++q) {
+      if (!std::isfinite(values[q])) return DataLoss("non-finite value in U");
+    }
+    return absl::OkStatus();
+  }
+
+ private:
+  const int32_t* outer_;
+  int64_t cols_;
+  int64_t q_ = 0;    // entries seen
+  int64_t row_ = 0;  // the row of entry q_
+  int32_t previous_ = 0;
+};
+
+// U's three sections into U.
+absl::Status ReadRows(Source& src, uint64_t* offset, const Header& h, BasisU& U) {
+  U.resize(h.rows, h.cols);
+  U.resizeNonZeros(h.nnz);
+  const uint64_t nnz = static_cast<uint64_t>(h.nnz);
+  const SectionPlan plans[] = {
+      {kRowPointers, U.outerIndexPtr(), 4 * (static_cast<uint64_t>(h.rows) + 1)},
+      {kColumns, U.innerIndexPtr(), 4 * nnz},
+      {kValues, U.valuePtr(), 4 * nnz},
+  };
+  for (const SectionPlan& plan : plans) {
+    if (absl::Status s = ReadSection(src, offset, plan); !s.ok()) return s;
+  }
+  if (absl::Status s = RowsCheck::RowPointers(U.outerIndexPtr(), h.rows, h.nnz); !s.ok()) return s;
+  RowsCheck check(U.outerIndexPtr(), h.cols);
+  if (absl::Status s = check.Columns(U.innerIndexPtr(), h.nnz); !s.ok()) return s;
+  return RowsCheck::Values(U.valuePtr(), h.nnz);
+}
+
+// U's three sections to `sink`, checked piece by piece; U keeps its k x d dimensions only.
+absl::Status StreamRows(Source& src, uint64_t* offset, const Header& h, int32_t dofs_per_face,
+                        BasisU& U, BasisRowsSink& sink) {
+  U.resize(h.rows, h.cols);
+  U.makeCompressed();
+  std::vector<int32_t> outer(static_cast<size_t>(h.rows) + 1);
+  const uint64_t nnz = static_cast<uint64_t>(h.nnz);
+  if (absl::Status s = ReadSection(src, offset, {kRowPointers, outer.data(), 4 * outer.size()});
+      !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = RowsCheck::RowPointers(outer.data(), h.rows, h.nnz); !s.ok()) return s;
+  sink.Begin(h.rows, h.cols, dofs_per_face, outer);
+  RowsCheck check(outer.data(), h.cols);
+  const size_t chunk = static_cast<size_t>(std::min<uint64_t>(kReadChunk, 4 * nnz)) / 4;
+  {
+    std::vector<int32_t> cols(chunk);
+    absl::Status s = ReadSectionWith(
+        src, offset, kColumns, 4 * nnz,
+        [&](uint64_t, size_t) { return reinterpret_cast<char*>(cols.data()); },
+        [&](const char*, size_t n) {
+          absl::Status checked = check.Columns(cols.data(), static_cast<int64_t>(n / 4));
+          if (checked.ok()) sink.AddColumns(cols.data(), static_cast<int64_t>(n / 4));
+          return checked;
+        });
+    if (!s.ok()) return s;
+  }
+  std::vector<float> values(chunk);
+  return ReadSectionWith(
+      src, offset, kValues, 4 * nnz,
+      [&](uint64_t, size_t) { return reinterpret_cast<char*>(values.data()); },
+      [&](const char*, size_t n) {
+        absl::Status checked = RowsCheck::Values(values.data(), static_cast<int64_t>(n / 4));
+        if (checked.ok()) sink.AddValues(values.data(), static_cast<int64_t>(n / 4));
+        return checked;
+      });
+}
+
+// The format from `src`; U's arrays into the basis, or to `rows` when given.
+absl::StatusOr<LoadedBasis> Decode(Source& src, BasisRowsSink* rows) {
   uint64_t offset = 0;
   absl::StatusOr<Header> hs = ReadHeader(src, &offset);
   if (!hs.ok()) return hs.status();
@@ -425,6 +548,10 @@ absl::StatusOr<LoadedBasis> Decode(Source& src) {
   out.mesh_id = h.mesh_id;
   Basis& b = out.basis;
   b.type = FieldType{static_cast<FieldKind>(h.field_kind), h.field_n};
+  const int32_t dofs_per_face = b.type.dofs_per_face();
+  if (h.rows % dofs_per_face != 0) {
+    return DataLoss(absl::StrFormat("%d rows for %d DOFs per face", h.rows, dofs_per_face));
+  }
   b.params.dimension = h.dimension;
   if (h.has_fields_per_region) b.params.fields_per_region = h.fields_per_region;
   b.params.sigma = h.sigma;
@@ -446,40 +573,18 @@ absl::StatusOr<LoadedBasis> Decode(Source& src) {
   b.sample_faces.resize(h.num_regions);
   b.local_eigenvalues.resize(h.dimension);
   b.params.face_weights.resize(h.num_weights);
-  b.U.resize(h.rows, h.cols);
-  b.U.resizeNonZeros(h.nnz);
   const SectionPlan plans[] = {
       {kSamples, b.sample_faces.data(), payload[0]},
       {kEigenvalues, b.local_eigenvalues.data(), payload[1]},
       {kWeights, b.params.face_weights.data(), payload[2]},
-      {kRowPointers, b.U.outerIndexPtr(), payload[3]},
-      {kColumns, b.U.innerIndexPtr(), payload[4]},
-      {kValues, b.U.valuePtr(), payload[5]},
   };
   for (const SectionPlan& plan : plans) {
     if (absl::Status s = ReadSection(src, &offset, plan); !s.ok()) return s;
   }
-  // Structure (a damaged-but-checksummed file must not crash later users of U).
-  const int32_t* outer = b.U.outerIndexPtr();
-  const int32_t* inner = b.U.innerIndexPtr();
-  if (outer[0] != 0 || outer[h.rows] != h.nnz) return DataLoss("row pointers inconsistent");
-  // All row pointers first: one past nnz in the middle (say 0, 5, 0 with nnz 0) would send the
-  // column check below past the end of the arrays.
-  for (int64_t r = 0; r < h.rows; ++r) {
-    if (outer[r + 1] < outer[r]) return DataLoss("row pointers decrease");
-  }
-  for (int64_t r = 0; r < h.rows; ++r) {
-    for (int32_t q = outer[r]; q < outer[r + 1]; ++q) {
-      if (inner[q] < 0 || inner[q] >= h.cols || (q > outer[r] && inner[q] <= inner[q - 1])) {
-        return DataLoss(absl::StrFormat("row %d: column indices invalid", r));
-      }
-    }
-  }
-  const float* values = b.U.valuePtr();
-  for (int64_t q = 0; q < h.nnz; ++q) {
-    if (!std::isfinite(values[q])) return DataLoss("non-finite value in U");
-  }
-  const int64_t faces = h.rows / b.type.dofs_per_face();
+  absl::Status read = rows == nullptr ? ReadRows(src, &offset, h, b.U)
+                                      : StreamRows(src, &offset, h, dofs_per_face, b.U, *rows);
+  if (!read.ok()) return read;
+  const int64_t faces = h.rows / dofs_per_face;
   for (int32_t s : b.sample_faces) {
     if (s < 0 || s >= faces) return DataLoss("sample face out of range");
   }
@@ -508,10 +613,19 @@ absl::StatusOr<std::string> EncodeBasis(const Basis& basis, std::string_view mes
 
 absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes) {
   StringSource src(bytes);
-  return Decode(src);
+  return Decode(src, nullptr);
 }
 
-absl::StatusOr<LoadedBasis> DecodeBasisFrom(BasisByteSource& src) { return Decode(src); }
+absl::StatusOr<LoadedBasis> DecodeBasisFrom(BasisByteSource& src) { return Decode(src, nullptr); }
+
+absl::StatusOr<LoadedBasis> DecodeBasisFrom(BasisByteSource& src, BasisRowsSink& rows) {
+  return Decode(src, &rows);
+}
+
+absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes, BasisRowsSink& rows) {
+  StringSource src(bytes);
+  return Decode(src, &rows);
+}
 
 absl::Status SaveBasisFile(const std::string& path, const Basis& basis, std::string_view mesh_id) {
   absl::StatusOr<AtomicFileWriter> out = AtomicFileWriter::Create(path);
@@ -524,7 +638,7 @@ absl::Status SaveBasisFile(const std::string& path, const Basis& basis, std::str
 absl::StatusOr<LoadedBasis> LoadBasisFile(const std::string& path) {
   absl::StatusOr<FileSource> src = OpenSource(path);
   if (!src.ok()) return src.status();
-  return Decode(*src);
+  return Decode(*src, nullptr);
 }
 
 absl::StatusOr<BasisFileInfo> ReadBasisFileInfo(const std::string& path) {

@@ -5,6 +5,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -70,6 +71,26 @@ class BasisByteSource {
 };
 // The format from `src`, as DecodeBasis: no copy of the bytes beside the basis.
 absl::StatusOr<LoadedBasis> DecodeBasisFrom(BasisByteSource& src);
+
+// Where DecodeBasisFrom can send U's CSR arrays instead of keeping them: a daemon builds its
+// face-major copy of U as the file streams by (LiftPlan::StreamBuilder) and never holds U's CSR
+// arrays. Everything a sink gets has passed the checks of a loaded U (see above): the row
+// pointers before it gets any column, each column before it gets any value. It is called from
+// the decoding thread, in file order.
+class BasisRowsSink {
+ public:
+  virtual ~BasisRowsSink() = default;
+  // First: U's size (rows a multiple of dofs_per_face) and its row pointers.
+  virtual void Begin(int64_t rows, int64_t cols, int32_t dofs_per_face,
+                     const std::vector<int32_t>& row_pointers) = 0;
+  // Then U's column indices, in pieces of any size, in order; then its values likewise.
+  virtual void AddColumns(const int32_t* cols, int64_t n) = 0;
+  virtual void AddValues(const float* vals, int64_t n) = 0;
+};
+// The same, U's arrays sent to `rows` as they are read: the basis's U then has its k x d
+// dimensions and no nonzeros. After an error the sink may have got part of U.
+absl::StatusOr<LoadedBasis> DecodeBasisFrom(BasisByteSource& src, BasisRowsSink& rows);
+absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes, BasisRowsSink& rows);
 
 }  // namespace fieldspace
 

@@ -72,6 +72,109 @@ LiftPlan LiftPlan::Build(const BasisMatrix& U, int32_t dofs_per_face) {
   return plan;
 }
 
+void LiftPlan::StreamBuilder::Begin(int64_t rows, int64_t cols, int32_t dofs_per_face,
+                                    const std::vector<int32_t>& row_pointers) {
+  plan_.p_ = dofs_per_face;
+  num_faces_ = rows / dofs_per_face;
+  cols_ = cols;
+  outer_ = row_pointers;
+  const int64_t nnz = outer_.back();
+  plan_.begin_.reserve(num_faces_ + 1);
+  // Exact when every face's rows share their columns (the union of p rows of n entries has n).
+  const int64_t expected = nnz / dofs_per_face;
+  if (cols <= 65536) {
+    plan_.cols16_.reserve(expected);
+  } else {
+    plan_.cols32_.reserve(expected);
+  }
+  CloseFaces();  // faces without entries before the first column
+}
+
+void LiftPlan::StreamBuilder::AddColumns(const int32_t* cols, int64_t n) {
+  const int64_t p = plan_.p_;
+  while (n > 0 && next_face_ < num_faces_) {
+    const int64_t take = std::min<int64_t>(n, outer_[p * (next_face_ + 1)] - columns_seen_);
+    face_columns_.insert(face_columns_.end(), cols, cols + take);
+    cols += take;
+    n -= take;
+    columns_seen_ += take;
+    CloseFaces();
+  }
+}
+
+void LiftPlan::StreamBuilder::CloseFaces() {
+  const int64_t p = plan_.p_;
+  std::vector<int32_t> merged;
+  while (next_face_ < num_faces_ && outer_[p * (next_face_ + 1)] <= columns_seen_) {
+    const int64_t f = next_face_;
+    const int32_t* face = face_columns_.data();
+    const int64_t first = outer_[p * f];
+    const auto row_begin = [&](int64_t c) { return face + (outer_[p * f + c] - first); };
+    const auto row_size = [&](int64_t c) { return outer_[p * f + c + 1] - outer_[p * f + c]; };
+    bool regular = true;
+    for (int64_t c = 1; c < p && regular; ++c) {
+      regular = row_size(c) == row_size(0) &&
+                std::equal(row_begin(c), row_begin(c) + row_size(c), row_begin(0));
+    }
+    const int32_t* list = row_begin(0);
+    int64_t size = row_size(0);
+    if (!regular) {
+      merged.clear();
+      for (int64_t c = 0; c < p; ++c) {
+        merged.insert(merged.end(), row_begin(c), row_begin(c) + row_size(c));
+      }
+      std::sort(merged.begin(), merged.end());
+      merged.erase(std::unique(merged.begin(), merged.end()), merged.end());
+      irregular_faces_.push_back(f);
+      irregular_start_.push_back(static_cast<int64_t>(places_.size()));
+      for (int64_t c = 0; c < p; ++c) {
+        for (const int32_t* e = row_begin(c); e != row_begin(c) + row_size(c); ++e) {
+          places_.push_back(static_cast<int32_t>(
+              std::lower_bound(merged.begin(), merged.end(), *e) - merged.begin()));
+        }
+      }
+      list = merged.data();
+      size = static_cast<int64_t>(merged.size());
+    }
+    if (cols_ <= 65536) {
+      plan_.cols16_.insert(plan_.cols16_.end(), list, list + size);
+    } else {
+      plan_.cols32_.insert(plan_.cols32_.end(), list, list + size);
+    }
+    plan_.begin_.push_back(plan_.begin_.back() + size);
+    face_columns_.clear();
+    ++next_face_;
+  }
+}
+
+void LiftPlan::StreamBuilder::AddValues(const float* vals, int64_t n) {
+  const int64_t p = plan_.p_;
+  if (plan_.vals_.empty()) plan_.vals_.assign(plan_.begin_.back() * p, 0.0f);
+  for (int64_t i = 0; i < n; ++i, ++values_seen_) {
+    const int64_t q = values_seen_;
+    while (outer_[value_row_ + 1] <= q) ++value_row_;
+    const int64_t f = value_row_ / p;
+    const int64_t c = value_row_ % p;
+    while (next_irregular_ < irregular_faces_.size() && irregular_faces_[next_irregular_] < f) {
+      ++next_irregular_;
+    }
+    const int64_t place =
+        next_irregular_ < irregular_faces_.size() && irregular_faces_[next_irregular_] == f
+            ? places_[irregular_start_[next_irregular_] + (q - outer_[p * f])]
+            : q - outer_[value_row_];
+    plan_.vals_[(plan_.begin_[f] + place) * p + c] = vals[i];
+  }
+}
+
+absl::StatusOr<LiftPlan> LiftPlan::StreamBuilder::Finish() && {
+  const int64_t nnz = outer_.empty() ? 0 : outer_.back();
+  if (outer_.empty() || next_face_ != num_faces_ || columns_seen_ != nnz || values_seen_ != nnz) {
+    return absl::FailedPreconditionError("LiftPlan::StreamBuilder: U did not come whole");
+  }
+  if (plan_.vals_.empty()) plan_.vals_.assign(plan_.begin_.back() * plan_.p_, 0.0f);
+  return std::move(plan_);
+}
+
 void LiftPlan::AppendRow(int64_t face, int32_t c, std::vector<int>* cols,
                          std::vector<float>* vals) const {
   ForEachEntry(face, [&](int col, const float* v) {

@@ -5,6 +5,8 @@
 #include <vector>
 
 #include "Eigen/SparseCore"
+#include "absl/status/statusor.h"
+#include "core/basis/basis_io.h"
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -27,6 +29,12 @@ class LiftPlan {
 
   int64_t num_faces() const { return static_cast<int64_t>(begin_.size()) - 1; }
   int32_t dofs_per_face() const { return p_; }
+  // Builds a plan from U's CSR arrays as a basis file streams them by (DecodeBasisFrom with a
+  // BasisRowsSink), equal to Build's from the decoded U: U itself is never held, only the plan,
+  // the row pointers and, for faces whose rows differ in their columns (practically none), each
+  // entry's place in the face's column list. Sequential: the file's read is the bound.
+  class StreamBuilder;
+
   // out[0 .. p) = (U x) at the DOFs of `face`; x has d entries. No bounds checks.
   void LiftFace(const double* x, int64_t face, double* out) const {
     if (cols16_.empty()) {
@@ -98,11 +106,43 @@ class LiftPlan {
     for (int32_t c = 0; c < p_; ++c) out[c] = acc[c];
   }
 
+  friend class StreamBuilder;
+
   int32_t p_ = 1;
   std::vector<int64_t> begin_{0};  // num_faces + 1 offsets into the column lists
   std::vector<uint16_t> cols16_;   // used when d <= 65536
   std::vector<int32_t> cols32_;    // otherwise
   std::vector<float> vals_;        // per column entry, p values (one per row of the face)
+};
+
+class LiftPlan::StreamBuilder final : public BasisRowsSink {
+ public:
+  void Begin(int64_t rows, int64_t cols, int32_t dofs_per_face,
+             const std::vector<int32_t>& row_pointers) override;
+  void AddColumns(const int32_t* cols, int64_t n) override;
+  void AddValues(const float* vals, int64_t n) override;
+  // The plan, once every column and value came; FailedPrecondition before that.
+  absl::StatusOr<LiftPlan> Finish() &&;
+
+ private:
+  // Appends the column lists of faces [next_face_, ...) whose entries have all come.
+  void CloseFaces();
+
+  LiftPlan plan_;
+  int64_t num_faces_ = 0;
+  int64_t cols_ = 0;
+  std::vector<int32_t> outer_;         // U's row pointers
+  int64_t columns_seen_ = 0;           // column indices come so far
+  int64_t values_seen_ = 0;            // values come so far
+  int64_t next_face_ = 0;              // the first face whose column list is not made
+  std::vector<int32_t> face_columns_;  // the columns of next_face_'s rows come so far
+  // Faces whose rows differ in their columns, ascending, where their entries' places in the
+  // face's column list start in `places_`, and those places (entry order).
+  std::vector<int64_t> irregular_faces_, irregular_start_;
+  std::vector<int32_t> places_;
+  // While values come: the current entry's row, and the next irregular face.
+  int64_t value_row_ = 0;
+  size_t next_irregular_ = 0;
 };
 
 }  // namespace fieldspace

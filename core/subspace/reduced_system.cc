@@ -597,12 +597,38 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
 absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
     std::shared_ptr<const Basis> basis, Eigen::VectorXd mass, ReducedMatrices matrices,
     const ReducedSystemOptions& options) {
+  return FromMatrices(std::move(basis), std::nullopt, std::move(mass), std::move(matrices),
+                      options);
+}
+
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
+    std::shared_ptr<const Basis> basis, LiftPlan plan, Eigen::VectorXd mass,
+    ReducedMatrices matrices, const ReducedSystemOptions& options) {
+  return FromMatrices(std::move(basis), std::move(plan), std::move(mass), std::move(matrices),
+                      options);
+}
+
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::FromMatrices(
+    std::shared_ptr<const Basis> basis, std::optional<LiftPlan> plan, Eigen::VectorXd mass,
+    ReducedMatrices matrices, const ReducedSystemOptions& options) {
   const auto t_start = std::chrono::steady_clock::now();
   RETURN_IF_ERROR(CheckBasisAndOptions(basis.get(), options));
+  if (plan.has_value()) {
+    if (basis->U.nonZeros() != 0) {
+      return absl::InvalidArgumentError("ReducedSystem: a basis with rows given with a LiftPlan");
+    }
+    if (plan->dofs_per_face() != basis->type.dofs_per_face() ||
+        plan->num_faces() * plan->dofs_per_face() != basis->U.rows()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("ReducedSystem: a LiftPlan of ", plan->num_faces(), " faces of ",
+                       plan->dofs_per_face(), " DOFs for a basis of ", basis->U.rows(), " rows"));
+    }
+  }
   const int64_t d = basis->U.cols();
   if (options.threads > 0) {
     return InArena(options, [&](const ReducedSystemOptions& inner) {
-      return Build(std::move(basis), std::move(mass), std::move(matrices), inner);
+      return FromMatrices(std::move(basis), std::move(plan), std::move(mass), std::move(matrices),
+                          inner);
     });
   }
   RETURN_IF_ERROR(CheckPositiveVector(mass, basis->U.rows(), "ReducedSystem: operator mass"));
@@ -613,12 +639,14 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   sys->bilaplacian_ = std::move(matrices.bilaplacian);
   sys->mass_matrix_ = std::move(matrices.mass_matrix);
   sys->stats_.products_given = true;
-  return Complete(std::move(sys), std::move(basis), std::move(mass), options, t_start);
+  return Complete(std::move(sys), std::move(basis), std::move(mass), options, t_start,
+                  std::move(plan));
 }
 
 absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Complete(
     std::shared_ptr<ReducedSystem> sys, std::shared_ptr<const Basis> basis, Eigen::VectorXd mass,
-    const ReducedSystemOptions& options, std::chrono::steady_clock::time_point t_start) {
+    const ReducedSystemOptions& options, std::chrono::steady_clock::time_point t_start,
+    std::optional<LiftPlan> plan) {
   const BasisMatrix& U = basis->U;
   const int64_t k = U.rows();
   const int64_t d = U.cols();
@@ -656,11 +684,15 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Complete(
   }
   sys->mass_factor_ = std::make_unique<SupernodalFactor>(*std::move(mass_factor));
   sys->stats_.mass_factor_seconds = SecondsSince(t_mass);
-  sys->lift_plan_ = LiftPlan::Build(U, basis->type.dofs_per_face());
+  const bool plan_given = plan.has_value();
+  sys->lift_plan_ = plan_given ? *std::move(plan) : LiftPlan::Build(U, basis->type.dofs_per_face());
   const int64_t pattern_bytes = 3 * (sys->stats_.pattern_nonzeros * 12 + (d + 1) * 4);
   sys->stats_.memory_bytes = pattern_bytes + sys->lift_plan_.memory_bytes() + k * 8 +
                              sys->symbolic_->memory_bytes() + sys->symbolic_->factor_nonzeros() * 8;
-  if (options.release_basis_rows) {
+  if (plan_given) {  // the basis came without rows
+    sys->basis_ = std::move(basis);
+    sys->rows_released_ = true;
+  } else if (options.release_basis_rows) {
     sys->basis_ = std::make_shared<const Basis>(WithoutRows(*basis));
     sys->rows_released_ = true;
   } else {

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -93,6 +94,14 @@ class ReducedSystem {
       std::shared_ptr<const Basis> basis, Eigen::VectorXd mass, ReducedMatrices matrices,
       const ReducedSystemOptions& options = {});
 
+  // The same for a basis read as a LiftPlan (LiftPlan::StreamBuilder from the basis file, what a
+  // daemon loads): `basis` has U's k x d dimensions and no nonzeros, `plan` is U. The system is
+  // one built with release_basis_rows. InvalidArgument also when `basis` has nonzeros or `plan`
+  // is not k x d with the basis's DOFs per face.
+  static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Build(
+      std::shared_ptr<const Basis> basis, LiftPlan plan, Eigen::VectorXd mass,
+      ReducedMatrices matrices, const ReducedSystemOptions& options = {});
+
   // The basis; without its rows (U has no nonzeros) when built with release_basis_rows: read them
   // through BasisRowOf.
   const Basis& basis() const { return *basis_; }
@@ -130,11 +139,16 @@ class ReducedSystem {
 
  private:
   ReducedSystem() = default;
-  // The part of both Builds after the matrices: counts, analysis, U^T M U's factorization, the
-  // lift plan.
+  // Both Builds from given matrices: `plan` is U when given (the basis then without rows).
+  static absl::StatusOr<std::shared_ptr<const ReducedSystem>> FromMatrices(
+      std::shared_ptr<const Basis> basis, std::optional<LiftPlan> plan, Eigen::VectorXd mass,
+      ReducedMatrices matrices, const ReducedSystemOptions& options);
+  // The part of the Builds after the matrices: counts, analysis, U^T M U's factorization, the
+  // lift plan (`plan`, or built from U when it has none).
   static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Complete(
       std::shared_ptr<ReducedSystem> sys, std::shared_ptr<const Basis> basis, Eigen::VectorXd mass,
-      const ReducedSystemOptions& options, std::chrono::steady_clock::time_point t_start);
+      const ReducedSystemOptions& options, std::chrono::steady_clock::time_point t_start,
+      std::optional<LiftPlan> plan = std::nullopt);
 
   std::shared_ptr<const Basis> basis_;
   bool rows_released_ = false;

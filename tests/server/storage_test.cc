@@ -14,6 +14,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/basis/basis_io.h"
+#include "core/subspace/projection.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/compute_pool.h"
@@ -542,6 +543,12 @@ TEST_F(RegistryRepairTest, RestartServesTheStoredReducedMatrices) {
             Eigen::MatrixXd((*recomputed)->bilaplacian()));
   EXPECT_EQ(Eigen::MatrixXd(from_store.mass_matrix()),
             Eigen::MatrixXd((*recomputed)->mass_matrix()));
+  // U went from the file straight into the served LiftPlan: the same lifts, bit for bit.
+  const Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(20, -1.0, 2.0);
+  auto lifted = Lift(from_store, x);
+  auto expected = Lift((*recomputed)->basis(), x);
+  ASSERT_TRUE(lifted.ok() && expected.ok());
+  EXPECT_EQ(*lifted, *expected);
   first.reset();
   computed_basis->reset();
   // Damaged: served all the same, from a product pass, and the file is good again.
@@ -567,6 +574,31 @@ TEST_F(RegistryRepairTest, RestartServesTheStoredReducedMatrices) {
   ASSERT_TRUE(absent.ok()) << absent.status();
   EXPECT_FALSE((*absent)->system->stats().products_given);
   EXPECT_TRUE(fs::exists(store_->ReducedPath(basis_id)));
+  // Intact but another basis's (d = 12): U is read again whole for the product pass, and the
+  // file written anew.
+  fourth.reset();
+  absent->reset();
+  auto fewer = std::make_shared<Basis>((*recomputed)->basis());
+  fewer->U = Eigen::SparseMatrix<float, Eigen::ColMajor>(fewer->U).leftCols(12);
+  fewer->U.makeCompressed();
+  fewer->params.dimension = 12;
+  fewer->local_eigenvalues.resize(12);
+  auto foreign = ReducedSystem::Build(fewer, *op, one_thread);
+  ASSERT_TRUE(foreign.ok()) << foreign.status();
+  ASSERT_TRUE(
+      store_->SaveReduced(basis_id, file->payload_hash, EncodeReducedMatrices(**foreign)).ok());
+  auto fifth = Start();
+  auto refit = fifth->GetBasis(basis_id);
+  ASSERT_TRUE(refit.ok()) << refit.status();
+  EXPECT_FALSE((*refit)->system->stats().products_given);
+  EXPECT_EQ(Eigen::MatrixXd((*refit)->system->bilaplacian()),
+            Eigen::MatrixXd((*recomputed)->bilaplacian()));
+  EXPECT_EQ((*refit)->system->basis().U.nonZeros(), 0);
+  auto rewritten = store_->LoadReduced(basis_id, file->payload_hash);
+  ASSERT_TRUE(rewritten.ok()) << rewritten.status();
+  auto matrices = DecodeReducedMatrices(*rewritten);
+  ASSERT_TRUE(matrices.ok()) << matrices.status();
+  EXPECT_EQ(matrices->bilaplacian.rows(), 20);
 }
 
 TEST_F(RegistryRepairTest, TruncatedMeshRepairedByUploadServesItsUndamagedBasisAgain) {

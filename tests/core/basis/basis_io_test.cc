@@ -2,10 +2,13 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -137,6 +140,92 @@ TEST_F(BasisIoTest, RowPointersPastTheEndAreDataLossNotARead) {
   auto bytes = EncodeBasis(b, "mesh");
   ASSERT_TRUE(bytes.ok()) << bytes.status();
   EXPECT_THAT(DecodeBasis(*bytes), StatusIs(absl::StatusCode::kDataLoss));
+}
+
+// What DecodeBasis sends a BasisRowsSink.
+struct RecordingSink final : BasisRowsSink {
+  void Begin(int64_t r, int64_t c, int32_t p, const std::vector<int32_t>& pointers) override {
+    ++begun;
+    rows = r;
+    cols = c;
+    dofs_per_face = p;
+    outer = pointers;
+  }
+  void AddColumns(const int32_t* c, int64_t n) override { columns.insert(columns.end(), c, c + n); }
+  void AddValues(const float* v, int64_t n) override { values.insert(values.end(), v, v + n); }
+  // Every column it got in range and ascending within its row, every value finite.
+  bool AllChecked() const {
+    for (int64_t r = 0; r + 1 < static_cast<int64_t>(outer.size()); ++r) {
+      for (int64_t q = outer[r]; q < outer[r + 1] && q < static_cast<int64_t>(columns.size());
+           ++q) {
+        if (columns[q] < 0 || columns[q] >= cols || (q > outer[r] && columns[q] <= columns[q - 1]))
+          return false;
+      }
+    }
+    return std::all_of(values.begin(), values.end(), [](float v) { return std::isfinite(v); });
+  }
+  int begun = 0;
+  int64_t rows = 0, cols = 0;
+  int32_t dofs_per_face = 0;
+  std::vector<int32_t> outer, columns;
+  std::vector<float> values;
+};
+
+// A daemon's load (LiftPlan::StreamBuilder as the sink): U's arrays go to the sink as stored,
+// the basis keeps U's dimensions only, and a damaged file is the same DataLoss as without a sink,
+// the sink never having got a column or value that failed the checks.
+TEST_F(BasisIoTest, RowsStreamedToASink) {
+  auto bytes = EncodeBasis(basis_, "mesh:abc");
+  ASSERT_TRUE(bytes.ok()) << bytes.status();
+  RecordingSink sink;
+  auto decoded = DecodeBasis(*bytes, sink);
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  EXPECT_EQ(decoded->mesh_id, "mesh:abc");
+  Basis without_rows = basis_;
+  without_rows.U.resize(basis_.U.rows(), basis_.U.cols());
+  without_rows.U.makeCompressed();
+  ExpectSame(without_rows, decoded->basis);
+  EXPECT_EQ(sink.begun, 1);
+  EXPECT_EQ(sink.rows, basis_.U.rows());
+  EXPECT_EQ(sink.cols, basis_.U.cols());
+  EXPECT_EQ(sink.dofs_per_face, 2);
+  const auto& U = basis_.U;
+  EXPECT_EQ(sink.outer, std::vector<int32_t>(U.outerIndexPtr(), U.outerIndexPtr() + U.rows() + 1));
+  EXPECT_EQ(sink.columns,
+            std::vector<int32_t>(U.innerIndexPtr(), U.innerIndexPtr() + U.nonZeros()));
+  EXPECT_EQ(sink.values, std::vector<float>(U.valuePtr(), U.valuePtr() + U.nonZeros()));
+
+  const std::string original = *bytes;
+  for (size_t i = 0; i < original.size(); i += (i < 512 || i + 512 > original.size()) ? 1 : 37) {
+    std::string damaged = original;
+    damaged[i] = static_cast<char>(damaged[i] ^ 0x5A);
+    RecordingSink got;
+    EXPECT_THAT(DecodeBasis(damaged, got), StatusIs(absl::StatusCode::kDataLoss)) << "byte " << i;
+    EXPECT_TRUE(got.AllChecked()) << "byte " << i;
+  }
+  // Checksummed but wrong: row pointers past the end (no Begin), a column out of range, a NaN.
+  const auto expect_refused = [&](const Basis& b, const char* what, int begun) {
+    auto encoded = EncodeBasis(b, "mesh");
+    ASSERT_TRUE(encoded.ok()) << encoded.status();
+    EXPECT_THAT(DecodeBasis(*encoded), StatusIs(absl::StatusCode::kDataLoss)) << what;
+    RecordingSink got;
+    auto r = DecodeBasis(*encoded, got);
+    EXPECT_THAT(r, StatusIs(absl::StatusCode::kDataLoss)) << what;
+    EXPECT_EQ(r.status().message(), DecodeBasis(*encoded).status().message()) << what;
+    EXPECT_EQ(got.begun, begun) << what;
+    EXPECT_TRUE(got.AllChecked()) << what;
+  };
+  Basis past_end = basis_;
+  past_end.U.resize(basis_.U.rows(), basis_.U.cols());
+  past_end.U.resizeNonZeros(0);
+  past_end.U.outerIndexPtr()[1] = 5;
+  expect_refused(past_end, "row pointers", 0);
+  Basis bad_column = basis_;
+  bad_column.U.innerIndexPtr()[bad_column.U.nonZeros() / 2] = static_cast<int32_t>(U.cols());
+  expect_refused(bad_column, "column", 1);
+  Basis nan = basis_;
+  nan.U.valuePtr()[7] = std::numeric_limits<float>::quiet_NaN();
+  expect_refused(nan, "NaN", 1);
 }
 
 TEST_F(BasisIoTest, TruncatedAndExtendedFilesAreDetected) {

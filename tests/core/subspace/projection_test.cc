@@ -153,6 +153,109 @@ TEST(LiftPlanTest, TensorRowsWithDifferentSupportsAndWideIndices) {
   EXPECT_EQ(Eigen::Map<Eigen::VectorXd>(out.data(), k), *expected);
 }
 
+// LiftPlan::StreamBuilder fed U's CSR arrays in pieces of `piece` elements (0: whole), as a
+// basis file streams them.
+LiftPlan StreamedPlan(const BasisMatrix& U, int32_t p, int64_t piece) {
+  LiftPlan::StreamBuilder builder;
+  const int64_t nnz = U.nonZeros();
+  builder.Begin(U.rows(), U.cols(), p,
+                std::vector<int32_t>(U.outerIndexPtr(), U.outerIndexPtr() + U.rows() + 1));
+  const int64_t step = piece > 0 ? piece : std::max<int64_t>(1, nnz);
+  for (int64_t q = 0; q < nnz; q += step) {
+    builder.AddColumns(U.innerIndexPtr() + q, std::min(step, nnz - q));
+  }
+  for (int64_t q = 0; q < nnz; q += step) {
+    builder.AddValues(U.valuePtr() + q, std::min(step, nnz - q));
+  }
+  absl::StatusOr<LiftPlan> plan = std::move(builder).Finish();
+  EXPECT_TRUE(plan.ok()) << plan.status();
+  return plan.ok() ? *std::move(plan) : LiftPlan();
+}
+
+// The same layout, entry for entry, and bit-identical lifts.
+void ExpectSamePlan(const LiftPlan& a, const LiftPlan& b, int64_t d) {
+  ASSERT_EQ(a.num_faces(), b.num_faces());
+  ASSERT_EQ(a.dofs_per_face(), b.dofs_per_face());
+  EXPECT_EQ(a.memory_bytes(), b.memory_bytes());
+  const int32_t p = a.dofs_per_face();
+  for (int64_t f = 0; f < a.num_faces(); ++f) {
+    std::vector<std::pair<int, std::vector<float>>> ea, eb;
+    a.ForEachEntry(f,
+                   [&](int col, const float* v) { ea.emplace_back(col, std::vector(v, v + p)); });
+    b.ForEachEntry(f,
+                   [&](int col, const float* v) { eb.emplace_back(col, std::vector(v, v + p)); });
+    ASSERT_EQ(ea, eb) << "face " << f;
+  }
+  const Eigen::VectorXd x = Eigen::VectorXd::Random(d);
+  std::vector<double> la(a.num_faces() * p), lb(b.num_faces() * p);
+  a.LiftAll(x.data(), la.data());
+  b.LiftAll(x.data(), lb.data());
+  EXPECT_EQ(la, lb);
+}
+
+// A daemon reads a stored basis straight into its LiftPlan: the plan equals Build's from U, for
+// faces whose rows share their columns or not, empty rows and faces, 16- and 32-bit column
+// indices, in whatever pieces the file's chunks cut the arrays.
+TEST(LiftPlanTest, StreamedPlanEqualsThePlanOfU) {
+  {  // A built basis (2 DOFs per face) and a random one.
+    const TriangleMesh mesh = Icosphere(2);
+    const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+    BasisOptions options;
+    options.params.dimension = 40;
+    absl::StatusOr<Basis> basis = BuildBasis(mesh, op, options);
+    ASSERT_TRUE(basis.ok()) << basis.status();
+    const auto random = RandomBasis(FieldType::Vector(), op.dofs(), 30, 9, 7);
+    for (const BasisMatrix* U : {&basis->U, &random->U}) {
+      const LiftPlan built = LiftPlan::Build(*U, 2);
+      for (int64_t piece : {int64_t{0}, int64_t{1}, int64_t{7}, int64_t{4096}}) {
+        SCOPED_TRACE(piece);
+        ExpectSamePlan(built, StreamedPlan(*U, 2, piece), U->cols());
+      }
+    }
+  }
+  for (const auto& [p, d] : {std::pair{1, 90}, std::pair{2, 300}, std::pair{3, 70000}}) {
+    SCOPED_TRACE(::testing::Message() << p << " DOFs per face, d " << d);
+    // Faces 0-1 and 17-19 without entries, rows of a face sharing their columns (f % 4 == 0),
+    // overlapping (f % 4 == 1), disjoint (f % 4 == 2), one row empty (f % 4 == 3).
+    const int64_t faces = 40, k = p * faces;
+    std::vector<Eigen::Triplet<float>> t;
+    for (int64_t f = 0; f < faces; ++f) {
+      if (f < 2 || (f >= 17 && f < 20)) continue;
+      for (int64_t c = 0; c < p; ++c) {
+        if (f % 4 == 3 && c == p - 1 && p > 1) continue;
+        for (int64_t j = 0; j < 5; ++j) {
+          const int64_t col = f % 4 == 0   ? (f * 13 + j * 17) % d
+                              : f % 4 == 1 ? (f * 13 + (j + c) * 17) % d
+                              : f % 4 == 2 ? (f * 13 + j * 17 + c * 5 * 17) % d
+                                           : (f * 11 + j * 19) % d;
+          t.emplace_back(f * p + c, col, static_cast<float>(1 + f + 0.25 * j - 0.5 * c));
+        }
+      }
+    }
+    BasisMatrix U(k, d);
+    U.setFromTriplets(t.begin(), t.end());
+    U.makeCompressed();
+    const LiftPlan built = LiftPlan::Build(U, p);
+    for (int64_t piece : {int64_t{0}, int64_t{1}, int64_t{3}, int64_t{11}}) {
+      SCOPED_TRACE(piece);
+      ExpectSamePlan(built, StreamedPlan(U, p, piece), d);
+    }
+  }
+  // An empty U: every face without entries.
+  BasisMatrix empty(8, 5);
+  empty.makeCompressed();
+  ExpectSamePlan(LiftPlan::Build(empty, 2), StreamedPlan(empty, 2, 0), 5);
+  // Missing values: refused, not a plan of zeros.
+  const std::shared_ptr<Basis> random = RandomBasis(FieldType::Vector(), 40, 10, 3, 5);
+  const BasisMatrix& U = random->U;
+  LiftPlan::StreamBuilder partial;
+  partial.Begin(U.rows(), U.cols(), 2,
+                std::vector<int32_t>(U.outerIndexPtr(), U.outerIndexPtr() + U.rows() + 1));
+  partial.AddColumns(U.innerIndexPtr(), U.nonZeros());
+  partial.AddValues(U.valuePtr(), U.nonZeros() - 1);
+  EXPECT_THAT(std::move(partial).Finish(), StatusIs(absl::StatusCode::kFailedPrecondition));
+}
+
 TEST_F(ProjectionTest, InvalidInputs) {
   const Eigen::VectorXd x = Eigen::VectorXd::Random(80);
   EXPECT_THAT(Lift(*basis_, Eigen::VectorXd::Zero(79)),

@@ -296,6 +296,75 @@ TEST(ReducedSystemTest, ReleasedRowsServeTheSameResults) {
   }
 }
 
+// What a daemon's load builds (U read from the store straight into a LiftPlan, the reduced
+// matrices from their cache): the system of the basis with U, released rows and all.
+TEST(ReducedSystemTest, BasisReadAsALiftPlan) {
+  const TriangleMesh mesh = Torus(24, 12);
+  for (const FieldType& type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
+    SCOPED_TRACE(type.ToString());
+    const FieldOperator op = MustBuildOperator(mesh, type);
+    std::shared_ptr<const Basis> basis = RandomBasis(type, op.dofs(), 48, 10, 3);
+    auto full = ReducedSystem::Build(basis, op);
+    ASSERT_TRUE(full.ok()) << full.status();
+    const ReducedSystem& a = **full;
+    auto matrices = DecodeReducedMatrices(EncodeReducedMatrices(a));
+    ASSERT_TRUE(matrices.ok()) << matrices.status();
+    auto without_rows = std::make_shared<Basis>(*basis);
+    without_rows->U.resize(basis->U.rows(), basis->U.cols());
+    without_rows->U.makeCompressed();
+    const int32_t p = type.dofs_per_face();
+    auto read =
+        ReducedSystem::Build(without_rows, LiftPlan::Build(basis->U, p), op.mass, *matrices);
+    ASSERT_TRUE(read.ok()) << read.status();
+    const ReducedSystem& b = **read;
+    EXPECT_TRUE(b.basis_rows_released());
+    EXPECT_TRUE(b.stats().products_given);
+    EXPECT_EQ(b.basis().U.nonZeros(), 0);
+    EXPECT_EQ(b.dofs(), a.dofs());
+    EXPECT_EQ(b.dimension(), a.dimension());
+    EXPECT_EQ(Eigen::MatrixXd(b.bilaplacian()), Eigen::MatrixXd(a.bilaplacian()));
+    BasisRowScratch scratch;
+    for (int64_t i = 0; i < a.dofs(); ++i) {
+      const BasisRow u = GetBasisRow(basis->U, i);
+      const BasisRow r = b.BasisRowOf(i, &scratch);
+      ASSERT_EQ(std::vector<int>(r.cols, r.cols + r.size),
+                std::vector<int>(u.cols, u.cols + u.size));
+      ASSERT_EQ(std::vector<float>(r.vals, r.vals + r.size),
+                std::vector<float>(u.vals, u.vals + u.size));
+    }
+    ModelProblem problem;
+    problem.weights.mu_s = 1.0;
+    problem.weights.mu_c = 10.0;
+    problem.constraints.push_back({7, Eigen::VectorXd::Ones(p), 1.0, ConstraintKind::kSoft});
+    problem.constraints.push_back(
+        {300, Eigen::VectorXd::LinSpaced(p, -1.0, 1.0), 1.0, ConstraintKind::kHard});
+    auto sa = SolveReducedModelProblem(a, problem);
+    auto sb = SolveReducedModelProblem(b, problem);
+    ASSERT_TRUE(sa.ok() && sb.ok());
+    EXPECT_LT(RelativeDifference(sb->coefficients, sa->coefficients), 1e-10);
+    auto la = Lift(a, sa->coefficients);
+    auto lb = Lift(b, sa->coefficients);
+    ASSERT_TRUE(la.ok() && lb.ok());
+    EXPECT_EQ(*lb, *la);
+    auto pa = Project(a, RandomVector(a.dofs(), 9));
+    auto pb = Project(b, RandomVector(a.dofs(), 9));
+    ASSERT_TRUE(pa.ok() && pb.ok());
+    EXPECT_LT(RelativeDifference(pb->coefficients, pa->coefficients), 1e-12);
+
+    // A basis that kept its rows, or a plan of another shape: refused.
+    EXPECT_THAT(ReducedSystem::Build(basis, LiftPlan::Build(basis->U, p), op.mass, *matrices),
+                StatusIs(absl::StatusCode::kInvalidArgument));
+    const BasisMatrix fewer = basis->U.topRows(basis->U.rows() - p);
+    EXPECT_THAT(ReducedSystem::Build(without_rows, LiftPlan::Build(fewer, p), op.mass, *matrices),
+                StatusIs(absl::StatusCode::kInvalidArgument));
+    if (p % 2 == 0) {
+      EXPECT_THAT(
+          ReducedSystem::Build(without_rows, LiftPlan::Build(basis->U, p / 2), op.mass, *matrices),
+          StatusIs(absl::StatusCode::kInvalidArgument));
+    }
+  }
+}
+
 TEST(ReducedSystemTest, DamagedOrForeignMatricesAreRefused) {
   const TriangleMesh mesh = Icosphere(2);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
