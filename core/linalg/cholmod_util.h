@@ -7,7 +7,7 @@
 #include "absl/status/statusor.h"
 #include "cholmod.h"
 
-// What the three Cholesky implementations of core/linalg (SparseCholesky, LocalCholesky,
+// What the two Cholesky implementations of core/linalg that use CHOLMOD (SparseCholesky,
 // SupernodalSymbolic) share in talking to CHOLMOD. Included only by core/linalg sources.
 namespace fieldspace::linalg_internal {
 

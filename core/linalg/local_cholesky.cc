@@ -1,14 +1,14 @@
 #include "core/linalg/local_cholesky.h"
 
-#include <cholmod.h>
+#include <amd.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "Eigen/Cholesky"
 #include "Eigen/Core"
 #include "absl/status/statusor.h"
-#include "core/linalg/cholmod_util.h"
 
 namespace fieldspace {
 namespace {
@@ -24,7 +24,7 @@ constexpr int32_t kSmallPanel = 24;     // columns of a supernode
 // the permuted system at x + k * p). P > 0 fixes p at compile time.
 template <int P>
 void ForwardSolve(int32_t p_runtime, int32_t nsuper, const int32_t* super, const int32_t* lpi,
-                  const int32_t* lpx, const int32_t* ls, const double* lx, double* x) {
+                  const int64_t* lpx, const int32_t* ls, const double* lx, double* x) {
   const int32_t p = P > 0 ? P : p_runtime;
   for (int32_t s = 0; s < nsuper; ++s) {
     const int32_t k1 = super[s];
@@ -49,7 +49,7 @@ void ForwardSolve(int32_t p_runtime, int32_t nsuper, const int32_t* super, const
 
 template <int P>
 void BackwardSolve(int32_t p_runtime, int32_t nsuper, const int32_t* super, const int32_t* lpi,
-                   const int32_t* lpx, const int32_t* ls, const double* lx, double* x) {
+                   const int64_t* lpx, const int32_t* ls, const double* lx, double* x) {
   const int32_t p = P > 0 ? P : p_runtime;
   double acc[64];
   for (int32_t s = nsuper - 1; s >= 0; --s) {
@@ -75,28 +75,10 @@ void BackwardSolve(int32_t p_runtime, int32_t nsuper, const int32_t* super, cons
 }
 using ConstMatrixMap = Eigen::Map<const Eigen::MatrixXd, 0, Eigen::OuterStride<>>;
 
-// The supernodal structure of a CHOLMOD symbolic factor (CHOLMOD_INT indices): the fill-reducing
-// permutation, the first column of each supernode, the offsets of its row indices (in ls) and of
-// its values (in lx), and the number of supernodes.
-struct Layout {
-  const int32_t* perm;
-  const int32_t* super;
-  const int32_t* lpi;
-  const int32_t* lpx;
-  const int32_t* ls;
-  int32_t nsuper;
-};
-
-Layout LayoutOf(const cholmod_factor* L) {
-  return {static_cast<const int32_t*>(L->Perm), static_cast<const int32_t*>(L->super),
-          static_cast<const int32_t*>(L->pi),   static_cast<const int32_t*>(L->px),
-          static_cast<const int32_t*>(L->s),    static_cast<int32_t>(L->nsuper)};
-}
-
 // L L^T x = b on p row-major right-hand sides (as ForwardSolve and BackwardSolve).
 template <int P>
 void Substitute(int32_t p, int32_t nsuper, const int32_t* super, const int32_t* lpi,
-                const int32_t* lpx, const int32_t* ls, const double* lx, double* x) {
+                const int64_t* lpx, const int32_t* ls, const double* lx, double* x) {
   ForwardSolve<P>(p, nsuper, super, lpi, lpx, ls, lx, x);
   BackwardSolve<P>(p, nsuper, super, lpi, lpx, ls, lx, x);
 }
@@ -109,48 +91,257 @@ constexpr decltype(&Substitute<0>) kSubstitute[kNumSubstitute] = {
 
 }  // namespace
 
-LocalCholesky::LocalCholesky() : common_(std::make_unique<linalg_internal::CholmodCommon>()) {
-  cholmod_common& c = **common_;
-  // AMD only (METIS gives ~40% fewer flops here but its ordering costs more than it saves),
-  // postordered, supernodal structure with CHOLMOD's default relaxed amalgamation.
-  c.nmethods = 1;
-  c.method[0].ordering = CHOLMOD_AMD;
-  c.postorder = 1;
-  c.supernodal = CHOLMOD_SUPERNODAL;
-  c.final_ll = 1;
-  // Fundamental supernodes only (no relaxed amalgamation): the kernels below are efficient on
-  // small supernodes, and the explicit zeros that amalgamation adds cost more in the many solves
-  // than they save in the factorization (measured: ~12% faster per region overall).
-  for (int i = 0; i < 3; ++i) {
-    c.nrelax[i] = 0;
-    c.zrelax[i] = 0.0;
-  }
-}
+LocalCholesky::LocalCholesky() = default;
+LocalCholesky::~LocalCholesky() = default;
 
-LocalCholesky::~LocalCholesky() { FreeSymbolic(); }
-
-void LocalCholesky::FreeSymbolic() {
-  if (symbolic_ != nullptr) cholmod_free_factor(&symbolic_, common_->get());
-  symbolic_ = nullptr;
-}
-
-absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& cancel) {
-  FreeSymbolic();
-  n_ = A.n;
+absl::Status LocalCholesky::Analyze(const UpperCsc& A) {
   const int32_t n = A.n;
-  if (n == 0) return absl::OkStatus();
-  cholmod_sparse a = linalg_internal::UpperView(n, A.outer.data(), A.inner.data(), A.values.data(),
-                                                /*sorted=*/false);
-  absl::StatusOr<cholmod_factor*> symbolic =
-      linalg_internal::Analyze(&a, common_->get(), "local system");
-  if (!symbolic.ok()) return symbolic.status();
-  symbolic_ = *symbolic;
-  flops_ = (*common_)->fl;
-  const auto [perm, super, lpi, lpx, ls, nsuper] = LayoutOf(symbolic_);
+  // AMD (amd_2 directly: the pattern of A + A^T without the diagonal, with elbow room; AMD's
+  // default dense-row threshold and aggressive absorption).
+  std::vector<int32_t>& len = len_;
+  len.assign(n, 0);
+  int64_t nz = 0;
+  for (int32_t j = 0; j < n; ++j) {
+    for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
+      const int32_t i = A.inner[p];
+      if (i == j) continue;
+      ++len[i];
+      ++len[j];
+      nz += 2;
+    }
+  }
+  const int64_t iwlen = nz + nz / 5 + n;
+  if (iwlen > std::numeric_limits<int32_t>::max() - 1) {
+    return absl::ResourceExhaustedError("local system too large for 32-bit indices");
+  }
+  amd_work_.resize(8 * static_cast<size_t>(n));
+  int32_t* pe = amd_work_.data();
+  int32_t* nv = pe + n;
+  int32_t* amd_next = nv + n;        // AMD's inverse permutation
+  int32_t* amd_last = amd_next + n;  // AMD's permutation
+  int32_t* head = amd_last + n;
+  int32_t* elen = head + n;
+  int32_t* degree = elen + n;
+  int32_t* w = degree + n;
+  iw_.resize(iwlen);
+  {
+    int32_t start = 0;
+    for (int32_t i = 0; i < n; ++i) {
+      pe[i] = start;
+      w[i] = start;
+      start += len[i];
+    }
+    for (int32_t j = 0; j < n; ++j) {
+      for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
+        const int32_t i = A.inner[p];
+        if (i == j) continue;
+        iw_[w[i]++] = j;
+        iw_[w[j]++] = i;
+      }
+    }
+  }
+  // The adjacency of A + A^T as CSC (amd_2 overwrites iw_ and pe): the elimination tree below
+  // walks it in the permuted order.
+  adj_outer_.resize(static_cast<size_t>(n) + 1);
+  for (int32_t i = 0; i < n; ++i) adj_outer_[i] = pe[i];
+  adj_outer_[n] = static_cast<int32_t>(nz);
+  adj_.assign(iw_.begin(), iw_.begin() + nz);
+  double control[AMD_CONTROL], info[AMD_INFO];
+  amd_defaults(control);
+  amd_2(n, pe, iw_.data(), len.data(), static_cast<int32_t>(iwlen), static_cast<int32_t>(nz), nv,
+        amd_next, amd_last, head, elen, degree, w, control, info);
+  perm_.assign(amd_last, amd_last + n);
 
-  // C = P A P^T, lower triangle, by counting sort on the permuted column.
+  // The elimination tree of P A P^T (Liu's algorithm: for each row k, the entries left of the
+  // diagonal, each followed to the root of its current subtree, path-compressed), a postorder of
+  // it (AMD's order is a postorder of its own assembly tree, mostly not of the elimination tree),
+  // and the matrix permuted once by both.
   pinv_.resize(n);
-  for (int32_t k = 0; k < n; ++k) pinv_[perm[k]] = k;
+  for (int32_t k = 0; k < n; ++k) pinv_[perm_[k]] = k;
+  parent_.resize(n);
+  {
+    std::vector<int32_t>& ancestor = next_;
+    ancestor.assign(n, -1);
+    for (int32_t k = 0; k < n; ++k) {
+      parent_[k] = -1;
+      const int32_t j = perm_[k];
+      for (int32_t p = adj_outer_[j]; p < adj_outer_[j + 1]; ++p) {
+        for (int32_t i = pinv_[adj_[p]]; i != -1 && i < k;) {
+          const int32_t up = ancestor[i];
+          ancestor[i] = k;
+          if (up == -1) parent_[i] = k;
+          i = up;
+        }
+      }
+    }
+  }
+  {
+    // Postorder: children in ascending order, by a depth-first search with an explicit stack.
+    std::vector<int32_t>& child_head = head_;
+    std::vector<int32_t>& sibling = next_;
+    child_head.assign(n, -1);
+    sibling.assign(n, -1);
+    for (int32_t j = n - 1; j >= 0; --j) {
+      if (parent_[j] != -1) {
+        sibling[j] = child_head[parent_[j]];
+        child_head[parent_[j]] = j;
+      }
+    }
+    std::vector<int32_t>& post = map_;
+    std::vector<int32_t>& stack = super_map_;
+    post.resize(n);
+    stack.resize(n);
+    int32_t k = 0;
+    for (int32_t root = 0; root < n; ++root) {
+      if (parent_[root] != -1) continue;
+      int32_t top = 0;
+      stack[0] = root;
+      while (top >= 0) {
+        const int32_t j = stack[top];
+        const int32_t c = child_head[j];
+        if (c == -1) {
+          --top;
+          post[k++] = j;
+        } else {
+          child_head[j] = sibling[c];
+          stack[++top] = c;
+        }
+      }
+    }
+    // Relabel: new column k is old column post[k].
+    std::vector<int32_t>& post_inv = head_;
+    for (int32_t i = 0; i < n; ++i) post_inv[post[i]] = i;
+    std::vector<int32_t>& relabeled = next_;
+    for (int32_t i = 0; i < n; ++i) {
+      const int32_t up = parent_[post[i]];
+      relabeled[i] = up == -1 ? -1 : post_inv[up];
+    }
+    parent_.swap(relabeled);
+    for (int32_t i = 0; i < n; ++i) post[i] = perm_[post[i]];
+    perm_.swap(post);
+  }
+  PermuteLower(A);
+
+  // Column counts of L (Gilbert, Ng and Peyton 1994): each column's count is the number of
+  // row subtrees it lies in, found from the skeleton matrix by least common ancestors in the
+  // postordered tree (here the identity order).
+  std::vector<int32_t>& count = colcount_;
+  count.assign(n, 0);
+  std::vector<int32_t>& first = head_;
+  std::vector<int32_t>& max_first = next_;
+  std::vector<int32_t>& prev_leaf = map_;
+  std::vector<int32_t>& ancestor = super_map_;
+  first.assign(n, -1);
+  max_first.assign(n, -1);
+  prev_leaf.assign(n, -1);
+  ancestor.resize(n);
+  for (int32_t k = 0; k < n; ++k) {
+    count[k] = first[k] == -1 ? 1 : 0;  // a leaf
+    for (int32_t j = k; j != -1 && first[j] == -1; j = parent_[j]) first[j] = k;
+    ancestor[k] = k;
+  }
+  for (int32_t j = 0; j < n; ++j) {
+    if (parent_[j] != -1) --count[parent_[j]];
+    for (int32_t p = c_outer_[j]; p < c_outer_[j + 1]; ++p) {
+      const int32_t i = c_inner_[p];
+      if (i <= j || first[j] <= max_first[i]) continue;  // not a leaf of row i's subtree
+      max_first[i] = first[j];
+      const int32_t jprev = prev_leaf[i];
+      prev_leaf[i] = j;
+      ++count[j];
+      if (jprev == -1) continue;  // the first leaf of row i's subtree
+      int32_t q = jprev;          // the least common ancestor of jprev and j
+      while (q != ancestor[q]) q = ancestor[q];
+      for (int32_t s = jprev; s != q;) {
+        const int32_t up = ancestor[s];
+        ancestor[s] = q;
+        s = up;
+      }
+      --count[q];
+    }
+    if (parent_[j] != -1) ancestor[j] = parent_[j];
+  }
+  for (int32_t j = 0; j < n; ++j) {
+    if (parent_[j] != -1) count[parent_[j]] += count[j];
+  }
+
+  // Fundamental supernodes: column j joins j - 1's supernode when j is its parent, j - 1 is its
+  // only child, and their columns share the pattern below.
+  std::vector<int32_t>& children = head_;
+  children.assign(n, 0);
+  for (int32_t j = 0; j < n; ++j) {
+    if (parent_[j] != -1) ++children[parent_[j]];
+  }
+  super_.clear();
+  super_.push_back(0);
+  for (int32_t j = 1; j < n; ++j) {
+    if (parent_[j - 1] == j && children[j] == 1 && count[j - 1] == count[j] + 1) continue;
+    super_.push_back(j);
+  }
+  super_.push_back(n);
+  nsuper_ = static_cast<int32_t>(super_.size()) - 1;
+  const int32_t nsuper = nsuper_;
+  super_map_.resize(n);
+  lpi_.resize(static_cast<size_t>(nsuper) + 1);
+  lpx_.resize(static_cast<size_t>(nsuper) + 1);
+  lpi_[0] = 0;
+  lpx_[0] = 0;
+  flops_ = 0;
+  for (int32_t s = 0; s < nsuper; ++s) {
+    const int32_t nscol = super_[s + 1] - super_[s];
+    const int32_t nsrow = count[super_[s]];
+    for (int32_t k = super_[s]; k < super_[s + 1]; ++k) {
+      super_map_[k] = s;
+      flops_ += static_cast<double>(count[k]) * count[k];
+    }
+    lpi_[s + 1] = lpi_[s] + nsrow;
+    lpx_[s + 1] = lpx_[s] + static_cast<int64_t>(nsrow) * nscol;
+  }
+  // Row patterns, ascending without a sort: each supernode's own columns, then the rows i below
+  // them in the order of i, where row i of L reaches a supernode iff the supernode lies on the
+  // tree path from a column j < i with C(i, j) != 0 up to i's own supernode.
+  ls_.resize(lpi_[nsuper]);
+  std::vector<int32_t>& super_parent = head_;
+  std::vector<int32_t>& fill = next_;
+  std::vector<int32_t>& marker = map_;
+  super_parent.resize(nsuper);
+  fill.resize(nsuper);
+  marker.assign(nsuper, -1);
+  for (int32_t s = 0; s < nsuper; ++s) {
+    const int32_t up = parent_[super_[s + 1] - 1];
+    super_parent[s] = up == -1 ? -1 : super_map_[up];
+    int32_t p = lpi_[s];
+    for (int32_t k = super_[s]; k < super_[s + 1]; ++k) ls_[p++] = k;
+    fill[s] = p;
+  }
+  for (int32_t i = 0; i < n; ++i) {
+    marker[super_map_[i]] = i;
+    const int32_t j = perm_[i];
+    for (int32_t p = adj_outer_[j]; p < adj_outer_[j + 1]; ++p) {
+      const int32_t col = pinv_[adj_[p]];
+      if (col >= i) continue;
+      for (int32_t s = super_map_[col]; marker[s] != i; s = super_parent[s]) {
+        marker[s] = i;
+        if (fill[s] == lpi_[s + 1]) {
+          return absl::InternalError("local system: supernode pattern exceeds its column count");
+        }
+        ls_[fill[s]++] = i;
+      }
+    }
+  }
+  for (int32_t s = 0; s < nsuper; ++s) {
+    if (fill[s] != lpi_[s + 1]) {
+      return absl::InternalError("local system: supernode pattern short of its column count");
+    }
+  }
+  return absl::OkStatus();
+}
+
+void LocalCholesky::PermuteLower(const UpperCsc& A) {
+  // C = P A P^T, lower triangle, by counting sort on the permuted column.
+  const int32_t n = A.n;
+  pinv_.resize(n);
+  for (int32_t k = 0; k < n; ++k) pinv_[perm_[k]] = k;
   c_outer_.assign(static_cast<size_t>(n) + 1, 0);
   for (int32_t j = 0; j < n; ++j) {
     for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
@@ -160,18 +351,33 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
   for (int32_t j = 0; j < n; ++j) c_outer_[j + 1] += c_outer_[j];
   c_inner_.resize(A.inner.size());
   c_values_.resize(A.inner.size());
-  {
-    map_.assign(c_outer_.begin(), c_outer_.end() - 1);  // cursors
-    for (int32_t j = 0; j < n; ++j) {
-      for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
-        const int32_t pi = pinv_[A.inner[p]];
-        const int32_t pj = pinv_[j];
-        const int32_t q = map_[std::min(pi, pj)]++;
-        c_inner_[q] = std::max(pi, pj);
-        c_values_[q] = A.values[p];
-      }
+  map_.assign(c_outer_.begin(), c_outer_.end() - 1);  // cursors
+  for (int32_t j = 0; j < n; ++j) {
+    for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
+      const int32_t pi = pinv_[A.inner[p]];
+      const int32_t pj = pinv_[j];
+      const int32_t q = map_[std::min(pi, pj)]++;
+      c_inner_[q] = std::max(pi, pj);
+      c_values_[q] = A.values[p];
     }
   }
+}
+
+absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& cancel) {
+  n_ = A.n;
+  nsuper_ = 0;
+  lx_.clear();
+  const int32_t n = A.n;
+  if (n == 0) return absl::OkStatus();
+  if (absl::Status analyzed = Analyze(A); !analyzed.ok()) {
+    nsuper_ = 0;
+    return analyzed;
+  }
+  const int32_t* super = super_.data();
+  const int32_t* lpi = lpi_.data();
+  const int64_t* lpx = lpx_.data();
+  const int32_t* ls = ls_.data();
+  const int32_t nsuper = nsuper_;
 
   // Left-looking supernodal numeric factorization (CHOLMOD's t_cholmod_super_numeric scheme).
   super_map_.resize(n);
@@ -182,7 +388,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
   head_.assign(nsuper, -1);
   next_.assign(nsuper, -1);
   lpos_.assign(nsuper, 0);
-  lx_.resize(symbolic_->xsize);
+  lx_.resize(lpx_[nsuper]);
   for (int32_t s = 0; s < nsuper; ++s) {
     const int32_t k1 = super[s];
     const int32_t k2 = super[s + 1];
@@ -279,7 +485,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
       }
     }
     if (!positive) {
-      FreeSymbolic();
+      nsuper_ = 0;
       return absl::FailedPreconditionError("local system is not numerically positive definite");
     }
     if (nsrow > nscol) {
@@ -289,7 +495,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
       head_[s2] = s;
     }
     if ((s & 255) == 0 && cancel.Check()) {
-      FreeSymbolic();
+      nsuper_ = 0;
       return absl::CancelledError("basis construction cancelled");
     }
   }
@@ -299,7 +505,7 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
 void LocalCholesky::SolveInPlace(double* X, int32_t p) {
   const int32_t n = n_;
   if (n == 0 || p == 0) return;
-  const auto [perm, super, lpi, lpx, ls, nsuper] = LayoutOf(symbolic_);
+  const int32_t* perm = perm_.data();
   // Permuted right-hand sides, row-major (row k at xp + k p): the updates of a supernode touch
   // whole rows, one cache line each for small p.
   for (int32_t c0 = 0; c0 < p; c0 += 64) {
@@ -310,7 +516,8 @@ void LocalCholesky::SolveInPlace(double* X, int32_t p) {
       for (int32_t c = 0; c < pc; ++c)
         xp[static_cast<int64_t>(k) * pc + c] = X[static_cast<int64_t>(c0 + c) * n + perm[k]];
     }
-    kSubstitute[pc < kNumSubstitute ? pc : 0](pc, nsuper, super, lpi, lpx, ls, lx_.data(), xp);
+    kSubstitute[pc < kNumSubstitute ? pc : 0](pc, nsuper_, super_.data(), lpi_.data(), lpx_.data(),
+                                              ls_.data(), lx_.data(), xp);
     for (int32_t k = 0; k < n; ++k) {
       for (int32_t c = 0; c < pc; ++c)
         X[static_cast<int64_t>(c0 + c) * n + perm[k]] = xp[static_cast<int64_t>(k) * pc + c];

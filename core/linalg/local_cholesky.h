@@ -8,12 +8,7 @@
 #include "absl/status/status.h"
 #include "core/common/cancel.h"
 
-struct cholmod_factor_struct;
-
 namespace fieldspace {
-namespace linalg_internal {
-class CholmodCommon;
-}  // namespace linalg_internal
 
 // A symmetric positive definite matrix in compressed sparse columns, upper triangle only (every
 // stored entry has row <= column; each column holds its diagonal), int32 indices. Rows within a
@@ -28,12 +23,14 @@ struct UpperCsc {
 // Sparse Cholesky P A P^T = L L^T for the many small, one-off local systems of the basis
 // construction (one per region, 10^3-10^5 rows), solved a few dozen times each.
 //
-// Why not CHOLMOD's numeric factorization: our platform's BLAS is the unoptimized reference BLAS,
-// so CHOLMOD's supernodal kernels run at ~1 GFlop/s and its simplicial one is no faster. CHOLMOD
-// computes the AMD ordering and the supernodal structure; the numeric factorization here is a
-// left-looking supernodal method (as CHOLMOD's) on Eigen's vectorized dense kernels, sequential:
-// the regions themselves run in parallel. One instance per thread, reused for region after region
-// (its workspace only grows).
+// Why not CHOLMOD: our platform's BLAS is the unoptimized reference BLAS, so CHOLMOD's supernodal
+// kernels run at ~1 GFlop/s and its simplicial one is no faster; and its analysis around the
+// ordering (transposes, a copy, a second postorder) cost as much as AMD itself on these small
+// systems. Here the ordering is AMD's (amd_2 on the pattern of A + A^T), the analysis the
+// elimination tree, column counts and fundamental supernodes of the permuted matrix, and the
+// numeric factorization a left-looking supernodal method (as CHOLMOD's) on Eigen's vectorized
+// dense kernels, sequential: the regions themselves run in parallel. One instance per thread,
+// reused for region after region (its workspace only grows).
 class LocalCholesky {
  public:
   LocalCholesky();
@@ -42,28 +39,41 @@ class LocalCholesky {
   LocalCholesky& operator=(const LocalCholesky&) = delete;
 
   // Orders, analyzes and factors `A`. FailedPrecondition when A is not numerically positive
-  // definite, ResourceExhausted when CHOLMOD runs out of memory, Cancelled when `cancel` (checked
-  // every few hundred supernodes) is set.
+  // definite, ResourceExhausted when it is too large for 32-bit indices, Cancelled when `cancel`
+  // (checked every few hundred supernodes) is set.
   absl::Status Factorize(const UpperCsc& A, const CancelToken& cancel);
 
   // X <- A^-1 X in place; X is n x p, column-major with leading dimension n.
   void SolveInPlace(double* X, int32_t p);
 
   int32_t rows() const { return n_; }
-  // Nonzeros of L (supernodal storage, including the zeros it keeps) and flops of the last
-  // factorization, for diagnostics.
+  // The fill-reducing order of the last factorization: row k of the factored system is row
+  // permutation()[k] of A.
+  const std::vector<int32_t>& permutation() const { return perm_; }
+  // Entries of L's supernodal storage (its nonzeros and the upper triangles of the diagonal
+  // blocks) and flops (the sum of its squared column counts) of the last factorization, for
+  // diagnostics.
   int64_t factor_nonzeros() const { return static_cast<int64_t>(lx_.size()); }
   double flops() const { return flops_; }
 
  private:
-  void FreeSymbolic();
+  // The ordering and the supernodal structure below, and C.
+  absl::Status Analyze(const UpperCsc& A);
+  // C = P A P^T (lower triangle, CSC) for perm_; sets pinv_.
+  void PermuteLower(const UpperCsc& A);
 
-  std::unique_ptr<linalg_internal::CholmodCommon> common_;
-  cholmod_factor_struct* symbolic_ = nullptr;
   int32_t n_ = 0;
   double flops_ = 0;
+  // The fill-reducing permutation (row k of the factored system is row perm_[k] of A) and its
+  // inverse; the elimination tree and column counts of L; its supernodes: the first column of
+  // each (super_, nsuper_ + 1 entries), the offsets of their row indices in ls_ (lpi_) and of
+  // their values in lx_ (lpx_).
+  std::vector<int32_t> perm_, pinv_, parent_, colcount_, super_, lpi_, ls_;
+  std::vector<int64_t> lpx_;
+  int32_t nsuper_ = 0;
   // Permuted lower triangle of A (CSC), the supernodal values of L, and workspace.
-  std::vector<int32_t> c_outer_, c_inner_, pinv_, super_map_, map_, head_, next_, lpos_;
+  std::vector<int32_t> c_outer_, c_inner_, super_map_, map_, head_, next_, lpos_;
+  std::vector<int32_t> len_, amd_work_, iw_, adj_outer_, adj_;
   std::vector<double> c_values_, lx_, update_, xp_;
 };
 

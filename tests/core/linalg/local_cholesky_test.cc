@@ -2,7 +2,9 @@
 // problems, against dense factorizations.
 #include "core/linalg/local_cholesky.h"
 
+#include <algorithm>
 #include <atomic>
+#include <cstdint>
 #include <vector>
 
 #include "Eigen/Cholesky"
@@ -65,6 +67,100 @@ TEST(LocalCholeskyTest, SolvesLikeDense) {
   Eigen::VectorXd x = b;
   chol.SolveInPlace(x.data(), 1);
   EXPECT_LT((dense2 * x - b).norm() / b.norm(), 1e-12);
+}
+
+// A random symmetric positive definite matrix: `components` blocks of random sparse graphs
+// (about `degree` neighbours a row), one row per block coupled to a tenth of its block (AMD's
+// dense-row handling), a few diagonal-only rows; strictly diagonally dominant.
+UpperCsc RandomMatrix(int block, int components, int degree, uint32_t seed,
+                      Eigen::MatrixXd* dense) {
+  const int n = block * components + 5;
+  dense->setZero(n, n);
+  uint64_t state = seed;
+  auto next = [&state](int bound) {
+    state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+    return static_cast<int>((state >> 33) % static_cast<uint64_t>(bound));
+  };
+  auto couple = [&](int i, int j) {
+    if (i == j) return;
+    const double v = -0.1 - 0.9 * next(1000) / 1000.0;
+    (*dense)(i, j) = (*dense)(j, i) = v;
+  };
+  for (int c = 0; c < components; ++c) {
+    const int base = c * block;
+    for (int i = 0; i < block; ++i) {
+      for (int e = 0; e < degree / 2; ++e) {
+        // Mostly near neighbours (a mesh-like band), sometimes far ones.
+        const int j = next(8) == 0 ? next(block) : std::min(block - 1, i + 1 + next(6));
+        couple(base + i, base + j);
+      }
+    }
+    for (int t = 0; t < block / 10; ++t) couple(base + block / 2, base + next(block));
+  }
+  for (int i = 0; i < n; ++i) {
+    (*dense)(i, i) = 0.0;
+    (*dense)(i, i) = dense->row(i).cwiseAbs().sum() + 0.5;
+  }
+  UpperCsc A;
+  A.n = n;
+  A.outer.push_back(0);
+  for (int j = 0; j < n; ++j) {
+    A.inner.push_back(j);  // the diagonal first this time
+    A.values.push_back((*dense)(j, j));
+    for (int i = 0; i < j; ++i) {
+      if ((*dense)(i, j) != 0.0) {
+        A.inner.push_back(i);
+        A.values.push_back((*dense)(i, j));
+      }
+    }
+    A.outer.push_back(static_cast<int32_t>(A.inner.size()));
+  }
+  return A;
+}
+
+// The symbolic analysis (AMD order, elimination tree, column counts, fundamental supernodes and
+// their row patterns) against the dense factor of the same permuted matrix: the column counts
+// (through flops(), the sum of their squares) are the dense factor's, the supernodal storage
+// holds its nonzeros plus at most the upper triangles of the diagonal blocks, and the solves
+// are exact.
+TEST(LocalCholeskyTest, AnalysisMatchesTheDenseFactor) {
+  for (uint32_t seed : {1u, 2u, 3u}) {
+    Eigen::MatrixXd dense;
+    const UpperCsc A = RandomMatrix(150, 3, 6, seed, &dense);
+    LocalCholesky chol;
+    ASSERT_TRUE(chol.Factorize(A, nullptr).ok());
+    const std::vector<int32_t>& perm = chol.permutation();
+    ASSERT_EQ(perm.size(), static_cast<size_t>(A.n));
+    std::vector<int> seen(A.n, 0);
+    for (int32_t p : perm) {
+      ASSERT_GE(p, 0);
+      ASSERT_LT(p, A.n);
+      ++seen[p];
+    }
+    EXPECT_EQ(*std::min_element(seen.begin(), seen.end()), 1);
+    Eigen::MatrixXd permuted(A.n, A.n);
+    for (int i = 0; i < A.n; ++i) {
+      for (int j = 0; j < A.n; ++j) permuted(i, j) = dense(perm[i], perm[j]);
+    }
+    const Eigen::MatrixXd L = permuted.llt().matrixL();
+    int64_t nonzeros = 0;
+    double squares = 0;
+    for (int j = 0; j < A.n; ++j) {
+      int64_t count = 0;
+      for (int i = j; i < A.n; ++i) count += L(i, j) != 0.0;
+      nonzeros += count;
+      squares += static_cast<double>(count) * count;
+    }
+    EXPECT_EQ(chol.flops(), squares) << "seed " << seed;
+    EXPECT_GE(chol.factor_nonzeros(), nonzeros);
+    EXPECT_LT(chol.factor_nonzeros(), nonzeros + nonzeros / 4);
+    // Fill well below the dense triangle's (the order is fill-reducing).
+    EXPECT_LT(nonzeros, int64_t{A.n} * A.n / 8);
+    const Eigen::MatrixXd B = Eigen::MatrixXd::Random(A.n, 4);
+    Eigen::MatrixXd X = B;
+    chol.SolveInPlace(X.data(), 4);
+    EXPECT_LT((dense * X - B).norm() / B.norm(), 1e-13) << "seed " << seed;
+  }
 }
 
 TEST(LocalCholeskyTest, RejectsIndefinite) {
