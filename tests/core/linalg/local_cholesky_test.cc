@@ -163,6 +163,28 @@ TEST(LocalCholeskyTest, AnalysisMatchesTheDenseFactor) {
   }
 }
 
+// Systems without off-diagonal entries: one row, and a diagonal (every column its own
+// supernode, the elimination tree a forest of single nodes).
+TEST(LocalCholeskyTest, SolvesDiagonalSystems) {
+  for (int32_t n : {1, 7}) {
+    UpperCsc A;
+    A.n = n;
+    A.outer.push_back(0);
+    for (int32_t j = 0; j < n; ++j) {
+      A.inner.push_back(j);
+      A.values.push_back(j + 2.0);
+      A.outer.push_back(j + 1);
+    }
+    LocalCholesky chol;
+    ASSERT_TRUE(chol.Factorize(A, nullptr).ok());
+    EXPECT_EQ(chol.factor_nonzeros(), n);
+    EXPECT_EQ(chol.flops(), n);
+    std::vector<double> x(n, 1.0);
+    chol.SolveInPlace(x.data(), 1);
+    for (int32_t j = 0; j < n; ++j) EXPECT_NEAR(x[j], 1.0 / (j + 2.0), 1e-15);
+  }
+}
+
 TEST(LocalCholeskyTest, RejectsIndefinite) {
   Eigen::MatrixXd dense;
   UpperCsc A = GridMatrix(8, 8, -5.0, &dense);  // diagonal ~ -1: indefinite
