@@ -8,7 +8,7 @@
 
 #include "Eigen/Cholesky"
 #include "Eigen/Core"
-#include "absl/status/statusor.h"
+#include "absl/status/status.h"
 
 namespace fieldspace {
 namespace {
@@ -379,11 +379,8 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
   const int32_t* ls = ls_.data();
   const int32_t nsuper = nsuper_;
 
-  // Left-looking supernodal numeric factorization (CHOLMOD's t_cholmod_super_numeric scheme).
-  super_map_.resize(n);
-  for (int32_t s = 0; s < nsuper; ++s) {
-    for (int32_t k = super[s]; k < super[s + 1]; ++k) super_map_[k] = s;
-  }
+  // Left-looking supernodal numeric factorization (CHOLMOD's t_cholmod_super_numeric scheme);
+  // super_map_ (column -> supernode) comes from Analyze.
   map_.assign(n, 0);
   head_.assign(nsuper, -1);
   next_.assign(nsuper, -1);

@@ -2,7 +2,6 @@
 #define FIELDSPACE_CORE_LINALG_LOCAL_CHOLESKY_H_
 
 #include <cstdint>
-#include <memory>
 #include <vector>
 
 #include "absl/status/status.h"
