@@ -1,6 +1,7 @@
 #include "core/basis/basis.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -356,19 +357,29 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     iterations.fetch_add(res->iterations, std::memory_order_relaxed);
     const int32_t first_col = r * m;
     const int32_t nfr = static_cast<int32_t>(faces.size());
-    for (int32_t c = 0; c < eo.count; ++c) {
-      auto phi = res->vectors.col(c);
+    const int32_t count = eo.count;
+    std::array<double, kMaxFieldsPerRegion> sign;
+    for (int32_t c = 0; c < count; ++c) {
       Eigen::Index imax = 0;
-      phi.cwiseAbs().maxCoeff(&imax);
-      const double sign = phi[imax] < 0 ? -1.0 : 1.0;
+      res->vectors.col(c).cwiseAbs().maxCoeff(&imax);
+      sign[c] = res->vectors(imax, c) < 0 ? -1.0 : 1.0;
       basis.local_eigenvalues[first_col + c] = res->values[c];
-      for (int32_t i = 0; i < nfr; ++i) {
-        const int64_t f = faces[i];
-        for (int32_t q = 0; q < dpf; ++q) {
-          const int64_t row = dpf * f + q;
-          const int64_t pos = outer[row] + slot[r][i] + c;
-          values[pos] = static_cast<float>(sign * phi[dpf * i + q] * inv_sqrt_mass[row]);
-          columns[pos] = first_col + c;
+    }
+    // Row by row, all of the region's fields at once: the region's entries of a row are adjacent
+    // (slot + c), so each row of U is fetched once, not once per field (U is hundreds of MB and the
+    // region's rows are scattered through it).
+    const double* phi = res->vectors.data();
+    const int64_t ld = res->vectors.rows();
+    for (int32_t i = 0; i < nfr; ++i) {
+      const int64_t f = faces[i];
+      for (int32_t q = 0; q < dpf; ++q) {
+        const int64_t row = dpf * f + q;
+        const int64_t pos = outer[row] + slot[r][i];
+        const double scale = inv_sqrt_mass[row];
+        const double* x = phi + dpf * i + q;
+        for (int32_t c = 0; c < count; ++c) {
+          values[pos + c] = static_cast<float>(sign[c] * x[c * ld] * scale);
+          columns[pos + c] = first_col + c;
         }
       }
     }
