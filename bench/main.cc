@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "bench/commands.h"
 #include "core/common/command_line.h"
+#include "core/common/huge_pages.h"
 
 namespace fieldspace::bench {
 namespace {
@@ -173,4 +174,7 @@ int Run(int argc, char** argv) {
 }  // namespace
 }  // namespace fieldspace::bench
 
-int main(int argc, char** argv) { return fieldspace::bench::Run(argc, argv); }
+int main(int argc, char** argv) {
+  fieldspace::ReexecWithHugePageMalloc(argv);
+  return fieldspace::bench::Run(argc, argv);
+}

@@ -25,6 +25,7 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "core/common/command_line.h"
+#include "core/common/huge_pages.h"
 #include "server/demo.h"
 #include "server/field_server.h"
 
@@ -76,6 +77,7 @@ int Fail(const std::string& message) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  fieldspace::ReexecWithHugePageMalloc(argv);
   using fieldspace::server::FieldServer;
   fieldspace::server::FieldServerOptions options;
   options.listen = "127.0.0.1:50051";
