@@ -75,6 +75,11 @@ HugePageEnvironment CurrentHugePageEnvironment() {
 void ReexecWithHugePageMalloc(char** argv) {
   const HugePageEnvironment env = CurrentHugePageEnvironment();
   const std::optional<std::string> tunables = HugePageTunables(env);
+  if (env.reexecuted != nullptr) {
+    // This is the re-executed process: the marker has done its work. Programs it starts decide
+    // for themselves (glibc may have dropped the tunable from the GLIBC_TUNABLES they inherit).
+    unsetenv(kHugePageMarker);
+  }
   if (!tunables.has_value()) return;
   const std::string previous = env.glibc_tunables != nullptr ? env.glibc_tunables : "";
   const bool had_tunables = env.glibc_tunables != nullptr;

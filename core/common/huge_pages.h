@@ -39,9 +39,10 @@ HugePageEnvironment CurrentHugePageEnvironment();
 
 // Called first in main() of fieldspaced and fieldspace-bench: when HugePageTunables says so,
 // re-executes the program (/proc/self/exe, the same argv) with GLIBC_TUNABLES set to its value
-// and kHugePageMarker set. Returns only when it did not re-execute (nothing to do, or execv
-// failed: the process then runs on with the environment it had). Nothing else has run yet, so
-// no threads, files or allocations are lost by the exec.
+// and kHugePageMarker set; the re-executed process removes the marker from its environment again,
+// so that programs it starts make their own choice. Returns only when it did not re-execute
+// (nothing to do, or execv failed: the process then runs on with the environment it had). Nothing
+// else has run yet, so no threads, files or allocations are lost by the exec.
 void ReexecWithHugePageMalloc(char** argv);
 
 }  // namespace fieldspace

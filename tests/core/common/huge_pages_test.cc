@@ -85,5 +85,13 @@ TEST(HugePagesTest, ReadsThisProcesssEnvironment) {
   unsetenv("FIELDSPACE_HUGE_PAGES");
 }
 
+TEST(HugePagesTest, TheReexecutedProcessDropsItsMarker) {
+  // As in the re-executed process: the marker is set. No second exec (the marker says so), and
+  // the marker is gone afterwards, so that programs this one starts decide for themselves.
+  ASSERT_EQ(setenv(kHugePageMarker, "1", 1), 0);
+  ReexecWithHugePageMalloc(nullptr);
+  EXPECT_EQ(std::getenv(kHugePageMarker), nullptr);
+}
+
 }  // namespace
 }  // namespace fieldspace
