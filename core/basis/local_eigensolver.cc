@@ -1,6 +1,7 @@
 #include "core/basis/local_eigensolver.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "Eigen/Cholesky"
@@ -123,12 +124,15 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   // Rayleigh-Ritz through the Cholesky factor of the Gram matrix B^T B. When that Gram matrix is
   // too ill-conditioned, P is dropped for the iteration (a restart). Convergence is confirmed with
   // an exactly recomputed S X before returning.
-  Eigen::MatrixXd X0 = RandomBlock(n, p, options.seed);
-  if (options.initial != nullptr && options.initial->rows() == n) {
-    const Eigen::Index k = std::min<Eigen::Index>(p, options.initial->cols());
-    X0.leftCols(k) = options.initial->leftCols(k);
+  Eigen::MatrixXd X;
+  {
+    Eigen::MatrixXd X0 = RandomBlock(n, p, options.seed);
+    if (options.initial != nullptr && options.initial->rows() == n) {
+      const Eigen::Index k = std::min<Eigen::Index>(p, options.initial->cols());
+      X0.leftCols(k) = options.initial->leftCols(k);
+    }
+    X = Orthonormalize(X0);
   }
-  Eigen::MatrixXd X = Orthonormalize(X0);
   Eigen::MatrixXd SX, W, SW, P, SP, R;
   op.ApplyStiffness(X, &SX);
   Eigen::VectorXd theta;
@@ -141,10 +145,16 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   }
   LocalEigenResult result;
   bool verified = false;  // SX recomputed exactly since the last update
-  // The trial basis [X, W, P] and its products, allocated once: on a coarse level's region of
-  // ~1.5M DOFs each is ~70 MB, which the allocator maps afresh on every allocation, so a new one
-  // per iteration paid its page faults every time (bench/RESULTS.md, Session 21).
-  Eigen::MatrixXd B(n, 3 * p), SB(n, 3 * p);
+  // The trial basis [X, W, P] is never copied into one matrix: its Gram matrices are taken block
+  // by block and the Ritz vectors are summed from the blocks into two scratch blocks, which then
+  // trade places with X and P (and SX and SP). A copy [X, W, P] and its products took six more
+  // n x p blocks per thread: 144 MB on a coarse level's region of ~1.5M DOFs. The scratch is
+  // allocated once per region (allocations of that size are mapped afresh each time, and paid
+  // their page faults on every iteration when they were per iteration: bench/RESULTS.md,
+  // Session 21).
+  Eigen::MatrixXd T1(n, p), T2(n, p);
+  const std::array<const Eigen::MatrixXd*, 3> blocks = {&X, &W, &P};
+  const std::array<const Eigen::MatrixXd*, 3> products = {&SX, &SW, &SP};
   for (int32_t it = 1; it <= options.max_iterations; ++it) {
     if (cancel.Check()) return absl::CancelledError("basis construction cancelled");
     R = SX - X * theta.asDiagonal();
@@ -170,8 +180,8 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
     op.ApplyShiftInverseAndStiffness(R, &W, &SW);
     {
       const Eigen::MatrixXd a = X.transpose() * W;
-      W -= X * a;
-      SW -= SX * a;
+      W.noalias() -= X * a;
+      SW.noalias() -= SX * a;
     }
     for (int32_t c = 0; c < p; ++c) {
       const double norm = W.col(c).norm();
@@ -193,19 +203,20 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
     for (int attempt = 0; attempt < 2 && !solved; ++attempt) {
       const bool with_p = attempt == 0 && P.cols() > 0;
       if (attempt == 1 && P.cols() == 0) break;
-      const int32_t q = with_p ? 3 * p : 2 * p;
-      B.leftCols(p) = X;
-      B.middleCols(p, p) = W;
-      SB.leftCols(p) = SX;
-      SB.middleCols(p, p) = SW;
-      if (with_p) {
-        B.middleCols(2 * p, p) = P;
-        SB.middleCols(2 * p, p) = SP;
+      const int32_t nb = with_p ? 3 : 2;  // blocks in the trial basis
+      const int32_t q = nb * p;
+      Eigen::MatrixXd G(q, q), H(q, q);
+      for (int32_t i = 0; i < nb; ++i) {
+        for (int32_t j = 0; j < nb; ++j) {
+          if (j > i) {
+            G.block(i * p, j * p, p, p).noalias() = blocks[i]->transpose() * *blocks[j];
+            G.block(j * p, i * p, p, p) = G.block(i * p, j * p, p, p).transpose();
+          } else if (j == i) {
+            G.block(i * p, i * p, p, p).noalias() = blocks[i]->transpose() * *blocks[i];
+          }
+          H.block(i * p, j * p, p, p).noalias() = blocks[i]->transpose() * *products[j];
+        }
       }
-      const auto Bq = B.leftCols(q);
-      const auto SBq = SB.leftCols(q);
-      const Eigen::MatrixXd G = Bq.transpose() * Bq;
-      Eigen::MatrixXd H = Bq.transpose() * SBq;
       H = 0.5 * (H + H.transpose()).eval();
       Eigen::LLT<Eigen::MatrixXd> llt(G);
       if (llt.info() != Eigen::Success) continue;
@@ -217,11 +228,17 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
       Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (A + A.transpose()));
       if (es.info() != Eigen::Success) continue;
       const Eigen::MatrixXd C = llt.matrixU().solve(Eigen::MatrixXd(es.eigenvectors().leftCols(p)));
-      // B holds copies of X, W and P, so the products may write straight into them.
-      X.noalias() = Bq * C;
-      SX.noalias() = SBq * C;
-      P.noalias() = Bq.rightCols(q - p) * C.bottomRows(q - p);
-      SP.noalias() = SBq.rightCols(q - p) * C.bottomRows(q - p);
+      // P <- W C_W + P C_P and X <- X C_X + P (the new P); then the same for S X and S P.
+      const auto update = [&](Eigen::MatrixXd& x, const Eigen::MatrixXd& w, Eigen::MatrixXd& pb) {
+        T1.noalias() = w * C.middleRows(p, p);
+        if (with_p) T1.noalias() += pb * C.bottomRows(p);
+        T2.noalias() = x * C.topRows(p);
+        T2 += T1;
+        x.swap(T2);
+        pb.swap(T1);  // T1 and T2 now hold the old blocks: scratch for the next update
+      };
+      update(X, W, P);
+      update(SX, SW, SP);
       theta = es.eigenvalues().head(p);
       solved = true;
     }
