@@ -102,21 +102,23 @@ class HodgeLocalOperator final : public LocalOperator {
   double shift() const override { return tau_; }
 
  private:
-  // Z = B_D^T X (N x p).
-  void ApplyBt(const Eigen::MatrixXd& X, Eigen::MatrixXd* Z);
-  // Y = B_D Z (n x p), or Y -= B_D Z.
-  void ApplyB(const Eigen::MatrixXd& Z, Eigen::MatrixXd* Y, bool subtract);
+  // zr_ = B_D^T X (N x p).
+  void ApplyBt(const Eigen::MatrixXd& X);
+  // Y = B_D zr_ (n x p), or Y -= B_D zr_.
+  void ApplyB(Eigen::MatrixXd* Y, bool subtract);
 
   int32_t n_ = 0;          // 2 * faces
   int32_t num_nodes_ = 0;  // N: vertices then edges
   int32_t num_vertices_ = 0;
   double tau_ = 0;
   RegionWorkspace& ws_;
-  std::vector<int32_t> b_cols_;  // n x 6: row r's columns (3 vertices, 3 edges)
+  // Face i's columns of B_D (3 vertices, 3 edges), and its 2 x 6 block. The nodes are numbered
+  // vertices first, then edges, until K is factored; from then on in the factor's order
+  // (LocalCholesky::inverse_permutation), so that zr_ is solved in place, without a permuted copy.
+  std::vector<int32_t> b_cols_;
   std::vector<double> b_vals_;
   std::vector<uint8_t> boundary_edge_;  // per local edge: exactly one of its faces in the region
-  Eigen::MatrixXd z_;
-  RowBlock xr_, yr_, zr_;  // scratch
+  RowBlock zr_;                         // B_D^T X, row-major: the solves' layout
 };
 
 }  // namespace fieldspace::basis_internal

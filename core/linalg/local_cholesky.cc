@@ -513,13 +513,18 @@ void LocalCholesky::SolveInPlace(double* X, int32_t p) {
       for (int32_t c = 0; c < pc; ++c)
         xp[static_cast<int64_t>(k) * pc + c] = X[static_cast<int64_t>(c0 + c) * n + perm[k]];
     }
-    kSubstitute[pc < kNumSubstitute ? pc : 0](pc, nsuper_, super_.data(), lpi_.data(), lpx_.data(),
-                                              ls_.data(), lx_.data(), xp);
+    SolvePermutedInPlace(xp, pc);
     for (int32_t k = 0; k < n; ++k) {
       for (int32_t c = 0; c < pc; ++c)
         X[static_cast<int64_t>(c0 + c) * n + perm[k]] = xp[static_cast<int64_t>(k) * pc + c];
     }
   }
+}
+
+void LocalCholesky::SolvePermutedInPlace(double* x, int32_t p) const {
+  if (n_ == 0 || p == 0) return;
+  kSubstitute[p < kNumSubstitute ? p : 0](p, nsuper_, super_.data(), lpi_.data(), lpx_.data(),
+                                          ls_.data(), lx_.data(), x);
 }
 
 }  // namespace fieldspace

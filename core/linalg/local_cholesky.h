@@ -44,11 +44,16 @@ class LocalCholesky {
 
   // X <- A^-1 X in place; X is n x p, column-major with leading dimension n.
   void SolveInPlace(double* X, int32_t p);
+  // The same for right-hand sides already in the factored system's order and row-major: row k
+  // (of P A P^T, i.e. row permutation()[k] of A) at x + k p. No copies: for callers that number
+  // their unknowns by inverse_permutation() once and keep their vectors that way.
+  void SolvePermutedInPlace(double* x, int32_t p) const;
 
   int32_t rows() const { return n_; }
   // The fill-reducing order of the last factorization: row k of the factored system is row
-  // permutation()[k] of A.
+  // permutation()[k] of A, and row i of A is row inverse_permutation()[i] of the factored system.
   const std::vector<int32_t>& permutation() const { return perm_; }
+  const std::vector<int32_t>& inverse_permutation() const { return pinv_; }
   // Entries of L's supernodal storage (its nonzeros and the upper triangles of the diagonal
   // blocks) and flops (the sum of its squared column counts) of the last factorization, for
   // diagnostics.

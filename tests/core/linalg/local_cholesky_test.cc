@@ -69,6 +69,32 @@ TEST(LocalCholeskyTest, SolvesLikeDense) {
   EXPECT_LT((dense2 * x - b).norm() / b.norm(), 1e-12);
 }
 
+TEST(LocalCholeskyTest, SolvesRightHandSidesKeptInTheFactorsOrder) {
+  // A caller that numbers its unknowns by inverse_permutation() keeps its vectors row-major in
+  // the factor's order and solves them in place.
+  Eigen::MatrixXd dense;
+  const UpperCsc A = GridMatrix(23, 31, 0.2, &dense);
+  LocalCholesky chol;
+  ASSERT_TRUE(chol.Factorize(A, nullptr).ok());
+  const std::vector<int32_t>& perm = chol.permutation();
+  const std::vector<int32_t>& order = chol.inverse_permutation();
+  ASSERT_EQ(order.size(), static_cast<size_t>(A.n));
+  for (int32_t k = 0; k < A.n; ++k) ASSERT_EQ(order[perm[k]], k);
+  for (const int p : {1, 2, 3, 5}) {
+    const Eigen::MatrixXd B = Eigen::MatrixXd::Random(A.n, p);
+    std::vector<double> x(static_cast<size_t>(A.n) * p);
+    for (int32_t i = 0; i < A.n; ++i) {
+      for (int c = 0; c < p; ++c) x[static_cast<size_t>(order[i]) * p + c] = B(i, c);
+    }
+    chol.SolvePermutedInPlace(x.data(), p);
+    Eigen::MatrixXd X(A.n, p);
+    for (int32_t i = 0; i < A.n; ++i) {
+      for (int c = 0; c < p; ++c) X(i, c) = x[static_cast<size_t>(order[i]) * p + c];
+    }
+    EXPECT_LT((dense * X - B).norm() / B.norm(), 1e-12) << "p = " << p;
+  }
+}
+
 // A random symmetric positive definite matrix: `components` blocks of random sparse graphs
 // (about `degree` neighbours a row), one row per block coupled to a tenth of its block (AMD's
 // dense-row handling), a few diagonal-only rows; strictly diagonally dominant.
