@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <vector>
 
 #include "Eigen/Cholesky"
 #include "Eigen/Eigenvalues"
@@ -31,6 +32,76 @@ Eigen::MatrixXd RandomBlock(int32_t n, int32_t p, uint64_t seed) {
 Eigen::MatrixXd Orthonormalize(const Eigen::MatrixXd& B) {
   Eigen::HouseholderQR<Eigen::MatrixXd> qr(B);
   return qr.householderQ() * Eigen::MatrixXd::Identity(B.rows(), B.cols());
+}
+
+// out = A^T B for tall blocks A, B (n x p each, p small): one vectorized dot product per entry.
+// (Eigen's matrix product packs both operands for such shapes and was twice as slow here.)
+template <typename Out>
+void InnerProducts(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B, Out&& out) {
+  for (Eigen::Index r = 0; r < A.cols(); ++r) {
+    for (Eigen::Index c = 0; c < B.cols(); ++c) out(r, c) = A.col(r).dot(B.col(c));
+  }
+}
+
+// LOBPCG's update of its blocks from the Ritz coefficients C = [C_X; C_W; C_P] (q x p, C_P only
+// `with_p`): p <- w C_W + p C_P, then x <- x C_X + p, row by row in place (a row's new values
+// depend on that row alone), so no block is copied or allocated. P > 0 fixes p at compile time.
+template <int P>
+void RitzUpdateRows(int64_t n, int32_t p_runtime, const double* C, int64_t q, bool with_p,
+                    double* x, const double* w, double* pb) {
+  constexpr int kMax = P > 0 ? P : 1;
+  const int32_t p = P > 0 ? P : p_runtime;
+  for (int64_t i = 0; i < n; ++i) {
+    double xi[kMax], wi[kMax], pi[kMax];
+    for (int32_t k = 0; k < p; ++k) {
+      xi[k] = x[i + k * n];
+      wi[k] = w[i + k * n];
+      pi[k] = with_p ? pb[i + k * n] : 0.0;
+    }
+    for (int32_t c = 0; c < p; ++c) {
+      const double* col = C + c * q;
+      double sp = 0.0;
+      for (int32_t k = 0; k < p; ++k) sp += wi[k] * col[p + k] + pi[k] * col[2 * p + k];
+      double sx = sp;
+      for (int32_t k = 0; k < p; ++k) sx += xi[k] * col[k];
+      x[i + c * n] = sx;
+      pb[i + c * n] = sp;
+    }
+  }
+}
+
+void RitzUpdate(const Eigen::MatrixXd& C, bool with_p, Eigen::MatrixXd& x, const Eigen::MatrixXd& w,
+                Eigen::MatrixXd& pb) {
+  const int64_t n = x.rows();
+  const int32_t p = static_cast<int32_t>(x.cols());
+  if (pb.rows() != n || pb.cols() != p) pb.resize(n, p);  // the first P: nothing to read
+  // Without P, C has no C_P rows: read zeros instead through a padded copy.
+  Eigen::MatrixXd padded;
+  const double* c = C.data();
+  if (!with_p) {
+    padded.setZero(3 * p, p);
+    padded.topRows(2 * p) = C;
+    c = padded.data();
+  }
+  const int64_t q = with_p ? C.rows() : 3 * p;
+  switch (p) {
+    case 1:
+      return RitzUpdateRows<1>(n, p, c, q, with_p, x.data(), w.data(), pb.data());
+    case 2:
+      return RitzUpdateRows<2>(n, p, c, q, with_p, x.data(), w.data(), pb.data());
+    case 3:
+      return RitzUpdateRows<3>(n, p, c, q, with_p, x.data(), w.data(), pb.data());
+    case 4:
+      return RitzUpdateRows<4>(n, p, c, q, with_p, x.data(), w.data(), pb.data());
+    default: {
+      // Larger blocks (many fields per region): Eigen's products, whose temporaries are fine
+      // at this size.
+      Eigen::MatrixXd np = w * C.middleRows(p, p);
+      if (with_p) np += pb * C.bottomRows(p);
+      x = x * C.topRows(p) + np;
+      pb = std::move(np);
+    }
+  }
 }
 
 absl::StatusOr<LocalEigenResult> SolveDense(LocalOperator& op, int32_t m) {
@@ -146,13 +217,10 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   LocalEigenResult result;
   bool verified = false;  // SX recomputed exactly since the last update
   // The trial basis [X, W, P] is never copied into one matrix: its Gram matrices are taken block
-  // by block and the Ritz vectors are summed from the blocks into two scratch blocks, which then
-  // trade places with X and P (and SX and SP). A copy [X, W, P] and its products took six more
-  // n x p blocks per thread: 144 MB on a coarse level's region of ~1.5M DOFs. The scratch is
-  // allocated once per region (allocations of that size are mapped afresh each time, and paid
-  // their page faults on every iteration when they were per iteration: bench/RESULTS.md,
-  // Session 21).
-  Eigen::MatrixXd T1(n, p), T2(n, p);
+  // by block, and the Ritz vectors are summed from the blocks in place (RitzUpdate). A copy
+  // [X, W, P] and its products took six more n x p blocks per thread (144 MB on a coarse
+  // level's region of ~1.5M DOFs), and Session 21 found that blocks of that size allocated per
+  // iteration paid their page faults every time (bench/RESULTS.md).
   const std::array<const Eigen::MatrixXd*, 3> blocks = {&X, &W, &P};
   const std::array<const Eigen::MatrixXd*, 3> products = {&SX, &SW, &SP};
   for (int32_t it = 1; it <= options.max_iterations; ++it) {
@@ -209,12 +277,12 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
       for (int32_t i = 0; i < nb; ++i) {
         for (int32_t j = 0; j < nb; ++j) {
           if (j > i) {
-            G.block(i * p, j * p, p, p).noalias() = blocks[i]->transpose() * *blocks[j];
+            InnerProducts(*blocks[i], *blocks[j], G.block(i * p, j * p, p, p));
             G.block(j * p, i * p, p, p) = G.block(i * p, j * p, p, p).transpose();
           } else if (j == i) {
-            G.block(i * p, i * p, p, p).noalias() = blocks[i]->transpose() * *blocks[i];
+            InnerProducts(*blocks[i], *blocks[i], G.block(i * p, i * p, p, p));
           }
-          H.block(i * p, j * p, p, p).noalias() = blocks[i]->transpose() * *products[j];
+          InnerProducts(*blocks[i], *products[j], H.block(i * p, j * p, p, p));
         }
       }
       H = 0.5 * (H + H.transpose()).eval();
@@ -228,17 +296,8 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
       Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (A + A.transpose()));
       if (es.info() != Eigen::Success) continue;
       const Eigen::MatrixXd C = llt.matrixU().solve(Eigen::MatrixXd(es.eigenvectors().leftCols(p)));
-      // P <- W C_W + P C_P and X <- X C_X + P (the new P); then the same for S X and S P.
-      const auto update = [&](Eigen::MatrixXd& x, const Eigen::MatrixXd& w, Eigen::MatrixXd& pb) {
-        T1.noalias() = w * C.middleRows(p, p);
-        if (with_p) T1.noalias() += pb * C.bottomRows(p);
-        T2.noalias() = x * C.topRows(p);
-        T2 += T1;
-        x.swap(T2);
-        pb.swap(T1);  // T1 and T2 now hold the old blocks: scratch for the next update
-      };
-      update(X, W, P);
-      update(SX, SW, SP);
+      RitzUpdate(C, with_p, X, W, P);
+      RitzUpdate(C, with_p, SX, SW, SP);
       theta = es.eigenvalues().head(p);
       solved = true;
     }
