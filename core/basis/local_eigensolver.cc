@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <vector>
+#include <utility>
 
 #include "Eigen/Cholesky"
 #include "Eigen/Eigenvalues"
