@@ -56,12 +56,15 @@ void RitzUpdateRows(int64_t n, int32_t p_runtime, const double* C, int64_t q, bo
     for (int32_t k = 0; k < p; ++k) {
       xi[k] = x[i + k * n];
       wi[k] = w[i + k * n];
-      pi[k] = with_p ? pb[i + k * n] : 0.0;
+      if (with_p) pi[k] = pb[i + k * n];
     }
     for (int32_t c = 0; c < p; ++c) {
       const double* col = C + c * q;
       double sp = 0.0;
-      for (int32_t k = 0; k < p; ++k) sp += wi[k] * col[p + k] + pi[k] * col[2 * p + k];
+      for (int32_t k = 0; k < p; ++k) sp += wi[k] * col[p + k];
+      if (with_p) {
+        for (int32_t k = 0; k < p; ++k) sp += pi[k] * col[2 * p + k];
+      }
       double sx = sp;
       for (int32_t k = 0; k < p; ++k) sx += xi[k] * col[k];
       x[i + c * n] = sx;
@@ -75,15 +78,8 @@ void RitzUpdate(const Eigen::MatrixXd& C, bool with_p, Eigen::MatrixXd& x, const
   const int64_t n = x.rows();
   const int32_t p = static_cast<int32_t>(x.cols());
   if (pb.rows() != n || pb.cols() != p) pb.resize(n, p);  // the first P: nothing to read
-  // Without P, C has no C_P rows: read zeros instead through a padded copy.
-  Eigen::MatrixXd padded;
   const double* c = C.data();
-  if (!with_p) {
-    padded.setZero(3 * p, p);
-    padded.topRows(2 * p) = C;
-    c = padded.data();
-  }
-  const int64_t q = with_p ? C.rows() : 3 * p;
+  const int64_t q = C.rows();
   switch (p) {
     case 1:
       return RitzUpdateRows<1>(n, p, c, q, with_p, x.data(), w.data(), pb.data());
