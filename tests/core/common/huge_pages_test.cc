@@ -69,6 +69,21 @@ TEST(HugePagesTest, LeavesTheProcessAloneWhenItShould) {
   EXPECT_EQ(HugePageTunables(env), "x.glibc.malloc.hugetlb=1:glibc.malloc.hugetlb=1");
 }
 
+// Passes in a normal run. ReexecWithHugePageMalloc sets kHugePageMarker on the program it
+// re-executes, and FailingArgv re-executes this binary with this test alone: an exec that should
+// not have happened makes the test that called it fail.
+TEST(HugePagesTest, NotStartedByAReexecution) {
+  EXPECT_EQ(std::getenv(kHugePageMarker), nullptr)
+      << "ReexecWithHugePageMalloc re-executed although it should not have";
+}
+
+char** FailingArgv() {
+  static char program[] = "huge_pages_test";
+  static char filter[] = "--gtest_filter=HugePagesTest.NotStartedByAReexecution";
+  static char* argv[] = {program, filter, nullptr};
+  return argv;
+}
+
 TEST(HugePagesTest, ReadsThisProcesssEnvironment) {
   ASSERT_EQ(setenv("FIELDSPACE_HUGE_PAGES", "0", 1), 0);
   const HugePageEnvironment env = CurrentHugePageEnvironment();
@@ -80,8 +95,8 @@ TEST(HugePagesTest, ReadsThisProcesssEnvironment) {
 #if defined(__GLIBC__)
   EXPECT_FALSE(env.glibc_version.empty());
 #endif
-  // Opted out: returns without an exec (were it to exec, this test binary would start over).
-  ReexecWithHugePageMalloc(nullptr);
+  // Opted out: returns without an exec.
+  ReexecWithHugePageMalloc(FailingArgv());
   unsetenv("FIELDSPACE_HUGE_PAGES");
 }
 
@@ -89,7 +104,7 @@ TEST(HugePagesTest, TheReexecutedProcessDropsItsMarker) {
   // As in the re-executed process: the marker is set. No second exec (the marker says so), and
   // the marker is gone afterwards, so that programs this one starts decide for themselves.
   ASSERT_EQ(setenv(kHugePageMarker, "1", 1), 0);
-  ReexecWithHugePageMalloc(nullptr);
+  ReexecWithHugePageMalloc(FailingArgv());
   EXPECT_EQ(std::getenv(kHugePageMarker), nullptr);
 }
 
