@@ -25,6 +25,8 @@
 #include <sstream>
 #include <string>
 #include <system_error>
+#include <utility>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "absl/strings/numbers.h"
@@ -143,7 +145,8 @@ int RunBasis(const Args& args) {
   const std::string mesh_path = args.positional()[0];
   auto mesh = LoadBenchMesh(mesh_path);
   if (!mesh.ok()) return ReportError(mesh.status());
-  auto op = BuildFieldOperator(*mesh, *type);
+  // S only if the build reads it (as the daemon builds: BuildBasisForKey).
+  auto op = BuildFieldOperatorWithoutStiffness(*mesh, *type);
   if (!op.ok()) return ReportError(op.status());
 
   BasisOptions options;
@@ -158,14 +161,19 @@ int RunBasis(const Args& args) {
     if (!w.ok()) return ReportError(w.status());
     options.params.face_weights = std::move(*w);
   }
-  absl::StatusOr<Basis> basis;
-  if (*quality == BasisQuality::kPaper) {
-    basis = BuildTwoLevelBasis(*mesh, *op, options, static_cast<int32_t>(*coarse_dim));
-  } else {
-    auto levels = QualityLevels(*quality, options.params.dimension, options.params.sigma);
-    if (!levels.ok()) return ReportError(levels.status());
-    basis = BuildMultiLevelBasis(*mesh, *op, options, *levels);
+  std::vector<BasisLevel> levels;
+  if (*quality != BasisQuality::kPaper) {
+    auto quality_levels = QualityLevels(*quality, options.params.dimension, options.params.sigma);
+    if (!quality_levels.ok()) return ReportError(quality_levels.status());
+    levels = *std::move(quality_levels);
   }
+  if (BuildReadsStiffness(*type, options, levels)) {
+    if (auto st = AssembleStiffness(*mesh, &*op); !st.ok()) return ReportError(st);
+  }
+  absl::StatusOr<Basis> basis =
+      *quality == BasisQuality::kPaper
+          ? BuildTwoLevelBasis(*mesh, *op, options, static_cast<int32_t>(*coarse_dim))
+          : BuildMultiLevelBasis(*mesh, *op, options, levels);
   if (!basis.ok()) return ReportError(basis.status());
 
   if (const auto save = args.Get("save"); save.has_value()) {
@@ -176,6 +184,9 @@ int RunBasis(const Args& args) {
     if (auto st = SaveBasisFile(*save, *basis, mesh_id); !st.ok()) return ReportError(st);
   }
   if (const auto dir = args.Get("export-mtx"); dir.has_value()) {
+    if (!op->has_stiffness()) {
+      if (auto st = AssembleStiffness(*mesh, &*op); !st.ok()) return ReportError(st);
+    }
     if (auto st = ExportMtx(*dir, *basis, *op); !st.ok()) return ReportError(st);
   }
 

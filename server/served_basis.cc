@@ -61,8 +61,7 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
                                             const Eigen::VectorXd& face_weights,
                                             const BuildContext& context) {
   if (context.progress) context.progress(BuildStage::kOperator, 0);
-  ASSIGN_OR_RETURN(FieldOperator op, BuildFieldOperator(mesh, key.field));
-  if (IsCancelled(context.cancel)) return absl::CancelledError("basis construction cancelled");
+  ASSIGN_OR_RETURN(FieldOperator op, BuildFieldOperatorWithoutStiffness(mesh, key.field));
   BasisOptions options;
   options.params.dimension = key.dimension;
   options.params.sigma = key.sigma;
@@ -77,18 +76,22 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
       context.progress(StageFor(phase), fraction);
     };
   }
-  absl::StatusOr<Basis> built;
-  if (key.quality == BasisQuality::kPaper) {
-    built = BuildTwoLevelBasis(mesh, op, options, key.coarse_dimension);
-  } else {
-    ASSIGN_OR_RETURN(std::vector<BasisLevel> levels,
-                     QualityLevels(key.quality, key.dimension, key.sigma));
-    built = BuildMultiLevelBasis(mesh, op, options, levels);
+  std::vector<BasisLevel> levels;
+  if (key.quality != BasisQuality::kPaper) {
+    ASSIGN_OR_RETURN(levels, QualityLevels(key.quality, key.dimension, key.sigma));
   }
+  // S is assembled before the build only if the build reads it; otherwise ServeBasis assembles
+  // it after the build for the reduced system, and the build's peak does not hold it.
+  const bool reads_stiffness = BuildReadsStiffness(key.field, options, levels);
+  if (reads_stiffness) RETURN_IF_ERROR(AssembleStiffness(mesh, &op));
+  if (IsCancelled(context.cancel)) return absl::CancelledError("basis construction cancelled");
+  absl::StatusOr<Basis> built = key.quality == BasisQuality::kPaper
+                                    ? BuildTwoLevelBasis(mesh, op, options, key.coarse_dimension)
+                                    : BuildMultiLevelBasis(mesh, op, options, levels);
   ASSIGN_OR_RETURN(Basis basis, std::move(built));
   BuiltBasis out;
   out.basis = std::make_shared<const Basis>(std::move(basis));
-  out.op = std::make_shared<const FieldOperator>(std::move(op));
+  if (reads_stiffness) out.op = std::make_shared<const FieldOperator>(std::move(op));
   return out;
 }
 
@@ -122,14 +125,11 @@ absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(
     return absl::InvalidArgumentError("ServeBasis: a basis read as a LiftPlan needs its matrices");
   }
   if (!system.ok()) {
-    FieldOperator assembled;
-    if (op == nullptr) {
-      ASSIGN_OR_RETURN(assembled, BuildFieldOperator(*mesh, basis->type));
-      op = &assembled;
-    }
     if (IsCancelled(context.cancel)) return absl::CancelledError("cancelled");
     if (context.progress) context.progress(BuildStage::kPrecompute, 0.5);
-    system = ReducedSystem::Build(basis, *op, options);
+    // Without `op`, the mesh's operator: a vector field's S is then never assembled.
+    system = op != nullptr ? ReducedSystem::Build(basis, *op, options)
+                           : ReducedSystem::Build(basis, *mesh, options);
   }
   if (!system.ok()) return system.status();
   auto served = std::make_shared<ServedBasis>();

@@ -66,21 +66,24 @@ struct BuildContext {
   int32_t threads = 0;  // 0: all
 };
 
-// Assembles the operator and builds the basis (core/basis) for `key` on `mesh`.
+// Builds the basis (core/basis) for `key` on `mesh`, with S assembled only if the build reads it.
 // `face_weights`: #F positive adaptivity weights or empty.
 struct BuiltBasis {
   std::shared_ptr<const Basis> basis;
-  std::shared_ptr<const FieldOperator> op;  // S and M the basis was built for
+  // S and M the basis was built for; null when the build did not read S (BuildReadsStiffness:
+  // vector fields), whose reduced system ServeBasis then computes from the mesh without S.
+  std::shared_ptr<const FieldOperator> op;
 };
 absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const BasisKey& key,
                                             const Eigen::VectorXd& face_weights,
                                             const BuildContext& context);
 
 // The per-basis precomputation (core's ReducedSystem) and the served handle. `op`: the basis's
-// operator, or null to assemble it here (after a load from the store). `matrices`: the reduced
-// matrices kept in the store for this basis (Store::LoadReduced), which spare the product pass;
-// should they not fit the basis, the pass runs after all (and says so on stderr). `plan`: U read
-// from the store as a LiftPlan (LiftPlan::StreamBuilder), `basis` then without rows; needs
+// operator, or null for the mesh's own (after a load from the store, or a vector build:
+// ReducedSystem::Build from the mesh, which never assembles a vector field's S). `matrices`: the
+// reduced matrices kept in the store for this basis (Store::LoadReduced), which spare the product
+// pass; should they not fit the basis, the pass runs after all (and says so on stderr). `plan`: U
+// read from the store as a LiftPlan (LiftPlan::StreamBuilder), `basis` then without rows; needs
 // `matrices`, and should they not fit, the error is returned (the pass needs U's rows: the
 // caller reads them).
 absl::StatusOr<std::shared_ptr<const ServedBasis>> ServeBasis(

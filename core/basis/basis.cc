@@ -83,10 +83,14 @@ absl::Status ValidateInputs(const TriangleMesh& mesh, const FieldOperator& op,
   const BasisParams& p = options.params;
   const int32_t dpf = op.type.dofs_per_face();
   const int64_t k = static_cast<int64_t>(dpf) * mesh.num_faces();
-  if (op.dofs() != k || op.stiffness.rows() != k || op.stiffness.cols() != k) {
+  if (op.dofs() != k ||
+      (op.has_stiffness() && (op.stiffness.rows() != k || op.stiffness.cols() != k))) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "operator size (S %d x %d, mass %d) does not match the mesh: %d faces x %d DOFs = %d",
         op.stiffness.rows(), op.stiffness.cols(), op.dofs(), mesh.num_faces(), dpf, k));
+  }
+  if (!op.has_stiffness() && BuildReadsStiffness(op.type, options)) {
+    return basis_internal::MissingStiffnessError(op.type);
   }
   RETURN_IF_ERROR(ValidateBasisParams(p, op.type, mesh.num_faces()));
   const int32_t m = p.fields_per_region.value_or(op.type.default_fields_per_region());
@@ -293,7 +297,10 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   if (op.type.kind == FieldKind::kVector && options.use_factored_vector_operator &&
       !options.clamped_local_fields) {
     hodge = basis_internal::BuildHodgeFactorData(mesh);
-    absl::StatusOr<bool> matches = basis_internal::HodgeFactorMatches(mesh, op, hodge, cancel);
+    // Without S the operator is the mesh's own, which is the factored form.
+    absl::StatusOr<bool> matches = op.has_stiffness()
+                                       ? basis_internal::HodgeFactorMatches(mesh, op, hodge, cancel)
+                                       : absl::StatusOr<bool>(true);
     if (!matches.ok()) return matches.status();
     basis.stats.hodge_factor_used = *matches;
   }
@@ -418,6 +425,13 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
 }
 
 }  // namespace
+
+bool BuildReadsStiffness(const FieldType& type, const BasisOptions& options,
+                         const std::vector<BasisLevel>& levels) {
+  bool clamped = levels.empty() && options.clamped_local_fields;
+  for (const BasisLevel& level : levels) clamped = clamped || level.clamped;
+  return type.kind != FieldKind::kVector || !options.use_factored_vector_operator || clamped;
+}
 
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options) {

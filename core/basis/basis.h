@@ -144,8 +144,11 @@ struct Basis {
 // kernel_columns = q. Each column is normalized (unit M-norm) with its largest-magnitude
 // entry positive. The result does not depend on the thread count (regions are independent and
 // each is solved deterministically).
+// `op` may be without S (BuildFieldOperatorWithoutStiffness) when the build does not read it
+// (BuildReadsStiffness); it then stands for the mesh's own operator.
 // Errors: InvalidArgument for bad parameters (d < 1 or > k, sigma <= 0 or non-finite, bad
-// weights, fields_per_region < 1, more components than regions, operator/mesh size mismatch),
+// weights, fields_per_region < 1, more components than regions, operator/mesh size mismatch,
+// an operator without S for a build that reads it),
 // Cancelled when options.cancel fires, ResourceExhausted when U would exceed
 // options.max_basis_bytes or 2^31 - 1 nonzeros.
 // An estimate of the peak bytes a basis build takes for a mesh of `num_faces` faces: the
@@ -203,6 +206,16 @@ struct BasisLevel {
   double sigma = 40.0;
   bool clamped = false;
 };
+
+// Whether a build reads S: BuildBasis and BuildTwoLevelBasis with `options`; BuildMultiLevelBasis
+// with `options` and `levels` (each level's `clamped` in place of options.clamped_local_fields).
+// Only vector fields whose local problems all take the factored Hodge form
+// (use_factored_vector_operator, nothing clamped) do not: those builds take an operator without S
+// (BuildFieldOperatorWithoutStiffness) and run without S's memory (867 MB of the 1.38M-face
+// armadillo's vector build); the caller assembles S afterwards where it needs it
+// (AssembleStiffness, e.g. for the reduced system).
+bool BuildReadsStiffness(const FieldType& type, const BasisOptions& options,
+                         const std::vector<BasisLevel>& levels = {});
 
 // Named basis quality levels (docs/conventions.md, Basis quality; measured in bench/RESULTS.md,
 // "Session 10").

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "Eigen/SparseCore"
+#include "absl/strings/str_cat.h"
 #include "core/common/random.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
@@ -206,6 +207,13 @@ HodgeFactorData BuildHodgeFactorData(const TriangleMesh& mesh) {
   for (size_t v = 0; v < mv.size(); ++v) data.inv_sqrt_vertex_mass[v] = std::sqrt(3.0 / mv[v]);
   for (size_t e = 0; e < me.size(); ++e) data.inv_sqrt_edge_mass[e] = std::sqrt(3.0 / me[e]);
   return data;
+}
+
+absl::Status MissingStiffnessError(const FieldType& type) {
+  return absl::InvalidArgumentError(
+      absl::StrCat("this build of ", type.ToString(),
+                   " fields reads S (generic or clamped local problems), and the operator has "
+                   "none (AssembleStiffness)"));
 }
 
 absl::StatusOr<bool> HodgeFactorMatches(const TriangleMesh& mesh, const FieldOperator& op,

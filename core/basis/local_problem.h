@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "Eigen/Core"
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "core/basis/local_eigensolver.h"
 #include "core/common/cancel.h"
@@ -73,6 +74,9 @@ struct HodgeFactorData {
   std::vector<double> inv_sqrt_edge_mass;    // #E
 };
 HodgeFactorData BuildHodgeFactorData(const TriangleMesh& mesh);
+
+// The error of a build that reads S (BuildReadsStiffness) given an operator without it.
+absl::Status MissingStiffnessError(const FieldType& type);
 
 // Whether op.stiffness equals B B^T (to rounding): tested on a random vector, entrywise
 // relative to |S| |x|. Only then may the Woodbury operator below stand in for S_bar.

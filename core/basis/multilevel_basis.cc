@@ -13,6 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/string_view.h"
+#include "core/basis/local_problem.h"
 #include "core/basis/progress.h"
 #include "core/common/status_macros.h"
 #include "core/common/timing.h"
@@ -218,6 +219,9 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
         levels.erase(levels.begin() + static_cast<std::ptrdiff_t>(i));
       }
     }
+  }
+  if (!op.has_stiffness() && BuildReadsStiffness(op.type, options, levels)) {
+    return basis_internal::MissingStiffnessError(op.type);
   }
   int64_t total = 0;
   for (const BasisLevel& level : levels) {

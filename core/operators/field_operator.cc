@@ -12,6 +12,10 @@ namespace fieldspace {
 
 absl::Status ValidateOperatorShape(const FieldOperator& op) {
   const int64_t k = op.dofs();
+  if (k > 0 && !op.has_stiffness()) {
+    return absl::InvalidArgumentError(
+        "operator: S is not assembled (BuildFieldOperator, or AssembleStiffness)");
+  }
   if (k == 0 || op.stiffness.rows() != k || op.stiffness.cols() != k ||
       k % op.type.dofs_per_face() != 0) {
     return absl::InvalidArgumentError(absl::StrFormat(
@@ -36,8 +40,23 @@ Eigen::VectorXd BuildFaceMass(const TriangleMesh& mesh, int32_t dofs_per_face) {
   return mass;
 }
 
-absl::StatusOr<FieldOperator> BuildFieldOperator(const TriangleMesh& mesh, const FieldType& type) {
+absl::StatusOr<FieldOperator> BuildFieldOperatorWithoutStiffness(const TriangleMesh& mesh,
+                                                                 const FieldType& type) {
   RETURN_IF_ERROR(type.Validate());
+  absl::StatusOr<FieldOperator> op(absl::in_place);
+  op->type = type;
+  op->mass = BuildFaceMass(mesh, type.dofs_per_face());
+  return op;
+}
+
+absl::Status AssembleStiffness(const TriangleMesh& mesh, FieldOperator* op) {
+  const FieldType& type = op->type;
+  RETURN_IF_ERROR(type.Validate());
+  const int64_t k = static_cast<int64_t>(type.dofs_per_face()) * mesh.num_faces();
+  if (op->dofs() != k) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "operator: mass of %d entries does not match the mesh (%d DOFs)", op->dofs(), k));
+  }
   // Initialized from prvalues only (guaranteed elision): assigning would deep-copy.
   absl::StatusOr<Eigen::SparseMatrix<double>> stiffness =
       [&]() -> absl::StatusOr<Eigen::SparseMatrix<double>> {
@@ -52,11 +71,15 @@ absl::StatusOr<FieldOperator> BuildFieldOperator(const TriangleMesh& mesh, const
     return absl::InvalidArgumentError("unknown field kind");
   }();
   if (!stiffness.ok()) return stiffness.status();
-  // Built in place and swapped, never copied: Eigen sparse matrices have no move operations.
-  absl::StatusOr<FieldOperator> op(absl::in_place);
-  op->type = type;
+  // Swapped in, never copied: Eigen sparse matrices have no move operations.
   op->stiffness.swap(*stiffness);
-  op->mass = BuildFaceMass(mesh, type.dofs_per_face());
+  return absl::OkStatus();
+}
+
+absl::StatusOr<FieldOperator> BuildFieldOperator(const TriangleMesh& mesh, const FieldType& type) {
+  absl::StatusOr<FieldOperator> op = BuildFieldOperatorWithoutStiffness(mesh, type);
+  if (!op.ok()) return op;
+  RETURN_IF_ERROR(AssembleStiffness(mesh, &*op));
   return op;
 }
 

@@ -13,6 +13,10 @@
 namespace fieldspace {
 
 // A Laplace operator on per-face fields of one FieldType: stiffness S and diagonal mass M.
+// S may be left unassembled (0 x 0, BuildFieldOperatorWithoutStiffness) where a step does not
+// read it: the operator then stands for BuildFieldOperator(mesh, type)'s on its mesh. Only the
+// steps that say so accept it (BuildBasis for vector fields, ComputeKernelFields); the others
+// reject it (ValidateOperatorShape).
 struct FieldOperator {
   FieldType type;
   // k x k, k = dofs_per_face * #F, DOF order of docs/conventions.md (DOF layout). Sparse,
@@ -22,6 +26,8 @@ struct FieldOperator {
   Eigen::VectorXd mass;
 
   int64_t dofs() const { return mass.size(); }
+  // False while S is unassembled (0 x 0) and the operator is the mesh's own.
+  bool has_stiffness() const { return stiffness.rows() != 0 || stiffness.cols() != 0; }
 
   FieldOperator() = default;
   FieldOperator(const FieldOperator&) = default;
@@ -47,8 +53,19 @@ struct FieldOperator {
 // more than 2^31 nonzeros.
 absl::StatusOr<FieldOperator> BuildFieldOperator(const TriangleMesh& mesh, const FieldType& type);
 
-// InvalidArgument unless `op` is non-empty, its stiffness is k x k for k = op.dofs(), and k is a
-// whole number of faces (a multiple of op.type.dofs_per_face()).
+// M only, S unassembled (has_stiffness() false): for a basis build that does not read S
+// (BuildReadsStiffness), which then runs without S's memory (867 MB on 1.38M faces for vector
+// fields); AssembleStiffness adds it afterwards. InvalidArgument for an invalid type.
+absl::StatusOr<FieldOperator> BuildFieldOperatorWithoutStiffness(const TriangleMesh& mesh,
+                                                                 const FieldType& type);
+
+// Assembles S of op->type on `mesh` into `op` (replacing any S it has): BuildFieldOperator is
+// BuildFieldOperatorWithoutStiffness followed by this. InvalidArgument unless op->mass has the
+// mesh's DOF count; ResourceExhausted as BuildFieldOperator.
+absl::Status AssembleStiffness(const TriangleMesh& mesh, FieldOperator* op);
+
+// InvalidArgument unless `op` is non-empty, its stiffness is assembled and k x k for k = op.dofs(),
+// and k is a whole number of faces (a multiple of op.type.dofs_per_face()).
 absl::Status ValidateOperatorShape(const FieldOperator& op);
 
 // The diagonal of M: dofs_per_face * #F entries, entry p f + c = area of face f.

@@ -13,6 +13,7 @@
 #include "core/common/status_macros.h"
 #include "core/linalg/multigrid.h"
 #include "core/linalg/sparse_cholesky.h"
+#include "core/operators/vector_laplacian.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 #include "tbb/parallel_reduce.h"
@@ -542,7 +543,14 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
                                                     KernelFieldStats* stats) {
   const auto t0 = std::chrono::steady_clock::now();
   const int64_t k = static_cast<int64_t>(op.type.dofs_per_face()) * mesh.num_faces();
-  if (op.dofs() != k || op.stiffness.rows() != k || op.stiffness.cols() != k) {
+  const bool vector = op.type.kind == FieldKind::kVector;
+  // A vector field's kernel is computed from the mesh: S may be unassembled then.
+  if (!vector && !op.has_stiffness()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the kernel of %s fields reads S, which is not assembled", op.type.ToString()));
+  }
+  if (op.dofs() != k ||
+      (op.has_stiffness() && (op.stiffness.rows() != k || op.stiffness.cols() != k))) {
     return absl::InvalidArgumentError(
         absl::StrFormat("operator size (S %d x %d, mass %d) does not match the mesh (%d DOFs)",
                         op.stiffness.rows(), op.stiffness.cols(), op.dofs(), k));
@@ -556,7 +564,6 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   KernelFieldStats local_stats;
   KernelFieldStats& st = stats != nullptr ? *stats : local_stats;
   st = KernelFieldStats();
-  const bool vector = op.type.kind == FieldKind::kVector;
   RowMatrix H;
   if (vector) {
     ASSIGN_OR_RETURN(H, HarmonicCandidates(mesh, options, &st));
@@ -570,10 +577,15 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   }
   const auto t_ritz = std::chrono::steady_clock::now();
   st.candidates = static_cast<int32_t>(H.cols());
-  st.lambda_ref = op.stiffness.diagonal().sum() / op.mass.sum();
   if (H.cols() == 0) {
     st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return Eigen::MatrixXd(H.rows(), 0);
+  }
+  if (op.has_stiffness()) {
+    st.lambda_ref = op.stiffness.diagonal().sum() / op.mass.sum();
+  } else {
+    ASSIGN_OR_RETURN(const VectorHodgeRows rows, VectorHodgeRows::Create(mesh));
+    st.lambda_ref = rows.Trace() / op.mass.sum();
   }
   // 4. Rank-revealing M-orthonormalization, then Rayleigh-Ritz with S.
   Eigen::MatrixXd gram = MassGram(op.mass, H);
@@ -635,7 +647,10 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
 
 absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh, const FieldType& type,
                                                     const KernelFieldOptions& options) {
-  ASSIGN_OR_RETURN(FieldOperator op, BuildFieldOperator(mesh, type));
+  // A vector field's kernel does not read S.
+  ASSIGN_OR_RETURN(FieldOperator op, type.kind == FieldKind::kVector
+                                         ? BuildFieldOperatorWithoutStiffness(mesh, type)
+                                         : BuildFieldOperator(mesh, type));
   return ComputeKernelFields(mesh, op, options);
 }
 

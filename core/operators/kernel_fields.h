@@ -83,8 +83,11 @@ struct KernelFieldStats {
 // component is flat for the n-fold transport.
 // O(#F) plus one Poisson solve on the #V x #V cotan Laplacian (vector fields): O(#V) per
 // multigrid iteration, about 10-20 iterations on the shared meshes.
-// InvalidArgument when `op` does not match the mesh; Cancelled; Internal when a closed
-// component's harmonic fields do not pass the acceptance (solver trouble).
+// For vector fields `op` may be without S (FieldOperator::has_stiffness): everything is computed
+// from the mesh then.
+// InvalidArgument when `op` does not match the mesh or, for n-fields and tensors, has no S;
+// Cancelled; Internal when a closed component's harmonic fields do not pass the acceptance
+// (solver trouble).
 absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
                                                     const FieldOperator& op,
                                                     const KernelFieldOptions& options = {},

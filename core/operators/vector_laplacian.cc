@@ -20,33 +20,10 @@ namespace {
 using operators_internal::AssembleFaceBlocks;
 using operators_internal::FaceRowWriter;
 using operators_internal::kFaceGrain;
+using vector_laplacian_internal::VertexStars;
 
 // Doubles per face in the edge-vector table (6 used, padded to a cache line).
 constexpr size_t kStride = 8;
-
-// 64-byte aligned storage for the per-face tables.
-template <typename T>
-struct CacheAlignedAllocator {
-  using value_type = T;
-  CacheAlignedAllocator() = default;
-  template <typename U>
-  CacheAlignedAllocator(const CacheAlignedAllocator<U>&) {}
-  T* allocate(size_t n) {
-    return static_cast<T*>(::operator new (n * sizeof(T), std::align_val_t{64}));
-  }
-  void deallocate(T* p, size_t) { ::operator delete (p, std::align_val_t{64}); }
-  friend bool operator==(const CacheAlignedAllocator&, const CacheAlignedAllocator&) {
-    return true;
-  }
-};
-
-// Faces around each vertex as packed corners 4 f + k (face f, corner k at the vertex; shifts
-// instead of divisions in the hot loop), ascending in f (counting sort over faces in order), so
-// the stars of a face's three vertices can be merged.
-struct VertexStars {
-  std::vector<int64_t> offset;   // #V + 1
-  std::vector<int32_t> corners;  // 3F
-};
 
 VertexStars BuildVertexStars(const TriangleMesh& mesh) {
   const FaceMatrix& F = mesh.faces();
@@ -116,7 +93,7 @@ inline void ForEachVertexNeighbor(const VertexStars& stars, const FaceMatrix& F,
 
 }  // namespace
 
-absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const TriangleMesh& mesh) {
+absl::StatusOr<VectorHodgeRows> VectorHodgeRows::Create(const TriangleMesh& mesh) {
   const int32_t nf = mesh.num_faces();
   const int32_t nv = mesh.num_vertices();
   const int32_t ne = mesh.num_edges();
@@ -124,18 +101,17 @@ absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const Tria
     return absl::ResourceExhaustedError(
         absl::StrFormat("vector Laplacian: %d faces is beyond 32-bit corner indices", nf));
   }
-  const FaceMatrix& F = mesh.faces();
-  const FaceMatrix& FE = mesh.face_edges();
-  const FaceMatrix& FN = mesh.face_neighbors();
   const PairMatrix& EF = mesh.edge_faces();
   const Eigen::VectorXd& area = mesh.face_areas();
-
-  const VertexStars stars = BuildVertexStars(mesh);
+  VectorHodgeRows rows(mesh);
+  rows.stars_ = BuildVertexStars(mesh);
+  const VertexStars& stars = rows.stars_;
 
   // Edge vectors t_fk = p_{k+2} - p_{k+1} (counter-clockwise, opposite corner k) in face f's frame.
   // They give both terms: area_f grad phi_k|f = J t_fk / 2 and area_f J grad psi_e|f = t_fk.
   // Rows padded to one 64-byte cache line: the neighbor loop reads whole rows of random faces.
-  std::vector<double, CacheAlignedAllocator<double>> t(kStride * static_cast<size_t>(nf));
+  std::vector<double, vector_laplacian_internal::CacheAlignedAllocator<double>>& t = rows.t_;
+  t.resize(kStride * static_cast<size_t>(nf));
   tbb::parallel_for(tbb::blocked_range<int32_t>(0, nf, kFaceGrain),
                     [&](const tbb::blocked_range<int32_t>& r) {
                       for (int32_t f = r.begin(); f != r.end(); ++f) {
@@ -148,7 +124,8 @@ absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const Tria
                     });
 
   // Inverse lumped vertex masses 3 / sum(incident areas) and CR edge masses 3 / sum(incident).
-  std::vector<double> inv_mv(nv);
+  std::vector<double>& inv_mv = rows.inv_mv_;
+  inv_mv.resize(nv);
   tbb::parallel_for(tbb::blocked_range<int32_t>(0, nv, 8192),
                     [&](const tbb::blocked_range<int32_t>& r) {
                       for (int32_t v = r.begin(); v != r.end(); ++v) {
@@ -159,7 +136,8 @@ absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const Tria
                         inv_mv[v] = 3.0 / sum;
                       }
                     });
-  std::vector<double> inv_me(ne);
+  std::vector<double>& inv_me = rows.inv_me_;
+  inv_me.resize(ne);
   tbb::parallel_for(tbb::blocked_range<int32_t>(0, ne, 8192),
                     [&](const tbb::blocked_range<int32_t>& r) {
                       for (int32_t e = r.begin(); e != r.end(); ++e) {
@@ -168,78 +146,105 @@ absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const Tria
                         inv_me[e] = 3.0 / sum;
                       }
                     });
-
-  // Distinct faces sharing a vertex with f: the star sizes summed, minus the repeats. A face
-  // sharing m >= 1 edges with f shares min(m + 1, 3) vertices (two vertices of a triangle always
-  // span one of its edges, and an edge has at most two faces), f itself shares 3.
-  auto count = [&](int32_t f) {
-    int64_t n = -2;
-    for (int k = 0; k < 3; ++k) n += stars.offset[F(f, k) + 1] - stars.offset[F(f, k)];
-    for (int k = 0; k < 3; ++k) {
-      const int32_t g = FN(f, k);
-      if (g == kNoFace) continue;
-      int m = 0, first = 3;
-      for (int j = 0; j < 3; ++j) {
-        if (FN(f, j) == g) {
-          ++m;
-          first = std::min(first, j);
-        }
-      }
-      if (first == k) n -= std::min(m + 1, 3) - 1;  // count each neighbor once
-    }
-    return static_cast<int32_t>(n);
-  };
-
-  auto fill = [&](int32_t f, FaceRowWriter<2>& writer) {
-    const double* tf = &t[kStride * f];
-    auto prefetch = [&](int32_t g) { __builtin_prefetch(&t[kStride * g]); };
-    ForEachVertexNeighbor(stars, F, f, prefetch, [&](int32_t g, const SharedVertex* shared, int n) {
-      const double* tg = &t[kStride * g];
-      double block[4] = {0.0, 0.0, 0.0, 0.0};
-      // Vertex (divergence) term: q = J t / 2 = (-t_y / 2, t_x / 2).
-      for (int i = 0; i < n; ++i) {
-        const double w = inv_mv[shared[i].v];
-        const double a[2] = {-0.5 * tf[2 * shared[i].kf + 1], 0.5 * tf[2 * shared[i].kf]};
-        const double b[2] = {-0.5 * tg[2 * shared[i].kg + 1], 0.5 * tg[2 * shared[i].kg]};
-        for (int c = 0; c < 2; ++c) {
-          for (int d = 0; d < 2; ++d) block[2 * c + d] += w * (a[c] * b[d]);
-        }
-      }
-      // Edge (curl) term over the edges f and g share, in ascending edge order.
-      std::array<std::array<int32_t, 3>, 3> edges;  // (edge, kf, kg)
-      int m = 0;
-      if (g == f) {
-        for (int k = 0; k < 3; ++k) edges[m++] = {FE(f, k), k, k};
-      } else if (n == 2) {
-        // The usual case: one shared edge, opposite the corners that are not shared.
-        const int kf = 3 - shared[0].kf - shared[1].kf;
-        const int kg = 3 - shared[0].kg - shared[1].kg;
-        edges[m++] = {FE(f, kf), kf, kg};
-      } else if (n == 3) {
-        // f and g share all three vertices (a closed two-triangle "pillow"): every common edge.
-        for (int k = 0; k < 3; ++k) {
-          if (FN(f, k) != g) continue;
-          const int32_t e = FE(f, k);
-          int l = 0;
-          while (l < 2 && FE(g, l) != e) ++l;
-          edges[m++] = {e, k, l};
-        }
-        operators_internal::SmallSort(edges.data(), m,
-                                      [](const auto& a, const auto& b) { return a[0] < b[0]; });
-      }
-      for (int i = 0; i < m; ++i) {
-        const double w = inv_me[edges[i][0]];
-        const double* a = tf + 2 * edges[i][1];
-        const double* b = tg + 2 * edges[i][2];
-        for (int c = 0; c < 2; ++c) {
-          for (int d = 0; d < 2; ++d) block[2 * c + d] += w * (a[c] * b[d]);
-        }
-      }
-      writer.Add(g, block);
-    });
-  };
-
-  return AssembleFaceBlocks<2>(nf, count, fill);
+  return rows;
 }
 
+// Distinct faces sharing a vertex with f: the star sizes summed, minus the repeats. A face
+// sharing m >= 1 edges with f shares min(m + 1, 3) vertices (two vertices of a triangle always
+// span one of its edges, and an edge has at most two faces), f itself shares 3.
+int32_t VectorHodgeRows::CountBlocks(int32_t f) const {
+  const FaceMatrix& F = mesh_->faces();
+  const FaceMatrix& FN = mesh_->face_neighbors();
+  int64_t n = -2;
+  for (int k = 0; k < 3; ++k) n += stars_.offset[F(f, k) + 1] - stars_.offset[F(f, k)];
+  for (int k = 0; k < 3; ++k) {
+    const int32_t g = FN(f, k);
+    if (g == kNoFace) continue;
+    int m = 0, first = 3;
+    for (int j = 0; j < 3; ++j) {
+      if (FN(f, j) == g) {
+        ++m;
+        first = std::min(first, j);
+      }
+    }
+    if (first == k) n -= std::min(m + 1, 3) - 1;  // count each neighbor once
+  }
+  return static_cast<int32_t>(n);
+}
+
+void VectorHodgeRows::ForEachBlock(
+    int32_t f, absl::FunctionRef<void(int32_t g, const double* block)> visit) const {
+  const FaceMatrix& F = mesh_->faces();
+  const FaceMatrix& FE = mesh_->face_edges();
+  const FaceMatrix& FN = mesh_->face_neighbors();
+  const double* t = t_.data();
+  const double* inv_mv = inv_mv_.data();
+  const double* inv_me = inv_me_.data();
+  const double* tf = &t[kStride * f];
+  auto prefetch = [&](int32_t g) { __builtin_prefetch(&t[kStride * g]); };
+  ForEachVertexNeighbor(stars_, F, f, prefetch, [&](int32_t g, const SharedVertex* shared, int n) {
+    const double* tg = &t[kStride * g];
+    double block[4] = {0.0, 0.0, 0.0, 0.0};
+    // Vertex (divergence) term: q = J t / 2 = (-t_y / 2, t_x / 2).
+    for (int i = 0; i < n; ++i) {
+      const double w = inv_mv[shared[i].v];
+      const double a[2] = {-0.5 * tf[2 * shared[i].kf + 1], 0.5 * tf[2 * shared[i].kf]};
+      const double b[2] = {-0.5 * tg[2 * shared[i].kg + 1], 0.5 * tg[2 * shared[i].kg]};
+      for (int c = 0; c < 2; ++c) {
+        for (int d = 0; d < 2; ++d) block[2 * c + d] += w * (a[c] * b[d]);
+      }
+    }
+    // Edge (curl) term over the edges f and g share, in ascending edge order.
+    std::array<std::array<int32_t, 3>, 3> edges;  // (edge, kf, kg)
+    int m = 0;
+    if (g == f) {
+      for (int k = 0; k < 3; ++k) edges[m++] = {FE(f, k), k, k};
+    } else if (n == 2) {
+      // The usual case: one shared edge, opposite the corners that are not shared.
+      const int kf = 3 - shared[0].kf - shared[1].kf;
+      const int kg = 3 - shared[0].kg - shared[1].kg;
+      edges[m++] = {FE(f, kf), kf, kg};
+    } else if (n == 3) {
+      // f and g share all three vertices (a closed two-triangle "pillow"): every common edge.
+      for (int k = 0; k < 3; ++k) {
+        if (FN(f, k) != g) continue;
+        const int32_t e = FE(f, k);
+        int l = 0;
+        while (l < 2 && FE(g, l) != e) ++l;
+        edges[m++] = {e, k, l};
+      }
+      operators_internal::SmallSort(edges.data(), m,
+                                    [](const auto& a, const auto& b) { return a[0] < b[0]; });
+    }
+    for (int i = 0; i < m; ++i) {
+      const double w = inv_me[edges[i][0]];
+      const double* a = tf + 2 * edges[i][1];
+      const double* b = tg + 2 * edges[i][2];
+      for (int c = 0; c < 2; ++c) {
+        for (int d = 0; d < 2; ++d) block[2 * c + d] += w * (a[c] * b[d]);
+      }
+    }
+    visit(g, block);
+  });
+}
+
+double VectorHodgeRows::Trace() const {
+  double trace = 0.0;
+  for (int32_t f = 0; f < num_faces(); ++f) {
+    ForEachBlock(f, [&](int32_t g, const double* block) {
+      if (g == f) trace += block[0] + block[3];
+    });
+  }
+  return trace;
+}
+
+absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const TriangleMesh& mesh) {
+  absl::StatusOr<VectorHodgeRows> rows = VectorHodgeRows::Create(mesh);
+  if (!rows.ok()) return rows.status();
+  return AssembleFaceBlocks<2>(
+      mesh.num_faces(), [&](int32_t f) { return rows->CountBlocks(f); },
+      [&](int32_t f, FaceRowWriter<2>& writer) {
+        rows->ForEachBlock(f, [&](int32_t g, const double* block) { writer.Add(g, block); });
+      });
+}
 }  // namespace fieldspace

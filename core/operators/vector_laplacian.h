@@ -1,7 +1,13 @@
 #ifndef FIELDSPACE_CORE_OPERATORS_VECTOR_LAPLACIAN_H_
 #define FIELDSPACE_CORE_OPERATORS_VECTOR_LAPLACIAN_H_
 
+#include <cstddef>
+#include <cstdint>
+#include <new>
+#include <vector>
+
 #include "Eigen/SparseCore"
+#include "absl/functional/function_ref.h"
 #include "absl/status/statusor.h"
 #include "core/mesh/triangle_mesh.h"
 
@@ -24,6 +30,64 @@ namespace fieldspace {
 // edge vector of e in face f (area_f J grad psi_e|f = t_f for e traversed counter-clockwise).
 // O(F) time and memory, parallel over faces. ResourceExhausted beyond 2^31 nonzeros.
 absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const TriangleMesh& mesh);
+
+namespace vector_laplacian_internal {
+
+// 64-byte aligned storage for the per-face tables.
+template <typename T>
+struct CacheAlignedAllocator {
+  using value_type = T;
+  CacheAlignedAllocator() = default;
+  template <typename U>
+  CacheAlignedAllocator(const CacheAlignedAllocator<U>&) {}
+  T* allocate(size_t n) {
+    return static_cast<T*>(::operator new (n * sizeof(T), std::align_val_t{64}));
+  }
+  void deallocate(T* p, size_t) { ::operator delete (p, std::align_val_t{64}); }
+  friend bool operator==(const CacheAlignedAllocator&, const CacheAlignedAllocator&) {
+    return true;
+  }
+};
+
+// Faces around each vertex as packed corners 4 f + k (face f, corner k at the vertex; shifts
+// instead of divisions in the hot loop), ascending in f (counting sort over faces in order), so
+// the stars of a face's three vertices can be merged.
+struct VertexStars {
+  std::vector<int64_t> offset;   // #V + 1
+  std::vector<int32_t> corners;  // 3F
+};
+
+}  // namespace vector_laplacian_internal
+
+// The rows of BuildVectorHodgeStiffness(mesh) one face at a time, computed from small per-face
+// tables instead of read from the assembled S: for steps that go over S's rows once or twice
+// (the assembly itself, the reduced system's products) without holding S (72 bytes a face here
+// against ~630 for S). The mesh must outlive it.
+class VectorHodgeRows {
+ public:
+  // ResourceExhausted beyond 2^29 faces (corners are packed in 32 bits).
+  static absl::StatusOr<VectorHodgeRows> Create(const TriangleMesh& mesh);
+
+  int32_t num_faces() const { return mesh_->num_faces(); }
+  // The number of faces sharing a vertex with f, f included: the blocks ForEachBlock visits.
+  int32_t CountBlocks(int32_t f) const;
+  // visit(g, block) for each face g sharing a vertex with f, ascending g (f included), with
+  // block[2 c + d] = S(2 f + c, 2 g + d): bitwise the values the assembled S holds.
+  void ForEachBlock(int32_t f, absl::FunctionRef<void(int32_t g, const double* block)> visit) const;
+  // trace(S): the sum of the diagonal blocks' diagonals.
+  double Trace() const;
+
+ private:
+  explicit VectorHodgeRows(const TriangleMesh& mesh) : mesh_(&mesh) {}
+
+  const TriangleMesh* mesh_;
+  vector_laplacian_internal::VertexStars stars_;
+  // Edge vectors t_fk (counter-clockwise, opposite corner k) in face f's frame, 8 doubles a face
+  // (6 used, one 64-byte cache line).
+  std::vector<double, vector_laplacian_internal::CacheAlignedAllocator<double>> t_;
+  std::vector<double> inv_mv_;  // #V: 3 / sum of incident face areas
+  std::vector<double> inv_me_;  // #E
+};
 
 }  // namespace fieldspace
 

@@ -14,6 +14,7 @@
 #include "core/common/status_macros.h"
 #include "core/common/timing.h"
 #include "core/linalg/sparse_checks.h"
+#include "core/operators/vector_laplacian.h"
 #include "core/subspace/subspace_util.h"
 #include "oneapi/tbb/blocked_range.h"
 #include "oneapi/tbb/enumerable_thread_specific.h"
@@ -63,6 +64,8 @@ struct ProductPass {
   const ReducedSystem* rows_of = nullptr;
   // Symmetric k x k, or null: mass product only. The S products read U (never rows_of).
   const Eigen::SparseMatrix<double>* S = nullptr;
+  // Instead of S, for vector fields: S's rows computed from the mesh (never assembled).
+  const VectorHodgeRows* hodge_rows = nullptr;
   const double* row_mass = nullptr;  // k values, >= 0 (> 0 with S)
   int64_t accumulator_budget_bytes = 0;
   const CancelFlag* cancel = nullptr;
@@ -90,7 +93,8 @@ struct ProductOutput {
 bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
   const ReducedSystem* source = pass.rows_of;
   const Eigen::SparseMatrix<double>* S = pass.S;
-  const bool with_s = S != nullptr;
+  const VectorHodgeRows* hodge_rows = pass.hodge_rows;
+  const bool with_s = S != nullptr || hodge_rows != nullptr;
   const double* row_mass = pass.row_mass;
   const int64_t k = source != nullptr ? source->dofs() : pass.U->rows();
   const int64_t d = source != nullptr ? source->dimension() : pass.U->cols();
@@ -215,11 +219,10 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
               w.u_begin.push_back(static_cast<int64_t>(w.u_cols.size()));
               w.row_mass.push_back(row_mass[i]);
               if (!with_s) continue;
-              // Row i of S U (S symmetric: row i = column i).
+              // Row i of S U (S symmetric: row i = column i), S's entries in ascending j.
               w.su_row.clear();
-              for (Eigen::SparseMatrix<double>::InnerIterator it(*S, i); it; ++it) {
-                const BasisRow uj = GetBasisRow(*pass.U, it.row());
-                const double sij = it.value();
+              const auto add_su = [&](int64_t j, double sij) {
+                const BasisRow uj = GetBasisRow(*pass.U, j);
                 for (int64_t q = 0; q < uj.size; ++q) {
                   const int32_t c = uj.cols[q];
                   if (!w.mark[c]) {
@@ -228,6 +231,18 @@ bool ComputeProducts(const ProductPass& pass, ProductOutput* out) {
                     w.su_row.emplace_back(c, 0.0);
                   }
                   w.spa[c] += sij * static_cast<double>(uj.vals[q]);
+                }
+              };
+              if (hodge_rows != nullptr) {
+                const int64_t c = i % 2;
+                hodge_rows->ForEachBlock(static_cast<int32_t>(i / 2),
+                                         [&](int32_t g, const double* block) {
+                                           add_su(2 * int64_t{g}, block[2 * c]);
+                                           add_su(2 * int64_t{g} + 1, block[2 * c + 1]);
+                                         });
+              } else {
+                for (Eigen::SparseMatrix<double>::InnerIterator it(*S, i); it; ++it) {
+                  add_su(it.row(), it.value());
                 }
               }
               for (auto& [c, v] : w.su_row) {
@@ -431,6 +446,10 @@ absl::Status CheckBuildInputs(const Basis* basis, const FieldOperator& op,
                                                    basis->type.ToString(), ", operator for ",
                                                    op.type.ToString()));
   }
+  if (!op.has_stiffness()) {
+    return absl::InvalidArgumentError(
+        "ReducedSystem: the operator's S is not assembled (AssembleStiffness)");
+  }
   if (k != op.dofs() || op.stiffness.rows() != k || op.stiffness.cols() != k) {
     return absl::InvalidArgumentError(absl::StrCat(
         "ReducedSystem: basis has ", k, " rows but the operator has ", op.dofs(), " DOFs and a ",
@@ -533,20 +552,46 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
       return Build(std::move(basis), op, inner);
     });
   }
-  const BasisMatrix& U = basis->U;
-  const int64_t k = U.rows();
-  const int64_t d = U.cols();
-  RETURN_IF_ERROR(CheckPositiveVector(op.mass, k, "ReducedSystem: operator mass"));
+  RETURN_IF_ERROR(CheckPositiveVector(op.mass, basis->U.rows(), "ReducedSystem: operator mass"));
   RETURN_IF_ERROR(CheckFiniteValues(op.stiffness, "ReducedSystem: operator stiffness"));
-  RETURN_IF_ERROR(CheckBasisMatrix(U, "ReducedSystem"));
+  RETURN_IF_ERROR(CheckBasisMatrix(basis->U, "ReducedSystem"));
+  return FromProducts(std::move(basis), &op.stiffness, nullptr, op.mass, options, t_start);
+}
 
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
+    std::shared_ptr<const Basis> basis, const TriangleMesh& mesh,
+    const ReducedSystemOptions& options) {
+  const auto t_start = std::chrono::steady_clock::now();
+  RETURN_IF_ERROR(CheckBasisAndOptions(basis.get(), options));
+  if (options.threads > 0) {
+    return InArena(options, [&](const ReducedSystemOptions& inner) {
+      return Build(std::move(basis), mesh, inner);
+    });
+  }
+  if (basis->type.kind != FieldKind::kVector) {
+    ASSIGN_OR_RETURN(const FieldOperator op, BuildFieldOperator(mesh, basis->type));
+    return Build(std::move(basis), op, options);
+  }
+  const int64_t k = 2 * static_cast<int64_t>(mesh.num_faces());
+  if (basis->U.rows() != k) {
+    return absl::InvalidArgumentError(absl::StrCat("ReducedSystem: basis has ", basis->U.rows(),
+                                                   " rows but the mesh has ", k, " DOFs"));
+  }
+  RETURN_IF_ERROR(CheckBasisMatrix(basis->U, "ReducedSystem"));
+  ASSIGN_OR_RETURN(const VectorHodgeRows rows, VectorHodgeRows::Create(mesh));
+  return FromProducts(std::move(basis), nullptr, &rows, BuildFaceMass(mesh, 2), options, t_start);
+}
+
+absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::FromProducts(
+    std::shared_ptr<const Basis> basis, const Eigen::SparseMatrix<double>* S,
+    const VectorHodgeRows* hodge_rows, Eigen::VectorXd mass, const ReducedSystemOptions& options,
+    std::chrono::steady_clock::time_point t_start) {
+  const int64_t d = basis->U.cols();
   auto sys = std::shared_ptr<ReducedSystem>(new ReducedSystem());
-  const Eigen::SparseMatrix<double>& S = op.stiffness;
-  const Eigen::VectorXd& mass = op.mass;
-
   ProductPass pass;
-  pass.U = &U;
-  pass.S = &S;
+  pass.U = &basis->U;
+  pass.S = S;
+  pass.hodge_rows = hodge_rows;
   pass.row_mass = mass.data();
   pass.accumulator_budget_bytes = options.accumulator_budget_bytes;
   pass.cancel = options.cancel;
@@ -591,7 +636,7 @@ absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(
   }
   std::vector<Entry>().swap(entries);
   sys->stats_.products_seconds = SecondsSince(t_start);
-  return Complete(std::move(sys), std::move(basis), op.mass, options, t_start);
+  return Complete(std::move(sys), std::move(basis), std::move(mass), options, t_start);
 }
 
 absl::StatusOr<std::shared_ptr<const ReducedSystem>> ReducedSystem::Build(

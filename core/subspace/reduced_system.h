@@ -15,12 +15,15 @@
 #include "core/basis/basis.h"
 #include "core/common/cancel.h"
 #include "core/linalg/supernodal_cholesky.h"
+#include "core/mesh/triangle_mesh.h"
 #include "core/operators/field_operator.h"
 #include "core/operators/field_type.h"
 #include "core/subspace/lift_plan.h"
 #include "core/subspace/subspace_util.h"
 
 namespace fieldspace {
+
+class VectorHodgeRows;  // core/operators/vector_laplacian.h
 
 struct ReducedSystemOptions {
   // Worker threads for the precomputation (0: all available cores).
@@ -85,6 +88,13 @@ class ReducedSystem {
   static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Build(
       std::shared_ptr<const Basis> basis, const FieldOperator& op,
       const ReducedSystemOptions& options = {});
+  // The same for the operator of basis->type on `mesh` (BuildFieldOperator's), bit for bit: for
+  // vector fields S's rows are computed from the mesh as the pass reads them (VectorHodgeRows)
+  // and S is never assembled (867 MB less on 1.38M faces); other fields assemble S for the pass.
+  // InvalidArgument also when U's rows are not the mesh's DOFs.
+  static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Build(
+      std::shared_ptr<const Basis> basis, const TriangleMesh& mesh,
+      const ReducedSystemOptions& options = {});
   // The same from the reduced matrices computed earlier for this basis and operator (e.g. by
   // DecodeReducedMatrices from a store) and the operator's mass alone (`mass`: k positive values,
   // BuildFaceMass): no product pass and no stiffness, the rest as above. The caller vouches that
@@ -143,6 +153,11 @@ class ReducedSystem {
   static absl::StatusOr<std::shared_ptr<const ReducedSystem>> FromMatrices(
       std::shared_ptr<const Basis> basis, std::optional<LiftPlan> plan, Eigen::VectorXd mass,
       ReducedMatrices matrices, const ReducedSystemOptions& options);
+  // Both Builds by the product pass over U, with S's rows from `S` or from `hodge_rows`.
+  static absl::StatusOr<std::shared_ptr<const ReducedSystem>> FromProducts(
+      std::shared_ptr<const Basis> basis, const Eigen::SparseMatrix<double>* S,
+      const VectorHodgeRows* hodge_rows, Eigen::VectorXd mass, const ReducedSystemOptions& options,
+      std::chrono::steady_clock::time_point t_start);
   // The part of the Builds after the matrices: counts, analysis, U^T M U's factorization, the
   // lift plan (`plan`, or built from U when it has none).
   static absl::StatusOr<std::shared_ptr<const ReducedSystem>> Complete(

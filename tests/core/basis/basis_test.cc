@@ -221,6 +221,73 @@ TEST(BasisTest, FactoredAndGenericVectorPathsAgree) {
   }
 }
 
+// A vector build through the Hodge factor does not read S: given an operator without it, the same
+// basis bit for bit (also the low-modes levels and the torus's kernel columns, which then take
+// their scale from the mesh).
+TEST(BasisTest, VectorBuildWithoutStiffnessIsTheSame) {
+  const TriangleMesh mesh = testing::Torus(24, 12, 1.0, 0.4);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  absl::StatusOr<FieldOperator> no_s =
+      BuildFieldOperatorWithoutStiffness(mesh, FieldType::Vector());
+  ASSERT_TRUE(no_s.ok());
+  BasisOptions options;
+  EXPECT_FALSE(BuildReadsStiffness(FieldType::Vector(), options));
+  options.params.dimension = 60;
+  auto with = BuildBasis(mesh, op, options);
+  auto without = BuildBasis(mesh, *no_s, options);
+  ASSERT_TRUE(with.ok()) << with.status();
+  ASSERT_TRUE(without.ok()) << without.status();
+  EXPECT_TRUE(without->stats.hodge_factor_used);
+  EXPECT_EQ(without->kernel_columns, 2);
+  EXPECT_EQ(Eigen::MatrixXf(without->U), Eigen::MatrixXf(with->U));
+  EXPECT_EQ(without->local_eigenvalues, with->local_eigenvalues);
+  auto levels = QualityLevels(BasisQuality::kLowModes, 80, options.params.sigma);
+  ASSERT_TRUE(levels.ok());
+  EXPECT_FALSE(BuildReadsStiffness(FieldType::Vector(), options, *levels));
+  auto low_with = BuildMultiLevelBasis(mesh, op, options, *levels);
+  auto low_without = BuildMultiLevelBasis(mesh, *no_s, options, *levels);
+  ASSERT_TRUE(low_with.ok()) << low_with.status();
+  ASSERT_TRUE(low_without.ok()) << low_without.status();
+  EXPECT_EQ(Eigen::MatrixXf(low_without->U), Eigen::MatrixXf(low_with->U));
+}
+
+// Every other build reads S and refuses an operator without it, before any work.
+TEST(BasisTest, BuildsThatReadStiffnessRefuseAnOperatorWithoutIt) {
+  const TriangleMesh mesh = Icosphere(3);
+  BasisOptions options;
+  options.params.dimension = 40;
+  const auto refused =
+      StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("reads S"));
+  for (FieldType type : {FieldType::Tensor(), FieldType::NField(4)}) {
+    SCOPED_TRACE(type.ToString());
+    EXPECT_TRUE(BuildReadsStiffness(type, options));
+    absl::StatusOr<FieldOperator> no_s = BuildFieldOperatorWithoutStiffness(mesh, type);
+    ASSERT_TRUE(no_s.ok());
+    EXPECT_THAT(BuildBasis(mesh, *no_s, options), refused);
+  }
+  absl::StatusOr<FieldOperator> no_s =
+      BuildFieldOperatorWithoutStiffness(mesh, FieldType::Vector());
+  ASSERT_TRUE(no_s.ok());
+  BasisOptions generic = options;
+  generic.use_factored_vector_operator = false;
+  EXPECT_TRUE(BuildReadsStiffness(FieldType::Vector(), generic));
+  EXPECT_THAT(BuildBasis(mesh, *no_s, generic), refused);
+  BasisOptions clamped = options;
+  clamped.clamped_local_fields = true;
+  EXPECT_TRUE(BuildReadsStiffness(FieldType::Vector(), clamped));
+  EXPECT_THAT(BuildBasis(mesh, *no_s, clamped), refused);
+  // A clamped level anywhere among the levels: refused before the first level is built.
+  auto smooth = QualityLevels(BasisQuality::kSmooth, 80, options.params.sigma);
+  ASSERT_TRUE(smooth.ok());
+  EXPECT_TRUE(BuildReadsStiffness(FieldType::Vector(), options, *smooth));
+  const std::vector<BasisLevel> last_clamped = {{60, 30.0, false}, {12, 25.0, true}};
+  EXPECT_TRUE(BuildReadsStiffness(FieldType::Vector(), options, last_clamped));
+  std::atomic<int> progress_calls{0};
+  options.progress = [&](BasisPhase, double) { ++progress_calls; };
+  EXPECT_THAT(BuildMultiLevelBasis(mesh, *no_s, options, last_clamped), refused);
+  EXPECT_EQ(progress_calls.load(), 0);
+}
+
 TEST(BasisTest, DeterministicAndIndependentOfThreadCount) {
   const TriangleMesh mesh = Icosphere(4);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());

@@ -207,6 +207,31 @@ TEST(KernelFieldsTest, RejectsAnOperatorOfAnotherMesh) {
   EXPECT_THAT(ComputeKernelFields(b, op), StatusIs(absl::StatusCode::kInvalidArgument));
 }
 
+// A vector field's kernel needs no S: without it the same columns and the same lambda_ref (the
+// trace then comes from the mesh); n-fields and tensors read S and say so.
+TEST(KernelFieldsTest, VectorKernelWithoutStiffnessIsTheSame) {
+  const TriangleMesh mesh = MustCreate(MakeGenusSurface(2, 4));
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  absl::StatusOr<FieldOperator> no_s =
+      BuildFieldOperatorWithoutStiffness(mesh, FieldType::Vector());
+  ASSERT_TRUE(no_s.ok());
+  KernelFieldStats with_stats, without_stats;
+  absl::StatusOr<Eigen::MatrixXd> with = ComputeKernelFields(mesh, op, {}, &with_stats);
+  absl::StatusOr<Eigen::MatrixXd> without = ComputeKernelFields(mesh, *no_s, {}, &without_stats);
+  ASSERT_TRUE(with.ok()) << with.status();
+  ASSERT_TRUE(without.ok()) << without.status();
+  ASSERT_EQ(with->cols(), 4);
+  EXPECT_EQ(*with, *without);
+  EXPECT_NEAR(without_stats.lambda_ref, with_stats.lambda_ref, 1e-12 * with_stats.lambda_ref);
+  EXPECT_GT(with_stats.lambda_ref, 0.0);
+  for (FieldType type : {FieldType::Tensor(), FieldType::NField(4)}) {
+    absl::StatusOr<FieldOperator> other = BuildFieldOperatorWithoutStiffness(mesh, type);
+    ASSERT_TRUE(other.ok());
+    EXPECT_THAT(ComputeKernelFields(mesh, *other), StatusIs(absl::StatusCode::kInvalidArgument,
+                                                            ::testing::HasSubstr("not assembled")));
+  }
+}
+
 // When the multigrid does not converge within poisson_max_iterations, CHOLMOD solves instead and
 // the harmonic fields are the same (here the genus-2 surface, 4 right-hand sides, 1 iteration).
 TEST(KernelFieldsTest, FallsBackToCholeskyWhenTheMultigridDoesNotConverge) {

@@ -340,6 +340,71 @@ TEST(FrameIndependenceTest, CyclicVertexOrderOnlyRotatesTheDofs) {
   }
 }
 
+// S assembled after the mass is S of BuildFieldOperator bit for bit; until then the operator
+// says it has none and the steps that need S refuse it.
+TEST(FieldOperatorTest, StiffnessAssembledLaterIsTheSameOperator) {
+  const TriangleMesh mesh = CatalogueMesh("ChippedTorus");
+  for (FieldType type : {FieldType::Vector(), FieldType::NField(4), FieldType::Tensor()}) {
+    SCOPED_TRACE(type.ToString());
+    const FieldOperator whole = MustBuildOperator(mesh, type);
+    absl::StatusOr<FieldOperator> op = BuildFieldOperatorWithoutStiffness(mesh, type);
+    ASSERT_TRUE(op.ok()) << op.status();
+    EXPECT_FALSE(op->has_stiffness());
+    EXPECT_TRUE(whole.has_stiffness());
+    EXPECT_EQ(op->mass, whole.mass);
+    EXPECT_THAT(ValidateOperatorShape(*op),
+                StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("assembled")));
+    ASSERT_TRUE(AssembleStiffness(mesh, &*op).ok());
+    EXPECT_TRUE(op->has_stiffness());
+    EXPECT_TRUE(ValidateOperatorShape(*op).ok());
+    EXPECT_EQ(MaxAbsDiff(op->stiffness, whole.stiffness), 0.0);
+    EXPECT_EQ(op->stiffness.nonZeros(), whole.stiffness.nonZeros());
+  }
+  // The mass must be the mesh's.
+  FieldOperator wrong = *BuildFieldOperatorWithoutStiffness(mesh, FieldType::Vector());
+  wrong.mass.conservativeResize(wrong.mass.size() - 2);
+  EXPECT_THAT(AssembleStiffness(mesh, &wrong), StatusIs(absl::StatusCode::kInvalidArgument));
+  EXPECT_THAT(BuildFieldOperatorWithoutStiffness(mesh, FieldType::NField(0)),
+              StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
+// S's rows computed one face at a time (what the reduced system's products read instead of S)
+// are the assembled S's bit for bit, and their trace (the kernel's scale) is S's.
+TEST(VectorHodgeTest, RowsWithoutAssemblyAreTheAssembledRows) {
+  for (const char* name : {"NoisySphere", "ChippedTorus", "ObtuseTorus", "Cylinder"}) {
+    SCOPED_TRACE(name);
+    const TriangleMesh mesh = CatalogueMesh(name);
+    const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+    const double trace = op.stiffness.diagonal().sum();
+    absl::StatusOr<VectorHodgeRows> rows = VectorHodgeRows::Create(mesh);
+    ASSERT_TRUE(rows.ok()) << rows.status();
+    EXPECT_NEAR(rows->Trace(), trace, 1e-12 * trace);
+    // Row 2 f + c of S, entry by entry in S's order (S symmetric: column = row).
+    int64_t mismatches = 0, visited = 0;
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      std::vector<std::pair<int64_t, double>> row[2];
+      int32_t blocks = 0;
+      rows->ForEachBlock(f, [&](int32_t g, const double* block) {
+        ++blocks;
+        for (int c = 0; c < 2; ++c) {
+          for (int d = 0; d < 2; ++d) row[c].emplace_back(2 * int64_t{g} + d, block[2 * c + d]);
+        }
+      });
+      EXPECT_EQ(blocks, rows->CountBlocks(f));
+      for (int c = 0; c < 2; ++c) {
+        std::vector<std::pair<int64_t, double>> expected;
+        for (SpMat::InnerIterator it(op.stiffness, 2 * int64_t{f} + c); it; ++it) {
+          expected.emplace_back(it.row(), it.value());
+        }
+        mismatches += row[c] != expected;
+        visited += static_cast<int64_t>(row[c].size());
+      }
+    }
+    EXPECT_EQ(mismatches, 0);
+    EXPECT_EQ(visited, op.stiffness.nonZeros());
+  }
+}
+
 TEST(FieldTypeTest, ValidateAndToString) {
   EXPECT_TRUE(FieldType::Vector().Validate().ok());
   EXPECT_TRUE(FieldType::Tensor().Validate().ok());

@@ -74,6 +74,48 @@ TEST(ReducedSystemTest, MatchesDenseProductsForEachFieldType) {
   }
 }
 
+// From the mesh alone: a vector field's S rows computed face by face give the system of the
+// assembled S, bit for bit on one thread (threads sum their accumulators in the order they
+// finish); other fields assemble S and match too. A mesh of another size is refused.
+TEST(ReducedSystemTest, FromTheMeshIsTheSystemOfTheAssembledOperator) {
+  const TriangleMesh mesh = Torus(24, 12);
+  for (const FieldType& type : {FieldType::Vector(), FieldType::Tensor()}) {
+    SCOPED_TRACE(type.ToString());
+    const FieldOperator op = MustBuildOperator(mesh, type);
+    auto basis = RandomBasis(type, op.dofs(), 90, 30, 11);
+    ReducedSystemOptions banded;
+    banded.accumulator_budget_bytes = 1;
+    banded.threads = 1;
+    for (const ReducedSystemOptions& options : {ReducedSystemOptions(), banded}) {
+      auto assembled = ReducedSystem::Build(basis, op, options);
+      auto from_mesh = ReducedSystem::Build(basis, mesh, options);
+      ASSERT_TRUE(assembled.ok()) << assembled.status();
+      ASSERT_TRUE(from_mesh.ok()) << from_mesh.status();
+      for (int which = 0; which < 3; ++which) {
+        const auto pick = [&](const ReducedSystem& sys) -> const Eigen::SparseMatrix<double>& {
+          return which == 0 ? sys.stiffness() : which == 1 ? sys.bilaplacian() : sys.mass_matrix();
+        };
+        const Eigen::SparseMatrix<double>& a = pick(**assembled);
+        const Eigen::SparseMatrix<double>& b = pick(**from_mesh);
+        ASSERT_EQ(a.nonZeros(), b.nonZeros());
+        if (options.threads == 1) {
+          EXPECT_TRUE(std::equal(a.valuePtr(), a.valuePtr() + a.nonZeros(), b.valuePtr()))
+              << "matrix " << which;
+        } else {  // threads sum their accumulators in whatever order they finish
+          EXPECT_LT(RelativeDifference(Eigen::MatrixXd(a), Eigen::MatrixXd(b)), 1e-14)
+              << "matrix " << which;
+        }
+        EXPECT_TRUE(
+            std::equal(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros(), b.innerIndexPtr()));
+      }
+      EXPECT_EQ((*from_mesh)->mass(), op.mass);
+    }
+  }
+  const TriangleMesh other = Icosphere(2);
+  auto basis = RandomBasis(FieldType::Vector(), 2 * mesh.num_faces(), 40, 20, 3);
+  EXPECT_THAT(ReducedSystem::Build(basis, other), StatusIs(absl::StatusCode::kInvalidArgument));
+}
+
 TEST(ReducedSystemTest, BandedAccumulationAndThreadCountGiveTheSameMatrices) {
   const TriangleMesh mesh = Torus(24, 12);
   const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
