@@ -3,9 +3,13 @@
 
 #include <algorithm>
 #include <chrono>
+#include <deque>
 #include <iostream>
+#include <string>
+#include <string_view>
 #include <thread>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "core/basis/basis_io.h"
@@ -198,10 +202,12 @@ void Registry::RunBuild(const std::shared_ptr<BuildJob>& job, BuildRequest reque
     record.created_unix_ms = NowUnixMs();
     record.build_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    ASSIGN_OR_RETURN(std::string payload, EncodeBasis(basis, record.key.mesh_id));
+    // U's arrays are written from where they are, not from a copy beside them.
+    std::deque<std::string> payload_storage;
+    ASSIGN_OR_RETURN(std::vector<std::string_view> payload,
+                     EncodeBasisPieces(basis, record.key.mesh_id, &payload_storage));
     uint64_t payload_hash = 0;
-    RETURN_IF_ERROR(store_->SaveBasis(record, {payload}, &payload_hash));
-    std::string().swap(payload);
+    RETURN_IF_ERROR(store_->SaveBasis(record, payload, &payload_hash));
     SaveReducedMatrices(record.id, payload_hash, *served->system);
     builds_run_.fetch_add(1);
     auto published = std::make_shared<ServedBasis>(*served);

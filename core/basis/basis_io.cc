@@ -209,6 +209,27 @@ class FileSink final : public Sink {
   AtomicFileWriter& out_;
 };
 
+// Pieces of at least kReferenceBytes are referenced in place; smaller ones are copied.
+class PiecesSink final : public Sink {
+ public:
+  PiecesSink(std::vector<std::string_view>* pieces, std::deque<std::string>* storage)
+      : pieces_(pieces), storage_(storage) {}
+  absl::Status Write(const void* data, size_t size) override {
+    constexpr size_t kReferenceBytes = 4096;
+    if (size >= kReferenceBytes) {
+      pieces_->emplace_back(static_cast<const char*>(data), size);
+    } else {
+      // A deque never moves its elements, so earlier views stay valid.
+      pieces_->emplace_back(storage_->emplace_back(static_cast<const char*>(data), size));
+    }
+    return absl::OkStatus();
+  }
+
+ private:
+  std::vector<std::string_view>* pieces_;
+  std::deque<std::string>* storage_;
+};
+
 using Source = BasisByteSource;
 
 class StringSource final : public Source {
@@ -609,6 +630,22 @@ absl::StatusOr<std::string> EncodeBasis(const Basis& basis, std::string_view mes
   StringSink sink(&out);
   if (absl::Status s = Encode(basis, mesh_id, sink); !s.ok()) return s;
   return out;
+}
+
+absl::StatusOr<std::vector<std::string_view>> EncodeBasisPieces(const Basis& basis,
+                                                                std::string_view mesh_id,
+                                                                std::deque<std::string>* storage) {
+  std::vector<std::string_view> pieces;
+  if (!basis.U.isCompressed()) {
+    // Encode compresses a copy of U, which would not outlive the pieces.
+    absl::StatusOr<std::string> whole = EncodeBasis(basis, mesh_id);
+    if (!whole.ok()) return whole.status();
+    pieces.emplace_back(storage->emplace_back(*std::move(whole)));
+    return pieces;
+  }
+  PiecesSink sink(&pieces, storage);
+  if (absl::Status s = Encode(basis, mesh_id, sink); !s.ok()) return s;
+  return pieces;
 }
 
 absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes) {

@@ -2,6 +2,7 @@
 #define FIELDSPACE_CORE_BASIS_BASIS_IO_H_
 
 #include <cstdint>
+#include <deque>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -57,6 +58,14 @@ absl::StatusOr<BasisFileInfo> ReadBasisFileInfo(const std::string& path);
 
 // The same format in memory.
 absl::StatusOr<std::string> EncodeBasis(const Basis& basis, std::string_view mesh_id);
+// The same bytes as pieces to be written one after another (a daemon's store takes them): the
+// small ones (preamble, header, section heads, checksums) held in `*storage`, the arrays
+// referenced where they are, so that no copy of U (8 bytes a nonzero) is made to save it.
+// `basis` and `*storage` must outlive the pieces. (A U that is not compressed is encoded into
+// `*storage` whole.)
+absl::StatusOr<std::vector<std::string_view>> EncodeBasisPieces(const Basis& basis,
+                                                                std::string_view mesh_id,
+                                                                std::deque<std::string>* storage);
 absl::StatusOr<LoadedBasis> DecodeBasis(std::string_view bytes);
 
 // Where DecodeBasisFrom reads a basis's bytes. It reads them once, in order, each read starting

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -107,6 +108,38 @@ TEST_F(BasisIoTest, RoundTripInMemoryAndOnDisk) {
   ASSERT_TRUE(SaveBasisFile(path, basis_, "other").ok());
   EXPECT_EQ(LoadBasisFile(path)->mesh_id, "other");
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir_), {}), 1);
+}
+
+// The pieces a daemon saves are EncodeBasis's bytes, U's arrays referenced in place (not copied),
+// also for a U that is not compressed (encoded whole then).
+TEST_F(BasisIoTest, PiecesAreTheEncodedBytesWithUReferencedInPlace) {
+  auto bytes = EncodeBasis(basis_, "mesh:abc123");
+  ASSERT_TRUE(bytes.ok()) << bytes.status();
+  std::deque<std::string> storage;
+  auto pieces = EncodeBasisPieces(basis_, "mesh:abc123", &storage);
+  ASSERT_TRUE(pieces.ok()) << pieces.status();
+  std::string joined;
+  bool values_in_place = false, columns_in_place = false;
+  for (std::string_view piece : *pieces) {
+    joined.append(piece);
+    values_in_place |= piece.data() == reinterpret_cast<const char*>(basis_.U.valuePtr());
+    columns_in_place |= piece.data() == reinterpret_cast<const char*>(basis_.U.innerIndexPtr());
+  }
+  EXPECT_EQ(joined, *bytes);
+  EXPECT_TRUE(values_in_place);
+  EXPECT_TRUE(columns_in_place);
+  size_t stored = 0;
+  for (const std::string& s : storage) stored += s.size();
+  EXPECT_LT(stored, bytes->size() / 4);
+
+  Basis uncompressed = basis_;
+  uncompressed.U.uncompress();
+  ASSERT_FALSE(uncompressed.U.isCompressed());
+  std::deque<std::string> whole;
+  auto one = EncodeBasisPieces(uncompressed, "mesh:abc123", &whole);
+  ASSERT_TRUE(one.ok()) << one.status();
+  ASSERT_EQ(one->size(), 1u);
+  EXPECT_EQ((*one)[0], *bytes);
 }
 
 TEST_F(BasisIoTest, EveryFlippedByteIsDetected) {
