@@ -212,8 +212,8 @@ struct BasisLevel {
 // Only vector fields whose local problems all take the factored Hodge form
 // (use_factored_vector_operator, nothing clamped) do not: those builds take an operator without S
 // (BuildFieldOperatorWithoutStiffness) and run without S's memory (867 MB of the 1.38M-face
-// armadillo's vector build); the caller assembles S afterwards where it needs it
-// (AssembleStiffness, e.g. for the reduced system).
+// armadillo's vector build). Their reduced system needs no S either (ReducedSystem::Build from
+// the mesh); AssembleStiffness adds it where a caller still wants it (e.g. to export it).
 bool BuildReadsStiffness(const FieldType& type, const BasisOptions& options,
                          const std::vector<BasisLevel>& levels = {});
 
