@@ -564,6 +564,15 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   KernelFieldStats local_stats;
   KernelFieldStats& st = stats != nullptr ? *stats : local_stats;
   st = KernelFieldStats();
+  // The scale of the acceptance test. Without S, from S's rows computed from the mesh, and first:
+  // their tables are freed before the candidates and the Poisson solve take their memory. Not
+  // needed (and left 0) when no component can have a kernel field.
+  if (op.has_stiffness()) {
+    st.lambda_ref = op.stiffness.diagonal().sum() / op.mass.sum();
+  } else if (KernelEntriesBound(mesh, op.type) > 0) {
+    ASSIGN_OR_RETURN(const VectorHodgeRows rows, VectorHodgeRows::Create(mesh));
+    st.lambda_ref = rows.Trace() / op.mass.sum();
+  }
   RowMatrix H;
   if (vector) {
     ASSIGN_OR_RETURN(H, HarmonicCandidates(mesh, options, &st));
@@ -580,12 +589,6 @@ absl::StatusOr<Eigen::MatrixXd> ComputeKernelFields(const TriangleMesh& mesh,
   if (H.cols() == 0) {
     st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     return Eigen::MatrixXd(H.rows(), 0);
-  }
-  if (op.has_stiffness()) {
-    st.lambda_ref = op.stiffness.diagonal().sum() / op.mass.sum();
-  } else {
-    ASSIGN_OR_RETURN(const VectorHodgeRows rows, VectorHodgeRows::Create(mesh));
-    st.lambda_ref = rows.Trace() / op.mass.sum();
   }
   // 4. Rank-revealing M-orthonormalization, then Rayleigh-Ritz with S.
   Eigen::MatrixXd gram = MassGram(op.mass, H);

@@ -40,7 +40,7 @@ struct KernelFieldOptions {
 struct KernelFieldStats {
   int32_t candidates = 0;          // fields built before the Rayleigh-Ritz selection
   int32_t expected_harmonic = 0;   // vector fields: 2 g summed over the closed components
-  double lambda_ref = 0;           // trace(S) / trace(M)
+  double lambda_ref = 0;           // trace(S) / trace(M) (0 without S where no kernel can be)
   double max_rayleigh = 0;         // largest x^T S x / lambda_ref of the accepted columns
   double min_rejected = 0;         // smallest x^T S x / lambda_ref of the rejected ones (0: none)
   int32_t poisson_iterations = 0;  // multigrid conjugate gradient iterations (vector fields)
