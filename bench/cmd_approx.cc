@@ -78,8 +78,7 @@ absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args) {
 }
 
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
-                                                             const FieldOperator& op,
-                                                             const Args& args) {
+                                                             FieldOperator* op, const Args& args) {
   auto dim = args.GetInt("dim", 0);
   if (!dim.ok()) return dim.status();
   auto sigma = args.GetDouble("sigma", 40.0);
@@ -104,14 +103,8 @@ absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh&
   options.params.sigma = *sigma;
   options.params.seed = static_cast<uint64_t>(*seed);
   options.kernel_columns = !args.Has("no-kernel-columns");
-  absl::StatusOr<Basis> basis;
-  if (*quality == BasisQuality::kPaper) {
-    basis = BuildTwoLevelBasis(mesh, op, options, static_cast<int32_t>(*coarse_dim));
-  } else {
-    auto levels = QualityLevels(*quality, options.params.dimension, options.params.sigma);
-    if (!levels.ok()) return levels.status();
-    basis = BuildMultiLevelBasis(mesh, op, options, *levels);
-  }
+  absl::StatusOr<Basis> basis =
+      BuildBasisOfQuality(mesh, op, options, *quality, static_cast<int32_t>(*coarse_dim));
   if (!basis.ok()) return basis.status();
   return std::shared_ptr<const Basis>(std::make_shared<Basis>(*std::move(basis)));
 }
@@ -122,7 +115,7 @@ absl::StatusOr<BenchSubspace> LoadBenchSubspace(const Args& args, const FieldTyp
   auto op = BuildFieldOperator(*mesh, type);
   if (!op.ok()) return op.status();
   Stopwatch basis_watch;
-  auto basis = BuildBenchBasis(*mesh, *op, args);
+  auto basis = BuildBenchBasis(*mesh, &*op, args);
   if (!basis.ok()) return basis.status();
   const double basis_seconds = basis_watch.Seconds();
   Stopwatch reduced_watch;
@@ -167,7 +160,7 @@ int RunApprox(const Args& args) {
   Stopwatch basis_watch;
   std::shared_ptr<const Basis> basis;
   if (basis_kind == "local") {
-    auto local = BuildBenchBasis(*mesh, *op, args);
+    auto local = BuildBenchBasis(*mesh, &*op, args);
     if (!local.ok()) return ReportError(local.status());
     basis = *std::move(local);
   } else {

@@ -145,7 +145,6 @@ int RunBasis(const Args& args) {
   const std::string mesh_path = args.positional()[0];
   auto mesh = LoadBenchMesh(mesh_path);
   if (!mesh.ok()) return ReportError(mesh.status());
-  // S only if the build reads it (as the daemon builds: BuildBasisForKey).
   auto op = BuildFieldOperatorWithoutStiffness(*mesh, *type);
   if (!op.ok()) return ReportError(op.status());
 
@@ -161,19 +160,9 @@ int RunBasis(const Args& args) {
     if (!w.ok()) return ReportError(w.status());
     options.params.face_weights = std::move(*w);
   }
-  std::vector<BasisLevel> levels;
-  if (*quality != BasisQuality::kPaper) {
-    auto quality_levels = QualityLevels(*quality, options.params.dimension, options.params.sigma);
-    if (!quality_levels.ok()) return ReportError(quality_levels.status());
-    levels = *std::move(quality_levels);
-  }
-  if (BuildReadsStiffness(*type, options, levels)) {
-    if (auto st = AssembleStiffness(*mesh, &*op); !st.ok()) return ReportError(st);
-  }
+  // S only if the build reads it, as the daemon builds (BuildBasisOfQuality).
   absl::StatusOr<Basis> basis =
-      *quality == BasisQuality::kPaper
-          ? BuildTwoLevelBasis(*mesh, *op, options, static_cast<int32_t>(*coarse_dim))
-          : BuildMultiLevelBasis(*mesh, *op, options, levels);
+      BuildBasisOfQuality(*mesh, &*op, options, *quality, static_cast<int32_t>(*coarse_dim));
   if (!basis.ok()) return ReportError(basis.status());
 
   if (const auto save = args.Get("save"); save.has_value()) {
@@ -207,12 +196,12 @@ int RunBasis(const Args& args) {
       .Double("total", basis->timings.total_seconds)
       .EndObject()
       .Double("peak_rss_mb", PeakRssMb())
-      .Double("estimated_peak_mb", static_cast<double>(EstimateBuildPeakBytes(
-                                       mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
-                                       options.kernel_columns && basis->kernel_columns > 0,
-                                       *coarse_dim > 0 || *quality != BasisQuality::kPaper,
-                                       *quality == BasisQuality::kSmooth, options.threads)) /
-                                       (1 << 20));
+      .Double("estimated_peak_mb",
+              static_cast<double>(EstimateBuildPeakBytes(
+                  mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
+                  options.kernel_columns && basis->kernel_columns > 0, *quality,
+                  static_cast<int32_t>(*coarse_dim), options.threads)) /
+                  (1 << 20));
   if (args.Has("stats")) {
     const BasisStats& st = basis->stats;
     json.BeginObject("stats")

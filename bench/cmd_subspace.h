@@ -20,17 +20,17 @@ namespace fieldspace::bench {
 // that errors and weights are comparable across meshes.
 absl::StatusOr<TriangleMesh> LoadUnitAreaMesh(const std::string& path);
 
-// BuildBasis with --dim (required), --sigma (default 40), --seed (default 0), --coarse-dim
-// (default 0: no coarse level; see StackBases), --quality paper|low-modes|smooth (default paper;
-// see BasisQuality) and kernel columns unless --no-kernel-columns.
 // --quality: paper (default), low-modes or smooth (BasisQuality).
 absl::StatusOr<BasisQuality> QualityFromArgs(const Args& args);
 // --biharmonic exact|mixed (default mixed): the reduced solvers' BiharmonicForm.
 absl::StatusOr<BiharmonicForm> BiharmonicFormFromArgs(const Args& args);
 
+// BuildBasisOfQuality with --dim (required), --sigma (default 40), --seed (default 0),
+// --coarse-dim (default 0: no coarse level; see StackBases), --quality (QualityFromArgs) and
+// kernel columns unless --no-kernel-columns. S is assembled into `op` if it lacks S and the
+// build reads it.
 absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh& mesh,
-                                                             const FieldOperator& op,
-                                                             const Args& args);
+                                                             FieldOperator* op, const Args& args);
 
 // What the eigen and design subcommands start from: the unit-area mesh of the first positional
 // argument, its operator, the bench basis and its reduced system, with the two build times.

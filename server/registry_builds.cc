@@ -141,9 +141,8 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
       WorkGrant grant,
       AdmitWorkLocked(
           EstimateBuildPeakBytes(mesh.num_faces, key.field, key.dimension, key.sigma,
-                                 key.kernel_columns,
-                                 key.coarse_dimension > 0 || key.quality != BasisQuality::kPaper,
-                                 key.quality == BasisQuality::kSmooth, options_.build_threads) +
+                                 key.kernel_columns, key.quality, key.coarse_dimension,
+                                 options_.build_threads) +
               ReducedAssemblyBytes(key.dimension, key.fields_per_region, options_.build_threads),
           "this basis build"));
   auto job = std::make_shared<BuildJob>(pending);

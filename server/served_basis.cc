@@ -76,22 +76,13 @@ absl::StatusOr<BuiltBasis> BuildBasisForKey(const TriangleMesh& mesh, const Basi
       context.progress(StageFor(phase), fraction);
     };
   }
-  std::vector<BasisLevel> levels;
-  if (key.quality != BasisQuality::kPaper) {
-    ASSIGN_OR_RETURN(levels, QualityLevels(key.quality, key.dimension, key.sigma));
-  }
-  // S is assembled before the build only if the build reads it; otherwise ServeBasis assembles
-  // it after the build for the reduced system, and the build's peak does not hold it.
-  const bool reads_stiffness = BuildReadsStiffness(key.field, options, levels);
-  if (reads_stiffness) RETURN_IF_ERROR(AssembleStiffness(mesh, &op));
-  if (IsCancelled(context.cancel)) return absl::CancelledError("basis construction cancelled");
-  absl::StatusOr<Basis> built = key.quality == BasisQuality::kPaper
-                                    ? BuildTwoLevelBasis(mesh, op, options, key.coarse_dimension)
-                                    : BuildMultiLevelBasis(mesh, op, options, levels);
-  ASSIGN_OR_RETURN(Basis basis, std::move(built));
+  // S only if the build reads it (BuildBasisOfQuality); otherwise ServeBasis computes the reduced
+  // system from the mesh, and neither step holds S.
+  ASSIGN_OR_RETURN(Basis basis,
+                   BuildBasisOfQuality(mesh, &op, options, key.quality, key.coarse_dimension));
   BuiltBasis out;
   out.basis = std::make_shared<const Basis>(std::move(basis));
-  if (reads_stiffness) out.op = std::make_shared<const FieldOperator>(std::move(op));
+  if (op.has_stiffness()) out.op = std::make_shared<const FieldOperator>(std::move(op));
   return out;
 }
 

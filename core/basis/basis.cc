@@ -497,27 +497,44 @@ int64_t Basis::MemoryBytes() const {
 }
 
 int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
-                               double sigma, bool kernel_columns, bool two_level, bool clamped,
-                               int32_t threads) {
+                               double sigma, bool kernel_columns, BasisQuality quality,
+                               int32_t coarse_dimension, int32_t threads) {
   const double k = static_cast<double>(num_faces) * type.dofs_per_face();
   const bool vector = type.kind == FieldKind::kVector;
-  // Calibrated when vector builds held the factored Hodge form beside S (hence more bytes per
-  // nonzero of U). They no longer hold S (BuildReadsStiffness; bench/RESULTS.md, Session 27:
-  // 1.38M faces, paper, 2045 -> 1223 MiB built alone, 2329 -> 1548 MiB in the daemon): the
-  // estimate is looser for them now, kept until re-measured on the meshes its test pins.
-  const double bytes_per_nonzero = vector ? 26.0 : 19.0;
+  const bool clamped = quality == BasisQuality::kSmooth;
+  BasisOptions defaults;
+  defaults.clamped_local_fields = clamped;
+  const bool reads_stiffness = BuildReadsStiffness(type, defaults);
+  // The levels' overlaps: sigma nonzeros per row of U each.
+  double level_sigmas = sigma;
+  int32_t num_levels = 1;
+  if (quality != BasisQuality::kPaper) {
+    absl::StatusOr<std::vector<BasisLevel>> levels = QualityLevels(quality, dimension, sigma);
+    if (levels.ok()) {
+      level_sigmas = 0.0;
+      for (const BasisLevel& level : *levels) level_sigmas += level.sigma;
+      num_levels = static_cast<int32_t>(levels->size());
+    }
+  } else if (coarse_dimension > 0) {
+    level_sigmas = 2.0 * sigma;
+    num_levels = 2;
+  }
+  double local = 0.0;
+  if (!reads_stiffness) {
+    local = (num_levels > 1 ? 24.0 : 14.0) * level_sigmas * k;
+  } else {
+    local = (num_levels > 1 ? 2.5 : 1.0) * (vector ? 26.0 : 19.0) * sigma * k;
+  }
   const double d = dimension;
   // The kernel step: the vertex Poisson solve's hierarchy and vectors and 2 g dense candidates
   // for vector fields; a few dense candidate columns otherwise.
   const double kernel =
       !kernel_columns ? 0.0 : (vector ? 400.0 * static_cast<double>(num_faces) : 32.0 * k);
-  const double levels = two_level ? 2.5 : 1.0;
   // As the build resolves BasisOptions::threads.
   const int32_t local_threads = threads > 0 ? threads : tbb::this_task_arena::max_concurrency();
   const double clamped_region = std::min(1.0, 25.0 * sigma / std::max(d, 1.0)) * k;
   const double clamped_factors = clamped ? local_threads * 8192.0 * clamped_region : 0.0;
-  return static_cast<int64_t>(levels * bytes_per_nonzero * sigma * k + 8.0 * d * d + kernel +
-                              clamped_factors);
+  return static_cast<int64_t>(local + 8.0 * d * d + kernel + clamped_factors);
 }
 
 }  // namespace fieldspace

@@ -151,24 +151,6 @@ struct Basis {
 // an operator without S for a build that reads it),
 // Cancelled when options.cancel fires, ResourceExhausted when U would exceed
 // options.max_basis_bytes or 2^31 - 1 nonzeros.
-// An estimate of the peak bytes a basis build takes for a mesh of `num_faces` faces: the
-// operator, U, the reduced system's assembly and the threads' local problems, from the rule of
-// thumb of sigma nonzeros per row of U, calibrated on measured peaks (bench/RESULTS.md, basis
-// construction: 940-1020 bytes per DOF for vector fields, 720-730 for n-fields and tensors at
-// sigma 40), plus the d x d reduced matrices, plus, with kernel columns, what computing them
-// beside the local fields holds (for vector fields the P1 Poisson solve's multigrid hierarchy and
-// vectors and the candidate fields: 560 MiB measured on 1.79M faces, counted as 400 bytes a face).
-// For admission against a memory budget. A two-level basis (BuildTwoLevelBasis with C > 0) holds
-// both levels' U and the stacked one, and the coarse level's large local problems: 2.5 times the
-// nonzero term. `clamped`: the levels of BasisQuality::kSmooth, built with `threads` threads
-// (BasisOptions::threads: 0 is all available cores); each thread holds the sparse Cholesky factor
-// of a clamped local problem, whose two-ring stencil fills in far more than the Dirichlet one: up
-// to the coarsest level's regions, min(1, 25 sigma / d) of the mesh, at 8 KiB per DOF (measured
-// 6.2-7.2 KiB on 58k-173k DOFs; bench/RESULTS.md, "Session 11").
-int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
-                               double sigma, bool kernel_columns, bool two_level,
-                               bool clamped = false, int32_t threads = 0);
-
 absl::StatusOr<Basis> BuildBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                  const BasisOptions& options);
 
@@ -265,6 +247,39 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
 // InvalidArgument unless 0 <= C < d; otherwise errors as BuildBasis and StackBases.
 absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                          const BasisOptions& options, int32_t coarse_dimension);
+
+// The build a caller names by quality: for kPaper, BuildTwoLevelBasis with `coarse_dimension`
+// (0: BuildBasis); for kLowModes and kSmooth, BuildMultiLevelBasis with QualityLevels(quality,
+// d, sigma) of options.params. `op` may come without S (BuildFieldOperatorWithoutStiffness): S is
+// assembled into it first (AssembleStiffness) exactly when the build reads it
+// (BuildReadsStiffness), so a vector build never holds S. The daemon (BuildBasisForKey) and
+// `fieldspace-bench basis` build through it. InvalidArgument for coarse_dimension > 0 with
+// another quality than kPaper; otherwise errors as the builds it calls and AssembleStiffness.
+absl::StatusOr<Basis> BuildBasisOfQuality(const TriangleMesh& mesh, FieldOperator* op,
+                                          const BasisOptions& options, BasisQuality quality,
+                                          int32_t coarse_dimension = 0);
+
+// An estimate of the peak bytes of BuildBasisOfQuality for a mesh of `num_faces` faces, built
+// with `threads` threads (BasisOptions::threads: 0 is all available cores), for admission against
+// a memory budget: the operator, U, the regions and the threads' local problems, plus the d x d
+// reduced matrices, plus, with kernel columns, what computing them beside the local fields holds
+// (for vector fields the P1 Poisson solve's multigrid hierarchy and vectors and the candidate
+// fields: 560 MiB measured on 1.79M faces, counted as 400 bytes a face). The local part follows
+// the rule of thumb of sigma nonzeros per row of U and level (QualityLevels; a coarse dimension
+// C > 0 adds a level at sigma), at bytes per such nonzero measured on built peaks:
+// - vector builds without S (BuildReadsStiffness false): 14 for one level and 24 for several,
+//   whose coarse levels factor local problems of up to half the mesh on every thread
+//   (bench/RESULTS.md, "Session 28": 89-2346 MiB for one level, 198-6070 MiB for several, on
+//   86k-1.79M faces at d = 2000);
+// - builds that read S (n-fields, tensors, kSmooth): 26 (vector) or 19 bytes for one level and
+//   2.5 times that for several (Session 22, when every build held S);
+// - kSmooth adds, on each thread, the sparse Cholesky factor of a clamped local problem, whose
+//   two-ring stencil fills in far more than the Dirichlet one: up to the coarsest level's
+//   regions, min(1, 25 sigma / d) of the mesh, at 8 KiB per DOF (measured 6.2-7.2 KiB on
+//   58k-173k DOFs; bench/RESULTS.md, "Session 11").
+int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t dimension,
+                               double sigma, bool kernel_columns, BasisQuality quality,
+                               int32_t coarse_dimension, int32_t threads = 0);
 
 }  // namespace fieldspace
 

@@ -294,4 +294,24 @@ absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOp
                                {coarse_dimension, sigma, options.clamped_local_fields}});
 }
 
+absl::StatusOr<Basis> BuildBasisOfQuality(const TriangleMesh& mesh, FieldOperator* op,
+                                          const BasisOptions& options, BasisQuality quality,
+                                          int32_t coarse_dimension) {
+  if (quality != BasisQuality::kPaper && coarse_dimension != 0) {
+    return absl::InvalidArgumentError(
+        "a coarse dimension combines only with the paper's quality level");
+  }
+  std::vector<BasisLevel> levels;
+  if (quality != BasisQuality::kPaper) {
+    ASSIGN_OR_RETURN(levels,
+                     QualityLevels(quality, options.params.dimension, options.params.sigma));
+  }
+  if (!op->has_stiffness() && BuildReadsStiffness(op->type, options, levels)) {
+    RETURN_IF_ERROR(AssembleStiffness(mesh, op));
+  }
+  if (IsCancelled(options.cancel)) return absl::CancelledError("basis construction cancelled");
+  return quality == BasisQuality::kPaper ? BuildTwoLevelBasis(mesh, *op, options, coarse_dimension)
+                                         : BuildMultiLevelBasis(mesh, *op, options, levels);
+}
+
 }  // namespace fieldspace
