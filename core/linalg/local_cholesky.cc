@@ -496,7 +496,18 @@ absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& canc
       return absl::CancelledError("basis construction cancelled");
     }
   }
+  if (n > kReleaseScratchRows) ReleaseScratch();
   return absl::OkStatus();
+}
+
+void LocalCholesky::ReleaseScratch() {
+  for (std::vector<int32_t>* v :
+       {&parent_, &colcount_, &c_outer_, &c_inner_, &super_map_, &map_, &head_, &next_, &lpos_,
+        &len_, &amd_work_, &iw_, &adj_outer_, &adj_}) {
+    std::vector<int32_t>().swap(*v);
+  }
+  std::vector<double>().swap(c_values_);
+  std::vector<double>().swap(update_);
 }
 
 void LocalCholesky::SolveInPlace(double* X, int32_t p) {

@@ -39,8 +39,12 @@ class LocalCholesky {
 
   // Orders, analyzes and factors `A`. FailedPrecondition when A is not numerically positive
   // definite, ResourceExhausted when it is too large for 32-bit indices, Cancelled when `cancel`
-  // (checked every few hundred supernodes) is set.
+  // (checked every few hundred supernodes) is set. A system of more than kReleaseScratchRows rows
+  // gives back the analysis' and the factorization's scratch once factored: on the coarse levels'
+  // regions of up to ~1.5M rows it is ~250 MB per thread that the solves do not read, and it would
+  // otherwise stay beside the factor through the eigensolve (bench/RESULTS.md, Session 28).
   absl::Status Factorize(const UpperCsc& A, const CancelToken& cancel);
+  static constexpr int32_t kReleaseScratchRows = 1 << 18;
 
   // X <- A^-1 X in place; X is n x p, column-major with leading dimension n.
   void SolveInPlace(double* X, int32_t p);
@@ -65,6 +69,8 @@ class LocalCholesky {
   absl::Status Analyze(const UpperCsc& A);
   // C = P A P^T (lower triangle, CSC) for perm_; sets pinv_.
   void PermuteLower(const UpperCsc& A);
+  // Frees everything but the factor, its order and the solves' scratch.
+  void ReleaseScratch();
 
   int32_t n_ = 0;
   double flops_ = 0;

@@ -69,6 +69,71 @@ TEST(LocalCholeskyTest, SolvesLikeDense) {
   EXPECT_LT((dense2 * x - b).norm() / b.norm(), 1e-12);
 }
 
+// The same grid without the dense copy, for systems too large for one; and A x for it.
+UpperCsc SparseGridMatrix(int nx, int ny, double shift) {
+  UpperCsc A;
+  A.n = nx * ny;
+  A.outer.push_back(0);
+  for (int j = 0; j < A.n; ++j) {
+    if (j >= nx) {
+      A.inner.push_back(j - nx);
+      A.values.push_back(-1.0);
+    }
+    if (j % nx != 0) {
+      A.inner.push_back(j - 1);
+      A.values.push_back(-1.0);
+    }
+    A.inner.push_back(j);
+    A.values.push_back(4.0 + shift + 0.01 * (j % 7));
+    A.outer.push_back(static_cast<int32_t>(A.inner.size()));
+  }
+  return A;
+}
+
+Eigen::VectorXd Multiply(const UpperCsc& A, const Eigen::VectorXd& x) {
+  Eigen::VectorXd y = Eigen::VectorXd::Zero(A.n);
+  for (int32_t j = 0; j < A.n; ++j) {
+    for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
+      const int32_t i = A.inner[p];
+      y[i] += A.values[p] * x[j];
+      if (i != j) y[j] += A.values[p] * x[i];
+    }
+  }
+  return y;
+}
+
+// Above kReleaseScratchRows the factorization gives its scratch back: the solves still read all
+// they need, and the next factorizations (small and large) rebuild it.
+TEST(LocalCholeskyTest, LargeSystemsSolveAfterTheirScratchIsGivenBack) {
+  const UpperCsc large = SparseGridMatrix(520, 520, 0.01);
+  ASSERT_GT(large.n, LocalCholesky::kReleaseScratchRows);
+  const UpperCsc small = SparseGridMatrix(30, 20, 0.5);
+  LocalCholesky chol;
+  for (const UpperCsc* A : {&large, &small, &large}) {
+    SCOPED_TRACE(A->n);
+    ASSERT_TRUE(chol.Factorize(*A, nullptr).ok());
+    const Eigen::VectorXd b = Eigen::VectorXd::Random(A->n);
+    Eigen::VectorXd x = b;
+    chol.SolveInPlace(x.data(), 1);
+    EXPECT_LT((Multiply(*A, x) - b).norm() / b.norm(), 1e-10);
+    // In the factor's order, two right-hand sides row-major.
+    const std::vector<int32_t>& pinv = chol.inverse_permutation();
+    Eigen::MatrixXd xr(2, A->n);
+    for (int32_t i = 0; i < A->n; ++i) {
+      xr(0, pinv[i]) = b[i];
+      xr(1, pinv[i]) = 2.0 * b[i];
+    }
+    chol.SolvePermutedInPlace(xr.data(), 2);
+    Eigen::VectorXd x0(A->n), x1(A->n);
+    for (int32_t i = 0; i < A->n; ++i) {
+      x0[i] = xr(0, pinv[i]);
+      x1[i] = xr(1, pinv[i]);
+    }
+    EXPECT_LT((x0 - x).norm() / x.norm(), 1e-12);
+    EXPECT_LT((x1 - 2.0 * x).norm() / x.norm(), 1e-12);
+  }
+}
+
 TEST(LocalCholeskyTest, SolvesRightHandSidesKeptInTheFactorsOrder) {
   // A caller that numbers its unknowns by inverse_permutation() keeps its vectors row-major in
   // the factor's order and solves them in place.
