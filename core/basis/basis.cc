@@ -265,14 +265,13 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   basis.stats.mean_region_faces = static_cast<double>(sum_region) / num_regions;
   Eigen::SparseMatrix<float, Eigen::RowMajor>& U = basis.U;
   U.resize(k, d);
-  // Room for the kernel columns BuildBesideKernel appends, so that AppendKernelColumns can write
-  // them in place instead of beside a copy of U (the build's peak on meshes with genus). Address
-  // space only: the pages are not touched before those columns are written.
-  const int64_t kernel_room =
-      options.kernel_columns ? KernelEntriesBound(mesh, op.type) : int64_t{0};
-  if (kernel_room > 0 && nnz + kernel_room <= std::numeric_limits<int32_t>::max()) {
-    U.reserve(nnz + kernel_room);
-  }
+  // Room for the kernel columns BuildBesideKernel appends and for options.reserve_entries, so
+  // that AppendKernelColumns and StackBases can write them in place instead of beside a copy of U
+  // (the build's peak on meshes with genus and of multilevel builds). Address space only: the
+  // pages are not touched before those columns are written.
+  const int64_t room = std::max<int64_t>(0, options.reserve_entries) +
+                       (options.kernel_columns ? KernelEntriesBound(mesh, op.type) : int64_t{0});
+  if (room > 0 && nnz + room <= std::numeric_limits<int32_t>::max()) U.reserve(nnz + room);
   U.resizeNonZeros(nnz);
   {
     int32_t* outer = U.outerIndexPtr();

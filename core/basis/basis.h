@@ -52,6 +52,11 @@ struct BasisOptions {
   // Refuse (ResourceExhausted) when U would need more than this many bytes: estimated as
   // sigma * k nonzeros before building, exact after the regions are known (8 bytes a nonzero).
   int64_t max_basis_bytes = int64_t{16} << 30;
+  // Room for this many more entries of U beyond the basis's own and its kernel columns' (address
+  // space only: the pages are not touched until written), for columns appended to it later in
+  // place (StackBases, AppendKernelColumns). BuildMultiLevelBasis gives its first level the room
+  // for the others' entries, so that stacking them does not copy U (the build's last peak).
+  int64_t reserve_entries = 0;
   // Convergence of each local eigenproblem: ||S_bar x - theta x|| <= tolerance (theta + tau) for
   // unit x (eigenvector errors ~ tolerance, eigenvalue errors ~ tolerance^2, relative). The
   // default gives eigenvalues to about 1e-6 relative, which is plenty for a basis (its span, not
@@ -228,9 +233,11 @@ absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int3
 // The levels' bases (BuildBasis with options.params' dimension and sigma replaced by the level's)
 // stacked in order (StackBases), then the kernel columns when options.kernel_columns, computed
 // beside the levels as in BuildBasis. One level is BuildBasis with its dimension and sigma.
-// params.dimension of the result is the total of the levels' dimensions. Progress fractions cover
-// each level in proportion to its dimension. InvalidArgument for no levels or a level's
-// dimension < 1; otherwise errors as BuildBasis and StackBases.
+// params.dimension of the result is the total of the levels' dimensions. The levels are built
+// last (coarsest) first, so that their large local problems do not meet the finer levels' U;
+// progress fractions cover each level in proportion to its dimension, in that order.
+// InvalidArgument for no levels or a level's dimension < 1; otherwise errors as BuildBasis and
+// StackBases.
 // On a mesh of genus > 0 a level after the first with fewer fields than its sigma is built as part
 // of the level before it (its dimension added to that level's): its regions would each exceed the
 // mesh's area, nearly whole components whose nearly harmonic lowest fields the local eigensolver
@@ -242,8 +249,8 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
 // BuildBasis with a coarse second level of `coarse_dimension` = C columns: StackBases of the basis
 // of dimension d - C (d = options.params.dimension) and the basis of dimension C, both with the
 // other options as given; d local columns in all, then the kernel columns when
-// options.kernel_columns. C = 0 is BuildBasis. Progress fractions cover the
-// fine level in the first (d - C) / d of each phase and the coarse level in the rest.
+// options.kernel_columns. C = 0 is BuildBasis. The coarse level is built first: progress
+// fractions cover it in the first C / d of each phase and the fine level in the rest.
 // InvalidArgument unless 0 <= C < d; otherwise errors as BuildBasis and StackBases.
 absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                          const BasisOptions& options, int32_t coarse_dimension);

@@ -17,6 +17,7 @@
 #include "core/basis/progress.h"
 #include "core/common/status_macros.h"
 #include "core/common/timing.h"
+#include "core/operators/kernel_fields.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -72,6 +73,47 @@ absl::StatusOr<RowMajorU> AppendColumns(const RowMajorU& a, int32_t b_cols, cons
   return U;
 }
 
+// [U, B] into U itself: in place when U's arrays have the room for B's entries (their capacity,
+// e.g. BasisOptions::reserve_entries), the rows moving up by B's entries of the rows before them,
+// the last row first, so that no row is overwritten before it moved; otherwise through
+// AppendColumns beside a copy. `count` and `write` as for AppendColumns.
+template <typename Count, typename Write>
+absl::Status AppendColumnsTo(RowMajorU& U, int32_t b_cols, const Count& count, const Write& write,
+                             absl::string_view what) {
+  if (!U.isCompressed()) U.makeCompressed();
+  const int64_t k = U.rows();
+  const int64_t old_nnz = U.nonZeros();
+  std::vector<int32_t> added(k);
+  int64_t new_nnz = old_nnz;
+  for (int64_t row = 0; row < k; ++row) {
+    added[row] = count(row);
+    new_nnz += added[row];
+  }
+  if (new_nnz > std::numeric_limits<int32_t>::max() || U.data().allocatedSize() < new_nnz) {
+    const auto counted = [&](int64_t row) { return added[row]; };
+    ASSIGN_OR_RETURN(RowMajorU appended, AppendColumns(U, b_cols, counted, write, what));
+    U.swap(appended);
+    return absl::OkStatus();
+  }
+  const int32_t d1 = static_cast<int32_t>(U.cols());
+  U.resizeNonZeros(static_cast<Eigen::Index>(new_nnz));  // within the capacity: no reallocation
+  U.conservativeResize(k, d1 + b_cols);                  // only the column count changes
+  int32_t* outer = U.outerIndexPtr();
+  int32_t* columns = U.innerIndexPtr();
+  float* values = U.valuePtr();
+  int64_t shift = new_nnz - old_nnz;
+  for (int64_t row = k - 1; row >= 0; --row) {
+    shift -= added[row];
+    const int32_t begin = outer[row], end = outer[row + 1];
+    std::memmove(columns + begin + shift, columns + begin, sizeof(int32_t) * (end - begin));
+    std::memmove(values + begin + shift, values + begin, sizeof(float) * (end - begin));
+    write(row, columns + end + shift, values + end + shift);
+    for (int32_t i = 0; i < added[row]; ++i) columns[end + shift + i] += d1;
+    outer[row + 1] = static_cast<int32_t>(end + shift + added[row]);
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
@@ -85,7 +127,6 @@ absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
   // K is read in place (its float values without their exact zeros: kernel fields of one
   // component of a several-component mesh, the zero a12 of c I); a float or sparse copy of it
   // would add to the old and the new U, this step's peak and the build's (Session 22).
-  if (!basis->U.isCompressed()) basis->U.makeCompressed();
   auto count = [&](int64_t row) {
     int32_t n = 0;
     for (int32_t j = 0; j < q; ++j) n += static_cast<float>(K(row, j)) != 0.0f;
@@ -99,39 +140,8 @@ absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
       *values++ = v;
     }
   };
-  RowMajorU& U = basis->U;
-  const int64_t old_nnz = U.nonZeros();
-  std::vector<int32_t> added(k);
-  int64_t new_nnz = old_nnz;
-  for (int64_t row = 0; row < k; ++row) {
-    added[row] = count(row);
-    new_nnz += added[row];
-  }
-  if (new_nnz <= std::numeric_limits<int32_t>::max() && U.data().allocatedSize() >= new_nnz) {
-    // In place, in the room the layout left (BuildBasis): the rows move up by the kernel entries
-    // of the rows before them, the last row first, so that no row is overwritten before it moved.
-    const int32_t d1 = static_cast<int32_t>(U.cols());
-    U.resizeNonZeros(static_cast<Eigen::Index>(new_nnz));  // within the capacity: no reallocation
-    U.conservativeResize(k, d1 + q);                       // only the column count changes
-    int32_t* outer = U.outerIndexPtr();
-    int32_t* columns = U.innerIndexPtr();
-    float* values = U.valuePtr();
-    int64_t shift = new_nnz - old_nnz;
-    for (int64_t row = k - 1; row >= 0; --row) {
-      shift -= added[row];
-      const int32_t begin = outer[row], end = outer[row + 1];
-      std::memmove(columns + begin + shift, columns + begin, sizeof(int32_t) * (end - begin));
-      std::memmove(values + begin + shift, values + begin, sizeof(float) * (end - begin));
-      write(row, columns + end + shift, values + end + shift);
-      for (int32_t i = 0; i < added[row]; ++i) columns[end + shift + i] += d1;
-      outer[row + 1] = static_cast<int32_t>(end + shift + added[row]);
-    }
-  } else {
-    const auto counted = [&](int64_t row) { return added[row]; };
-    ASSIGN_OR_RETURN(RowMajorU appended,
-                     AppendColumns(U, q, counted, write, "AppendKernelColumns"));
-    U.swap(appended);
-  }
+  // In place in the room the layout left (BuildBasis), else beside a copy.
+  RETURN_IF_ERROR(AppendColumnsTo(basis->U, q, count, write, "AppendKernelColumns"));
   basis->params.dimension = static_cast<int32_t>(basis->U.cols());
   basis->local_eigenvalues.resize(basis->U.cols(), 0.0);
   basis->kernel_columns += q;
@@ -157,9 +167,8 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
     std::copy_n(b.innerIndexPtr() + begin, count(row), columns);
     std::copy_n(b.valuePtr() + begin, count(row), values);
   };
-  ASSIGN_OR_RETURN(RowMajorU U, AppendColumns(fine.U, static_cast<int32_t>(b.cols()), count, write,
-                                              "StackBases"));
-  fine.U.swap(U);
+  RETURN_IF_ERROR(
+      AppendColumnsTo(fine.U, static_cast<int32_t>(b.cols()), count, write, "StackBases"));
   fine.params.dimension = static_cast<int32_t>(fine.U.cols());
   fine.sample_faces.insert(fine.sample_faces.end(), coarse.sample_faces.begin(),
                            coarse.sample_faces.end());
@@ -251,27 +260,44 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
   }
   const auto started = std::chrono::steady_clock::now();
   BasisTimings timings;  // of all levels
+  // The levels are built coarsest (last) first and stacked in their order at the end: the coarse
+  // levels factor local problems of up to half the mesh on every thread, the build's largest
+  // scratch, and built first they run beside no other level's U (1.38M faces, low-modes:
+  // bench/RESULTS.md, Session 28). Each level is built on its own, so the order does not change
+  // the result.
   const auto build_levels = [&]() -> absl::StatusOr<Basis> {
-    std::optional<Basis> stacked;
-    for (const BasisLevel& level : levels) {
+    std::vector<std::optional<Basis>> built(levels.size());
+    for (size_t i = levels.size(); i-- > 0;) {
+      const BasisLevel& level = levels[i];
       share = static_cast<double>(level.dimension) / static_cast<double>(total);
       level_options.params.dimension = level.dimension;
       level_options.params.sigma = level.sigma;
       level_options.clamped_local_fields = level.clamped;
-      ASSIGN_OR_RETURN(Basis built, BuildBasis(mesh, op, level_options));
-      timings.sampling_seconds += built.timings.sampling_seconds;
-      timings.regions_seconds += built.timings.regions_seconds;
-      timings.eigensolve_seconds += built.timings.eigensolve_seconds;
-      if (stacked.has_value()) {
-        ASSIGN_OR_RETURN(Basis both, StackBases(*std::move(stacked), built));
-        stacked = std::move(both);
-      } else {
-        stacked = std::move(built);
+      // The first level, built last, lays out U with room for the other levels' entries and the
+      // kernel columns' (and the caller's reserve): both are appended to it in place.
+      level_options.reserve_entries = 0;
+      if (i == 0) {
+        level_options.reserve_entries =
+            std::max<int64_t>(0, options.reserve_entries) +
+            (options.kernel_columns ? KernelEntriesBound(mesh, op.type) : int64_t{0});
+        for (size_t j = 1; j < built.size(); ++j) {
+          level_options.reserve_entries += built[j]->U.nonZeros();
+        }
       }
+      ASSIGN_OR_RETURN(built[i], BuildBasis(mesh, op, level_options));
+      timings.sampling_seconds += built[i]->timings.sampling_seconds;
+      timings.regions_seconds += built[i]->timings.regions_seconds;
+      timings.eigensolve_seconds += built[i]->timings.eigensolve_seconds;
       start += share;
     }
-    stacked->timings = timings;
-    return *std::move(stacked);
+    Basis stacked = *std::move(built[0]);
+    built[0].reset();
+    for (size_t i = 1; i < built.size(); ++i) {
+      ASSIGN_OR_RETURN(stacked, StackBases(std::move(stacked), *built[i]));
+      built[i].reset();
+    }
+    stacked.timings = timings;
+    return stacked;
   };
   absl::StatusOr<Basis> stacked = BuildBesideKernel(mesh, op, options, build_levels, [] {});
   if (!stacked.ok()) return stacked;

@@ -588,6 +588,21 @@ TEST(BasisTest, StackBasesConcatenatesColumns) {
   const Eigen::MatrixXf s = Eigen::MatrixXf(stacked->U);
   EXPECT_EQ(s.leftCols(60), Eigen::MatrixXf(fine->U));
   EXPECT_EQ(s.rightCols(9), Eigen::MatrixXf(coarse->U));
+  // A fine basis laid out with room for the coarse one's entries (reserve_entries) takes them in
+  // place, in its own arrays, and is the same stack.
+  options.params.dimension = 60;
+  options.reserve_entries = coarse->U.nonZeros();
+  auto roomy = BuildBasis(mesh, op, options);
+  ASSERT_TRUE(roomy.ok()) << roomy.status();
+  EXPECT_EQ(Eigen::MatrixXf(roomy->U), Eigen::MatrixXf(fine->U));
+  const float* arrays = roomy->U.valuePtr();
+  auto in_place = StackBases(*std::move(roomy), *coarse);
+  ASSERT_TRUE(in_place.ok()) << in_place.status();
+  EXPECT_EQ(in_place->U.valuePtr(), arrays);
+  EXPECT_EQ(Eigen::MatrixXf(in_place->U), s);
+  EXPECT_EQ(in_place->U.nonZeros(), stacked->U.nonZeros());
+  options.params.dimension = 9;
+  options.reserve_entries = 0;
 
   const TriangleMesh small = Icosphere(2);
   auto other = BuildBasis(small, MustBuildOperator(small, FieldType::Vector()), options);
@@ -625,14 +640,18 @@ TEST(BasisTest, TwoLevelBasisIsTheStackOfItsLevels) {
   ASSERT_TRUE(decoded.ok()) << decoded.status();
   EXPECT_EQ(Eigen::MatrixXf(decoded->basis.U), Eigen::MatrixXf(two->U));
   EXPECT_EQ(decoded->basis.local_eigenvalues, two->local_eigenvalues);
-  // Progress stays in [0, 1]; the coarse level reports past the fine level's share 60/69.
+  // Progress stays in [0, 1]. The coarse level is built first, in the first 9/69; the fine level
+  // reports past it, up to the end.
   ASSERT_FALSE(seen.empty());
   double highest = 0;
+  double first_eigensolve = -1;
   for (const auto& [phase, fraction] : seen) {
     EXPECT_GE(fraction, 0.0);
     EXPECT_LE(fraction, 1.0);
     highest = std::max(highest, fraction);
+    if (phase == BasisPhase::kEigensolve && first_eigensolve < 0) first_eigensolve = fraction;
   }
+  EXPECT_LE(first_eigensolve, 9.0 / 69.0 + 1e-12);
   EXPECT_GT(highest, 60.0 / 69.0);
   // C = 0 is the one-level basis; C outside [0, d) is rejected.
   options.params.dimension = 60;
