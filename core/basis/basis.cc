@@ -520,7 +520,7 @@ int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t
   }
   double local = 0.0;
   if (!reads_stiffness) {
-    local = (num_levels > 1 ? 24.0 : 14.0) * level_sigmas * k;
+    local = (num_levels > 1 ? 18.0 : 14.0) * level_sigmas * k;
   } else {
     local = (num_levels > 1 ? 2.5 : 1.0) * (vector ? 26.0 : 19.0) * sigma * k;
   }

@@ -232,10 +232,11 @@ absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int3
 
 // The levels' bases (BuildBasis with options.params' dimension and sigma replaced by the level's)
 // stacked in order (StackBases), then the kernel columns when options.kernel_columns, computed
-// beside the levels as in BuildBasis. One level is BuildBasis with its dimension and sigma.
+// beside the first level as in BuildBasis. One level is BuildBasis with its dimension and sigma.
 // params.dimension of the result is the total of the levels' dimensions. The levels are built
-// last (coarsest) first, so that their large local problems do not meet the finer levels' U;
-// progress fractions cover each level in proportion to its dimension, in that order.
+// last (coarsest) first, so that their large local problems meet neither the finer levels' U nor
+// the kernel step; progress fractions cover each level in proportion to its dimension, in that
+// order.
 // InvalidArgument for no levels or a level's dimension < 1; otherwise errors as BuildBasis and
 // StackBases.
 // On a mesh of genus > 0 a level after the first with fewer fields than its sigma is built as part
@@ -274,9 +275,9 @@ absl::StatusOr<Basis> BuildBasisOfQuality(const TriangleMesh& mesh, FieldOperato
 // fields: 560 MiB measured on 1.79M faces, counted as 400 bytes a face). The local part follows
 // the rule of thumb of sigma nonzeros per row of U and level (QualityLevels; a coarse dimension
 // C > 0 adds a level at sigma), at bytes per such nonzero measured on built peaks:
-// - vector builds without S (BuildReadsStiffness false): 14 for one level and 24 for several,
+// - vector builds without S (BuildReadsStiffness false): 14 for one level and 18 for several,
 //   whose coarse levels factor local problems of up to half the mesh on every thread
-//   (bench/RESULTS.md, "Session 28": 89-2346 MiB for one level, 198-6070 MiB for several, on
+//   (bench/RESULTS.md, "Session 28": 89-2346 MiB for one level, 160-4551 MiB for several, on
 //   86k-1.79M faces at d = 2000);
 // - builds that read S (n-fields, tensors, kSmooth): 26 (vector) or 19 bytes for one level and
 //   2.5 times that for several (Session 22, when every build held S);

@@ -262,34 +262,37 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
   BasisTimings timings;  // of all levels
   // The levels are built coarsest (last) first and stacked in their order at the end: the coarse
   // levels factor local problems of up to half the mesh on every thread, the build's largest
-  // scratch, and built first they run beside no other level's U (1.38M faces, low-modes:
-  // bench/RESULTS.md, Session 28). Each level is built on its own, so the order does not change
-  // the result.
-  const auto build_levels = [&]() -> absl::StatusOr<Basis> {
-    std::vector<std::optional<Basis>> built(levels.size());
-    for (size_t i = levels.size(); i-- > 0;) {
-      const BasisLevel& level = levels[i];
-      share = static_cast<double>(level.dimension) / static_cast<double>(total);
-      level_options.params.dimension = level.dimension;
-      level_options.params.sigma = level.sigma;
-      level_options.clamped_local_fields = level.clamped;
-      // The first level, built last, lays out U with room for the other levels' entries and the
-      // kernel columns' (and the caller's reserve): both are appended to it in place.
-      level_options.reserve_entries = 0;
-      if (i == 0) {
-        level_options.reserve_entries =
-            std::max<int64_t>(0, options.reserve_entries) +
-            (options.kernel_columns ? KernelEntriesBound(mesh, op.type) : int64_t{0});
-        for (size_t j = 1; j < built.size(); ++j) {
-          level_options.reserve_entries += built[j]->U.nonZeros();
-        }
+  // scratch, and built first they run beside no other level's U and not beside the kernel step,
+  // which runs beside the first level, built last (bench/RESULTS.md, Session 28). Each level is
+  // built on its own, so the order does not change the result.
+  std::vector<std::optional<Basis>> built(levels.size());
+  const auto build_level = [&](size_t i) -> absl::Status {
+    const BasisLevel& level = levels[i];
+    share = static_cast<double>(level.dimension) / static_cast<double>(total);
+    level_options.params.dimension = level.dimension;
+    level_options.params.sigma = level.sigma;
+    level_options.clamped_local_fields = level.clamped;
+    // The first level, built last, lays out U with room for the other levels' entries and the
+    // kernel columns' (and the caller's reserve): both are appended to it in place.
+    level_options.reserve_entries = 0;
+    if (i == 0) {
+      level_options.reserve_entries =
+          std::max<int64_t>(0, options.reserve_entries) +
+          (options.kernel_columns ? KernelEntriesBound(mesh, op.type) : int64_t{0});
+      for (size_t j = 1; j < built.size(); ++j) {
+        level_options.reserve_entries += built[j]->U.nonZeros();
       }
-      ASSIGN_OR_RETURN(built[i], BuildBasis(mesh, op, level_options));
-      timings.sampling_seconds += built[i]->timings.sampling_seconds;
-      timings.regions_seconds += built[i]->timings.regions_seconds;
-      timings.eigensolve_seconds += built[i]->timings.eigensolve_seconds;
-      start += share;
     }
+    ASSIGN_OR_RETURN(built[i], BuildBasis(mesh, op, level_options));
+    timings.sampling_seconds += built[i]->timings.sampling_seconds;
+    timings.regions_seconds += built[i]->timings.regions_seconds;
+    timings.eigensolve_seconds += built[i]->timings.eigensolve_seconds;
+    start += share;
+    return absl::OkStatus();
+  };
+  for (size_t i = levels.size() - 1; i > 0; --i) RETURN_IF_ERROR(build_level(i));
+  const auto build_first_and_stack = [&]() -> absl::StatusOr<Basis> {
+    RETURN_IF_ERROR(build_level(0));
     Basis stacked = *std::move(built[0]);
     built[0].reset();
     for (size_t i = 1; i < built.size(); ++i) {
@@ -299,7 +302,8 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
     stacked.timings = timings;
     return stacked;
   };
-  absl::StatusOr<Basis> stacked = BuildBesideKernel(mesh, op, options, build_levels, [] {});
+  absl::StatusOr<Basis> stacked =
+      BuildBesideKernel(mesh, op, options, build_first_and_stack, [] {});
   if (!stacked.ok()) return stacked;
   stacked->timings.total_seconds = SecondsSince(started);
   if (options.kernel_columns && options.progress) options.progress(BasisPhase::kAssembly, 1.0);

@@ -357,8 +357,10 @@ TEST_F(HostileInputTest, SolvesAndBuildsBeyondTheMemoryBudgetAreRefusedUpFront) 
   FieldServerOptions options;
   options.memory_budget_mb = 24;
   Start(options);
-  auto ico4 = MakeIcosphere(4, 1.0);  // 5,120 faces: a vector build is estimated at ~11 MB
-  auto ico5 = MakeIcosphere(5, 1.0);  // 20,480 faces: ~43 MB, beyond the budget
+  // Vector builds at d = 100 (EstimateBuildPeakBytes): 5,120 faces ~6 MB; 20,480 faces at
+  // sigma 80 ~46 MB, beyond the budget.
+  auto ico4 = MakeIcosphere(4, 1.0);
+  auto ico5 = MakeIcosphere(5, 1.0);
   ASSERT_TRUE(ico4.ok() && ico5.ok());
   {
     grpc::ClientContext context;
@@ -366,6 +368,7 @@ TEST_F(HostileInputTest, SolvesAndBuildsBeyondTheMemoryBudgetAreRefusedUpFront) 
     request.set_mesh_id(UploadRaw(*ico5, "ico5"));
     request.mutable_field()->set_kind(v1::FIELD_KIND_VECTOR);
     request.set_dimension(100);
+    request.set_sigma(80);
     auto reader = stub_->BuildBasis(&context, request);
     v1::BuildBasisProgress progress;
     while (reader->Read(&progress)) {
