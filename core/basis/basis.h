@@ -277,7 +277,7 @@ absl::StatusOr<Basis> BuildBasisOfQuality(const TriangleMesh& mesh, FieldOperato
 // C > 0 adds a level at sigma), at bytes per such nonzero measured on built peaks:
 // - vector builds without S (BuildReadsStiffness false): 14 for one level and 18 for several,
 //   whose coarse levels factor local problems of up to half the mesh on every thread
-//   (bench/RESULTS.md, "Session 28": 89-2346 MiB for one level, 160-4551 MiB for several, on
+//   (bench/RESULTS.md, "Session 28": 89-2346 MiB for one level, 160-4366 MiB for several, on
 //   86k-1.79M faces at d = 2000);
 // - builds that read S (n-fields, tensors, kSmooth): 26 (vector) or 19 bytes for one level and
 //   2.5 times that for several (Session 22, when every build held S);
