@@ -40,9 +40,10 @@ class LocalCholesky {
   // Orders, analyzes and factors `A`. FailedPrecondition when A is not numerically positive
   // definite, ResourceExhausted when it is too large for 32-bit indices, Cancelled when `cancel`
   // (checked every few hundred supernodes) is set. A system of more than kReleaseScratchRows rows
-  // gives back the analysis' and the factorization's scratch once factored: on the coarse levels'
-  // regions of up to ~1.5M rows it is ~250 MB per thread that the solves do not read, and it would
-  // otherwise stay beside the factor through the eigensolve (bench/RESULTS.md, Session 28).
+  // gives back the analysis' and the factorization's scratch once factored: the solves do not read
+  // it, and on the coarse levels' regions of up to ~1.5M rows it would otherwise stay beside the
+  // factor through the eigensolve (179 MiB of the 1.38M-face low-modes build's peak;
+  // bench/RESULTS.md, Session 28).
   absl::Status Factorize(const UpperCsc& A, const CancelToken& cancel);
   static constexpr int32_t kReleaseScratchRows = 1 << 18;
 
