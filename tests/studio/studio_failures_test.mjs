@@ -96,12 +96,14 @@ const page = await newPage();
 const { checkAgainstSolve, waitForMessage, state } = pageProbe(page, client, pb);
 
 // 3. A basis still building: builds run one at a time, so a small basis queued behind a large one
-// stays BUILDING until the large one is cancelled.
+// stays BUILDING until the large one is cancelled. The large one (360k faces, dimension 8000,
+// low-modes) takes about 16 s on two cores here, far longer than opening the page; the build of
+// half a second it replaces (25.6k faces, dimension 1500) once ended before the cancel on CI.
 {
-  const big = torusObj(160, 80);
+  const big = torusObj(600, 300);
   const bigMesh = await uploadMesh(client, pb, big, "big.obj");
   const bigBuild = client.buildBasis({ meshId: bigMesh.id, field: { kind: pb.FieldKind.VECTOR },
-    dimension: 1500 })[Symbol.asyncIterator]();
+    dimension: 8000, quality: pb.BasisQuality.LOW_MODES })[Symbol.asyncIterator]();
   const first = await bigBuild.next();
   const bigId = first.value.basisId;
   const mesh = await uploadMesh(client, pb, torusObj(), "torus.obj");
