@@ -739,7 +739,10 @@ TEST_F(ServiceTest, BuildErrors) {
 TEST_F(ServiceTest, IdenticalBuildsJoinAndCancelEndsOnlyTheCancelledOne) {
   // A build that occupies the (single) build lane, then two identical requests that queue behind
   // it: the second one joins the first instead of starting another build.
-  MeshArrays big = Icosphere(5);  // 20480 faces
+  // 81,920 faces: ~2.2 s of build on two cores, regions of ~7k faces (so the cancel lands within
+  // one region's solve). Icosphere(5)'s build took 0.4 s, close enough to the few calls below
+  // for a loaded machine to finish it before the cancel.
+  MeshArrays big = Icosphere(6);
   Uploaded up = Upload(stub(), Chunked(RawBytes(big), RawHeader(big), 1 << 20));
   ASSERT_TRUE(up.status.ok());
   v1::BuildBasisRequest blocker = BuildRequest(up.info.id(), v1::FIELD_KIND_TENSOR, 480);
