@@ -95,9 +95,6 @@ absl::StatusOr<std::shared_ptr<const Basis>> BuildBenchBasis(const TriangleMesh&
   }
   auto quality = QualityFromArgs(args);
   if (!quality.ok()) return quality.status();
-  if (*quality != BasisQuality::kPaper && *coarse_dim > 0) {
-    return absl::InvalidArgumentError("--coarse-dim combines only with --quality paper");
-  }
   BasisOptions options;
   options.params.dimension = static_cast<int32_t>(*dim);
   options.params.sigma = *sigma;

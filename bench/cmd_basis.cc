@@ -131,12 +131,14 @@ int RunBasis(const Args& args) {
   if (*coarse_dim < 0 || *coarse_dim >= *dim) {
     return ReportError(absl::InvalidArgumentError("--coarse-dim must be in [0, dim)"));
   }
+  const int32_t coarse = static_cast<int32_t>(*coarse_dim);
   auto quality = QualityFromArgs(args);
   if (!quality.ok()) return ReportError(quality.status());
-  if (*quality != BasisQuality::kPaper && *coarse_dim > 0) {
-    return ReportError(
-        absl::InvalidArgumentError("--coarse-dim combines only with --quality paper"));
-  }
+  // The levels' other rules (a coarse dimension only with --quality paper, d >= 40 for the
+  // others), checked before the mesh loads.
+  const absl::Status levels =
+      QualityLevels(*quality, static_cast<int32_t>(*dim), *sigma, coarse).status();
+  if (!levels.ok()) return ReportError(levels);
   if (*threads < 0 || *threads > 4096) {
     return ReportError(
         absl::InvalidArgumentError(absl::StrCat("--threads ", *threads, " out of range")));
@@ -161,8 +163,7 @@ int RunBasis(const Args& args) {
     options.params.face_weights = std::move(*w);
   }
   // S only if the build reads it, as the daemon builds (BuildBasisOfQuality).
-  absl::StatusOr<Basis> basis =
-      BuildBasisOfQuality(*mesh, &*op, options, *quality, static_cast<int32_t>(*coarse_dim));
+  absl::StatusOr<Basis> basis = BuildBasisOfQuality(*mesh, &*op, options, *quality, coarse);
   if (!basis.ok()) return ReportError(basis.status());
 
   if (const auto save = args.Get("save"); save.has_value()) {
@@ -196,12 +197,11 @@ int RunBasis(const Args& args) {
       .Double("total", basis->timings.total_seconds)
       .EndObject()
       .Double("peak_rss_mb", PeakRssMb())
-      .Double("estimated_peak_mb",
-              static_cast<double>(EstimateBuildPeakBytes(
-                  mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
-                  options.kernel_columns && basis->kernel_columns > 0, *quality,
-                  static_cast<int32_t>(*coarse_dim), options.threads)) /
-                  (1 << 20));
+      .Double("estimated_peak_mb", static_cast<double>(EstimateBuildPeakBytes(
+                                       mesh->num_faces(), *type, static_cast<int32_t>(*dim), *sigma,
+                                       options.kernel_columns && basis->kernel_columns > 0,
+                                       *quality, coarse, options.threads)) /
+                                       (1 << 20));
   if (args.Has("stats")) {
     const BasisStats& st = basis->stats;
     json.BeginObject("stats")

@@ -89,17 +89,8 @@ absl::StatusOr<Registry::StartedBuild> Registry::StartBuild(BuildRequest request
     request.face_weights = std::move(params.face_weights);
     RETURN_IF_ERROR(valid);
   }
-  if (key.coarse_dimension < 0 || key.coarse_dimension >= key.dimension) {
-    return absl::InvalidArgumentError(absl::StrCat("coarse_dimension must be in [0, dimension = ",
-                                                   key.dimension, "), got ", key.coarse_dimension));
-  }
-  if (key.quality != BasisQuality::kPaper) {
-    if (key.coarse_dimension != 0) {
-      return absl::InvalidArgumentError(
-          "coarse_dimension must be 0 with a quality level other than PAPER (it sets the levels)");
-    }
-    RETURN_IF_ERROR(QualityLevels(key.quality, key.dimension, key.sigma).status());
-  }
+  RETURN_IF_ERROR(
+      QualityLevels(key.quality, key.dimension, key.sigma, key.coarse_dimension).status());
   // A vector field's kernel is the harmonic fields: none on a genus-0 mesh (with or without
   // boundary), so the option would not change the basis and must not change its id.
   if (key.field.kind == FieldKind::kVector && mesh.genus == 0) key.kernel_columns = false;

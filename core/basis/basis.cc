@@ -507,16 +507,12 @@ int64_t EstimateBuildPeakBytes(int64_t num_faces, const FieldType& type, int32_t
   // The levels' overlaps: sigma nonzeros per row of U each.
   double level_sigmas = sigma;
   int32_t num_levels = 1;
-  if (quality != BasisQuality::kPaper) {
-    absl::StatusOr<std::vector<BasisLevel>> levels = QualityLevels(quality, dimension, sigma);
-    if (levels.ok()) {
-      level_sigmas = 0.0;
-      for (const BasisLevel& level : *levels) level_sigmas += level.sigma;
-      num_levels = static_cast<int32_t>(levels->size());
-    }
-  } else if (coarse_dimension > 0) {
-    level_sigmas = 2.0 * sigma;
-    num_levels = 2;
+  const absl::StatusOr<std::vector<BasisLevel>> levels =
+      QualityLevels(quality, dimension, sigma, coarse_dimension);
+  if (levels.ok()) {
+    level_sigmas = 0.0;
+    for (const BasisLevel& level : *levels) level_sigmas += level.sigma;
+    num_levels = static_cast<int32_t>(levels->size());
   }
   double local = 0.0;
   if (!reads_stiffness) {

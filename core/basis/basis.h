@@ -224,11 +224,14 @@ enum class BasisQuality : uint8_t {
   kSmooth = 2,
 };
 
-// The levels of `quality` for dimension d and overlap sigma: one level {d, sigma} for kPaper.
-// InvalidArgument for kLowModes and kSmooth with d < 40 (the coarsest level needs d / 40 >= 1
-// fields).
+// The levels of `quality` for dimension d and overlap sigma, the finest first: for kPaper one
+// level {d, sigma}, or with a coarse dimension 0 < C < d the two levels {d - C, sigma} and
+// {C, sigma} (BuildTwoLevelBasis); for kLowModes and kSmooth the three levels above. The one
+// place a basis's levels are laid out: the builds and EstimateBuildPeakBytes read them here.
+// InvalidArgument for C outside [0, d), C != 0 with another quality than kPaper, and kLowModes
+// and kSmooth with d < 40 (the coarsest level needs d / 40 >= 1 fields).
 absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int32_t dimension,
-                                                      double sigma);
+                                                      double sigma, int32_t coarse_dimension = 0);
 
 // The levels' bases (BuildBasis with options.params' dimension and sigma replaced by the level's)
 // stacked in order (StackBases), then the kernel columns when options.kernel_columns, computed
@@ -247,22 +250,21 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
                                            const BasisOptions& options,
                                            const std::vector<BasisLevel>& levels);
 
-// BuildBasis with a coarse second level of `coarse_dimension` = C columns: StackBases of the basis
-// of dimension d - C (d = options.params.dimension) and the basis of dimension C, both with the
-// other options as given; d local columns in all, then the kernel columns when
-// options.kernel_columns. C = 0 is BuildBasis. The coarse level is built first: progress
-// fractions cover it in the first C / d of each phase and the fine level in the rest.
-// InvalidArgument unless 0 <= C < d; otherwise errors as BuildBasis and StackBases.
+// BuildBasis with a coarse second level of `coarse_dimension` = C columns: BuildMultiLevelBasis of
+// QualityLevels(kPaper, d, sigma, C) of options.params (the basis of dimension d - C, then the
+// basis of dimension C, both with the other options as given); d local columns in all, then the
+// kernel columns when options.kernel_columns. C = 0 is BuildBasis. The coarse level is built
+// first: progress fractions cover it in the first C / d of each phase and the fine level in the
+// rest. InvalidArgument unless 0 <= C < d; otherwise errors as BuildBasis and StackBases.
 absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                          const BasisOptions& options, int32_t coarse_dimension);
 
-// The build a caller names by quality: for kPaper, BuildTwoLevelBasis with `coarse_dimension`
-// (0: BuildBasis); for kLowModes and kSmooth, BuildMultiLevelBasis with QualityLevels(quality,
-// d, sigma) of options.params. `op` may come without S (BuildFieldOperatorWithoutStiffness): S is
-// assembled into it first (AssembleStiffness) exactly when the build reads it
-// (BuildReadsStiffness), so a vector build never holds S. The daemon (BuildBasisForKey) and
-// `fieldspace-bench basis` build through it. InvalidArgument for coarse_dimension > 0 with
-// another quality than kPaper; otherwise errors as the builds it calls and AssembleStiffness.
+// The build a caller names by quality: BuildMultiLevelBasis of QualityLevels(quality, d, sigma,
+// coarse_dimension) of options.params (for kPaper, BuildTwoLevelBasis; with C = 0, BuildBasis).
+// `op` may come without S (BuildFieldOperatorWithoutStiffness): S is assembled into it first
+// (AssembleStiffness) exactly when the build reads it (BuildReadsStiffness), so a vector build
+// never holds S. The daemon (BuildBasisForKey) and `fieldspace-bench basis` build through it.
+// Errors as QualityLevels, the builds it calls and AssembleStiffness.
 absl::StatusOr<Basis> BuildBasisOfQuality(const TriangleMesh& mesh, FieldOperator* op,
                                           const BasisOptions& options, BasisQuality quality,
                                           int32_t coarse_dimension = 0);
@@ -273,8 +275,8 @@ absl::StatusOr<Basis> BuildBasisOfQuality(const TriangleMesh& mesh, FieldOperato
 // reduced matrices, plus, with kernel columns, what computing them beside the local fields holds
 // (for vector fields the P1 Poisson solve's multigrid hierarchy and vectors and the candidate
 // fields: 560 MiB measured on 1.79M faces, counted as 400 bytes a face). The local part follows
-// the rule of thumb of sigma nonzeros per row of U and level (QualityLevels; a coarse dimension
-// C > 0 adds a level at sigma), at bytes per such nonzero measured on built peaks:
+// the rule of thumb of sigma nonzeros per row of U and level (QualityLevels), at bytes per such
+// nonzero measured on built peaks:
 // - vector builds without S (BuildReadsStiffness false): 14 for one level and 18 for several,
 //   whose coarse levels factor local problems of up to half the mesh on every thread
 //   (bench/RESULTS.md, "Session 28": 89-2346 MiB for one level, 160-4366 MiB for several, on

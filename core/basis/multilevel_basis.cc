@@ -114,6 +114,18 @@ absl::Status AppendColumnsTo(RowMajorU& U, int32_t b_cols, const Count& count, c
   return absl::OkStatus();
 }
 
+// QualityLevels of options.params; the paper's levels take options.clamped_local_fields.
+absl::StatusOr<std::vector<BasisLevel>> LevelsOf(const BasisOptions& options, BasisQuality quality,
+                                                 int32_t coarse_dimension) {
+  ASSIGN_OR_RETURN(
+      std::vector<BasisLevel> levels,
+      QualityLevels(quality, options.params.dimension, options.params.sigma, coarse_dimension));
+  if (quality == BasisQuality::kPaper) {
+    for (BasisLevel& level : levels) level.clamped = options.clamped_local_fields;
+  }
+  return levels;
+}
+
 }  // namespace
 
 absl::Status AppendKernelColumns(const Eigen::MatrixXd& K, Basis* basis) {
@@ -186,10 +198,21 @@ absl::StatusOr<Basis> StackBases(Basis fine, const Basis& coarse) {
 }
 
 absl::StatusOr<std::vector<BasisLevel>> QualityLevels(BasisQuality quality, int32_t dimension,
-                                                      double sigma) {
+                                                      double sigma, int32_t coarse_dimension) {
+  if (quality != BasisQuality::kPaper && coarse_dimension != 0) {
+    return absl::InvalidArgumentError(
+        "a coarse dimension combines only with the paper's quality level (the others set the "
+        "levels)");
+  }
   switch (quality) {
     case BasisQuality::kPaper:
-      return std::vector<BasisLevel>{{dimension, sigma}};
+      if (coarse_dimension < 0 || coarse_dimension >= dimension) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "the coarse dimension must be in [0, d = ", dimension, "), got ", coarse_dimension));
+      }
+      if (coarse_dimension == 0) return std::vector<BasisLevel>{{dimension, sigma}};
+      return std::vector<BasisLevel>{{dimension - coarse_dimension, sigma},
+                                     {coarse_dimension, sigma}};
     case BasisQuality::kLowModes:
     case BasisQuality::kSmooth: {
       const bool clamped = quality == BasisQuality::kSmooth;
@@ -312,36 +335,19 @@ absl::StatusOr<Basis> BuildMultiLevelBasis(const TriangleMesh& mesh, const Field
 
 absl::StatusOr<Basis> BuildTwoLevelBasis(const TriangleMesh& mesh, const FieldOperator& op,
                                          const BasisOptions& options, int32_t coarse_dimension) {
-  const int32_t d = options.params.dimension;
-  if (coarse_dimension < 0 || coarse_dimension >= d) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("coarse dimension must be in [0, d = ", d, "), got ", coarse_dimension));
-  }
-  if (coarse_dimension == 0) return BuildBasis(mesh, op, options);
-  const double sigma = options.params.sigma;
-  return BuildMultiLevelBasis(mesh, op, options,
-                              {{d - coarse_dimension, sigma, options.clamped_local_fields},
-                               {coarse_dimension, sigma, options.clamped_local_fields}});
+  ASSIGN_OR_RETURN(std::vector<BasisLevel> levels,
+                   LevelsOf(options, BasisQuality::kPaper, coarse_dimension));
+  return BuildMultiLevelBasis(mesh, op, options, levels);
 }
 
 absl::StatusOr<Basis> BuildBasisOfQuality(const TriangleMesh& mesh, FieldOperator* op,
                                           const BasisOptions& options, BasisQuality quality,
                                           int32_t coarse_dimension) {
-  if (quality != BasisQuality::kPaper && coarse_dimension != 0) {
-    return absl::InvalidArgumentError(
-        "a coarse dimension combines only with the paper's quality level");
-  }
-  std::vector<BasisLevel> levels;
-  if (quality != BasisQuality::kPaper) {
-    ASSIGN_OR_RETURN(levels,
-                     QualityLevels(quality, options.params.dimension, options.params.sigma));
-  }
+  ASSIGN_OR_RETURN(std::vector<BasisLevel> levels, LevelsOf(options, quality, coarse_dimension));
   if (!op->has_stiffness() && BuildReadsStiffness(op->type, options, levels)) {
     RETURN_IF_ERROR(AssembleStiffness(mesh, op));
   }
-  if (IsCancelled(options.cancel)) return absl::CancelledError("basis construction cancelled");
-  return quality == BasisQuality::kPaper ? BuildTwoLevelBasis(mesh, *op, options, coarse_dimension)
-                                         : BuildMultiLevelBasis(mesh, *op, options, levels);
+  return BuildMultiLevelBasis(mesh, *op, options, levels);
 }
 
 }  // namespace fieldspace

@@ -794,6 +794,28 @@ TEST(BasisTest, QualityLevels) {
   }
   EXPECT_THAT(QualityLevels(BasisQuality::kSmooth, 39, 40.0),
               StatusIs(absl::StatusCode::kInvalidArgument));
+  // The paper's with a coarse dimension C: {d - C, sigma} then {C, sigma}; C = 0 is one level.
+  auto two = QualityLevels(BasisQuality::kPaper, 2000, 40.0, 200);
+  ASSERT_TRUE(two.ok());
+  ASSERT_EQ(two->size(), 2u);
+  EXPECT_EQ((*two)[0].dimension, 1800);
+  EXPECT_EQ((*two)[1].dimension, 200);
+  for (const BasisLevel& level : *two) {
+    EXPECT_EQ(level.sigma, 40.0);
+    EXPECT_FALSE(level.clamped);
+  }
+  EXPECT_EQ(QualityLevels(BasisQuality::kPaper, 2000, 40.0, 0)->size(), 1u);
+  for (int32_t coarse : {-1, 2000, 2001}) {
+    EXPECT_THAT(QualityLevels(BasisQuality::kPaper, 2000, 40.0, coarse),
+                StatusIs(absl::StatusCode::kInvalidArgument,
+                         ::testing::HasSubstr("must be in [0, d = 2000)")));
+  }
+  // The other qualities set their own levels.
+  for (BasisQuality quality : {BasisQuality::kLowModes, BasisQuality::kSmooth}) {
+    EXPECT_THAT(
+        QualityLevels(quality, 2000, 40.0, 200),
+        StatusIs(absl::StatusCode::kInvalidArgument, ::testing::HasSubstr("coarse dimension")));
+  }
 }
 
 // A clamped local field vanishes outside its region, so its full-space biharmonic energy
