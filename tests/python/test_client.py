@@ -671,7 +671,7 @@ class BuildTest(unittest.TestCase):
             time.sleep(0.05)
 
     def test_deadline_ends_the_stream_not_the_build(self):
-        V, F = obj_arrays(icosphere_obj(5)[0])  # 20,480 faces: a build of a few seconds
+        V, F = obj_arrays(icosphere_obj(6)[0])  # 81,920 faces: a build of ~1.5-2 s
         mesh = CLIENT.upload(V, F)
         seen = []
         with self.assertRaises(fs.DeadlineExceeded) as caught:
@@ -686,7 +686,7 @@ class BuildTest(unittest.TestCase):
         CLIENT.delete_mesh(mesh.id, cascade=True)
 
     def test_keyboard_interrupt_cancels_the_build_on_the_server(self):
-        V, F = obj_arrays(icosphere_obj(5)[0])  # 20,480 faces: a build of a few seconds
+        V, F = obj_arrays(icosphere_obj(6)[0])  # 81,920 faces: a build of ~1.5-2 s
         mesh = CLIENT.upload(V, F)
         started = []
 
@@ -706,7 +706,7 @@ class BuildTest(unittest.TestCase):
 
     def test_ctrl_c_cancels_the_build_on_the_server(self):
         """A real SIGINT to a process blocked in build (progress bar on)."""
-        V, F = obj_arrays(icosphere_obj(5)[0])
+        V, F = obj_arrays(icosphere_obj(6)[0])  # as above: the build outlasts the signal
         mesh = CLIENT.upload(V, F)
         child = textwrap.dedent("""
             import signal, sys
