@@ -3,10 +3,12 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <utility>
 
 #include "Eigen/SparseCore"
 #include "absl/strings/str_cat.h"
 #include "core/common/random.h"
+#include "core/operators/vector_laplacian.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
 
@@ -190,23 +192,10 @@ void RestrictedLocalOperator::ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen:
 // ---------------------------------------------------------------- Hodge factor
 
 HodgeFactorData BuildHodgeFactorData(const TriangleMesh& mesh) {
-  HodgeFactorData data;
-  const FaceMatrix& F = mesh.faces();
-  const FaceMatrix& FE = mesh.face_edges();
-  const Eigen::VectorXd& area = mesh.face_areas();
-  std::vector<double> mv(mesh.num_vertices(), 0.0), me(mesh.num_edges(), 0.0);
-  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
-    for (int k = 0; k < 3; ++k) {
-      mv[F(f, k)] += area[f];
-      me[FE(f, k)] += area[f];
-    }
-  }
-  // The operator uses inverse masses 3 / sum(incident areas).
-  data.inv_sqrt_vertex_mass.resize(mv.size());
-  data.inv_sqrt_edge_mass.resize(me.size());
-  for (size_t v = 0; v < mv.size(); ++v) data.inv_sqrt_vertex_mass[v] = std::sqrt(3.0 / mv[v]);
-  for (size_t e = 0; e < me.size(); ++e) data.inv_sqrt_edge_mass[e] = std::sqrt(3.0 / me[e]);
-  return data;
+  HodgeInverseMasses inv = BuildHodgeInverseMasses(mesh);
+  for (double& m : inv.vertex) m = std::sqrt(m);
+  for (double& m : inv.edge) m = std::sqrt(m);
+  return {std::move(inv.vertex), std::move(inv.edge)};
 }
 
 absl::Status MissingStiffnessError(const FieldType& type) {

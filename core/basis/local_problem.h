@@ -68,7 +68,8 @@ class RestrictedLocalOperator final : public LocalOperator {
 // Vector Hodge Laplacian): B has one column per vertex (M J-rotated hat gradients, scaled by
 // Mv^-1/2) and one per edge (M J CR gradients, scaled by Me^-1/2); on face f both columns of
 // corner k are built from the frame coordinates t_fk of the edge vector opposite k
-// (area_f grad phi_k = J t_fk / 2 and area_f J grad psi_e = t_fk).
+// (area_f grad phi_k = J t_fk / 2 and area_f J grad psi_e = t_fk). The scales are the square
+// roots of S's own inverse masses (BuildHodgeInverseMasses, core/operators/vector_laplacian.h).
 struct HodgeFactorData {
   std::vector<double> inv_sqrt_vertex_mass;  // #V
   std::vector<double> inv_sqrt_edge_mass;    // #E

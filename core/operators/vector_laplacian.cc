@@ -93,19 +93,32 @@ inline void ForEachVertexNeighbor(const VertexStars& stars, const FaceMatrix& F,
 
 }  // namespace
 
+HodgeInverseMasses BuildHodgeInverseMasses(const TriangleMesh& mesh) {
+  const FaceMatrix& F = mesh.faces();
+  const FaceMatrix& FE = mesh.face_edges();
+  const Eigen::VectorXd& area = mesh.face_areas();
+  HodgeInverseMasses inv;
+  inv.vertex.assign(mesh.num_vertices(), 0.0);
+  inv.edge.assign(mesh.num_edges(), 0.0);
+  for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+    for (int k = 0; k < 3; ++k) {
+      inv.vertex[F(f, k)] += area[f];
+      inv.edge[FE(f, k)] += area[f];
+    }
+  }
+  for (double& m : inv.vertex) m = 3.0 / m;
+  for (double& m : inv.edge) m = 3.0 / m;
+  return inv;
+}
+
 absl::StatusOr<VectorHodgeRows> VectorHodgeRows::Create(const TriangleMesh& mesh) {
   const int32_t nf = mesh.num_faces();
-  const int32_t nv = mesh.num_vertices();
-  const int32_t ne = mesh.num_edges();
   if (4 * static_cast<int64_t>(nf) > std::numeric_limits<int32_t>::max()) {
     return absl::ResourceExhaustedError(
         absl::StrFormat("vector Laplacian: %d faces is beyond 32-bit corner indices", nf));
   }
-  const PairMatrix& EF = mesh.edge_faces();
-  const Eigen::VectorXd& area = mesh.face_areas();
   VectorHodgeRows rows(mesh);
   rows.stars_ = BuildVertexStars(mesh);
-  const VertexStars& stars = rows.stars_;
 
   // Edge vectors t_fk = p_{k+2} - p_{k+1} (counter-clockwise, opposite corner k) in face f's frame.
   // They give both terms: area_f grad phi_k|f = J t_fk / 2 and area_f J grad psi_e|f = t_fk.
@@ -122,30 +135,7 @@ absl::StatusOr<VectorHodgeRows> VectorHodgeRows::Create(const TriangleMesh& mesh
                         }
                       }
                     });
-
-  // Inverse lumped vertex masses 3 / sum(incident areas) and CR edge masses 3 / sum(incident).
-  std::vector<double>& inv_mv = rows.inv_mv_;
-  inv_mv.resize(nv);
-  tbb::parallel_for(tbb::blocked_range<int32_t>(0, nv, 8192),
-                    [&](const tbb::blocked_range<int32_t>& r) {
-                      for (int32_t v = r.begin(); v != r.end(); ++v) {
-                        double sum = 0.0;
-                        for (int64_t i = stars.offset[v]; i < stars.offset[v + 1]; ++i) {
-                          sum += area[stars.corners[i] >> 2];
-                        }
-                        inv_mv[v] = 3.0 / sum;
-                      }
-                    });
-  std::vector<double>& inv_me = rows.inv_me_;
-  inv_me.resize(ne);
-  tbb::parallel_for(tbb::blocked_range<int32_t>(0, ne, 8192),
-                    [&](const tbb::blocked_range<int32_t>& r) {
-                      for (int32_t e = r.begin(); e != r.end(); ++e) {
-                        double sum = area[EF(e, 0)];
-                        if (EF(e, 1) != kNoFace) sum += area[EF(e, 1)];
-                        inv_me[e] = 3.0 / sum;
-                      }
-                    });
+  rows.inv_mass_ = BuildHodgeInverseMasses(mesh);
   return rows;
 }
 
@@ -178,8 +168,8 @@ void VectorHodgeRows::ForEachBlock(
   const FaceMatrix& FE = mesh_->face_edges();
   const FaceMatrix& FN = mesh_->face_neighbors();
   const double* t = t_.data();
-  const double* inv_mv = inv_mv_.data();
-  const double* inv_me = inv_me_.data();
+  const double* inv_mv = inv_mass_.vertex.data();
+  const double* inv_me = inv_mass_.edge.data();
   const double* tf = &t[kStride * f];
   auto prefetch = [&](int32_t g) { __builtin_prefetch(&t[kStride * g]); };
   ForEachVertexNeighbor(stars_, F, f, prefetch, [&](int32_t g, const SharedVertex* shared, int n) {

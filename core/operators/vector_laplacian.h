@@ -31,6 +31,17 @@ namespace fieldspace {
 // O(F) time and memory, parallel over faces. ResourceExhausted beyond 2^31 nonzeros.
 absl::StatusOr<Eigen::SparseMatrix<double>> BuildVectorHodgeStiffness(const TriangleMesh& mesh);
 
+// The inverses of S's lumped masses above: Mv_v^-1 = 3 / (sum of the areas of the faces around
+// vertex v) and Me_e^-1 = 3 / (the areas of e's one or two faces), each sum in ascending face
+// order. The one definition: S's assembly (VectorHodgeRows) and the basis build's factored form
+// S = B B^T (core/basis/local_problem.h, HodgeFactorData) both read them here, so that B B^T
+// reproduces S to the last bits.
+struct HodgeInverseMasses {
+  std::vector<double> vertex;  // #V
+  std::vector<double> edge;    // #E
+};
+HodgeInverseMasses BuildHodgeInverseMasses(const TriangleMesh& mesh);
+
 namespace vector_laplacian_internal {
 
 // 64-byte aligned storage for the per-face tables.
@@ -86,8 +97,7 @@ class VectorHodgeRows {
   // Edge vectors t_fk (counter-clockwise, opposite corner k) in face f's frame, 8 doubles a face
   // (6 used, one 64-byte cache line).
   std::vector<double, vector_laplacian_internal::CacheAlignedAllocator<double>> t_;
-  std::vector<double> inv_mv_;  // #V: 3 / sum of incident face areas
-  std::vector<double> inv_me_;  // #E
+  HodgeInverseMasses inv_mass_;
 };
 
 }  // namespace fieldspace

@@ -405,6 +405,36 @@ TEST(VectorHodgeTest, RowsWithoutAssemblyAreTheAssembledRows) {
   }
 }
 
+TEST(VectorHodgeTest, InverseMassesAreAThirdOfTheIncidentAreas) {
+  // Each face gives a third of its area to each of its vertices and edges, so the lumped masses
+  // each sum to the area, and a vertex's or an edge's is a third of its faces' areas.
+  for (const char* name : {"NoisySphere", "ChippedTorus", "Cylinder"}) {
+    SCOPED_TRACE(name);
+    const TriangleMesh mesh = CatalogueMesh(name);
+    const HodgeInverseMasses inv = BuildHodgeInverseMasses(mesh);
+    ASSERT_EQ(inv.vertex.size(), static_cast<size_t>(mesh.num_vertices()));
+    ASSERT_EQ(inv.edge.size(), static_cast<size_t>(mesh.num_edges()));
+    double vertex_total = 0.0, edge_total = 0.0;
+    for (double m : inv.vertex) vertex_total += 1.0 / m;
+    for (double m : inv.edge) edge_total += 1.0 / m;
+    EXPECT_NEAR(vertex_total, mesh.total_area(), 1e-12 * mesh.total_area());
+    EXPECT_NEAR(edge_total, mesh.total_area(), 1e-12 * mesh.total_area());
+    const Eigen::VectorXd& area = mesh.face_areas();
+    const PairMatrix& EF = mesh.edge_faces();
+    for (int32_t e = 0; e < mesh.num_edges(); ++e) {
+      const double faces = area[EF(e, 0)] + (EF(e, 1) != kNoFace ? area[EF(e, 1)] : 0.0);
+      ASSERT_NEAR(inv.edge[e], 3.0 / faces, 1e-12 * inv.edge[e]) << "edge " << e;
+    }
+    std::vector<double> around(mesh.num_vertices(), 0.0);
+    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+      for (int k = 0; k < 3; ++k) around[mesh.faces()(f, k)] += area[f];
+    }
+    for (int32_t v = 0; v < mesh.num_vertices(); ++v) {
+      ASSERT_NEAR(inv.vertex[v], 3.0 / around[v], 1e-12 * inv.vertex[v]) << "vertex " << v;
+    }
+  }
+}
+
 TEST(FieldTypeTest, ValidateAndToString) {
   EXPECT_TRUE(FieldType::Vector().Validate().ok());
   EXPECT_TRUE(FieldType::Tensor().Validate().ok());
