@@ -4,6 +4,7 @@
 #include <array>
 #include <cmath>
 #include <utility>
+#include <vector>
 
 #include "Eigen/Cholesky"
 #include "Eigen/Eigenvalues"
@@ -34,12 +35,74 @@ Eigen::MatrixXd Orthonormalize(const Eigen::MatrixXd& B) {
   return qr.householderQ() * Eigen::MatrixXd::Identity(B.rows(), B.cols());
 }
 
-// out = A^T B for tall blocks A, B (n x p each, p small): one vectorized dot product per entry.
-// (Eigen's matrix product packs both operands for such shapes and was twice as slow here.)
+// Rows per chunk of the tall-block products below: a chunk of each of the (at most a dozen)
+// n x 1 columns involved stays in L1 / L2 while all pairs of them are multiplied, instead of
+// every product streaming two whole columns from memory (a region's blocks are 0.3-1 MB each).
+constexpr Eigen::Index kRowChunk = 512;
+
+// out = A^T B for tall blocks A, B (n x p each, p small), chunk by chunk of rows, one vectorized
+// dot product per entry and chunk. (Eigen's matrix product packs both operands for such shapes
+// and was twice as slow here.)
 template <typename Out>
 void InnerProducts(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B, Out&& out) {
-  for (Eigen::Index r = 0; r < A.cols(); ++r) {
-    for (Eigen::Index c = 0; c < B.cols(); ++c) out(r, c) = A.col(r).dot(B.col(c));
+  out.setZero();
+  const Eigen::Index n = A.rows();
+  for (Eigen::Index r0 = 0; r0 < n; r0 += kRowChunk) {
+    const Eigen::Index len = std::min(kRowChunk, n - r0);
+    for (Eigen::Index r = 0; r < A.cols(); ++r) {
+      const auto a = A.col(r).segment(r0, len);
+      for (Eigen::Index c = 0; c < B.cols(); ++c) out(r, c) += a.dot(B.col(c).segment(r0, len));
+    }
+  }
+}
+
+// The Gram matrices of LOBPCG's trial basis V = [X, W, P] (the first nb of `blocks`, n x p
+// each) without forming V: G = V^T V (q x q, q = nb p) and H = V^T (S V) from the carried
+// products, in one pass over the rows.
+void TrialGram(const std::array<const Eigen::MatrixXd*, 3>& blocks,
+               const std::array<const Eigen::MatrixXd*, 3>& products, int32_t nb, int32_t p,
+               Eigen::MatrixXd& G, Eigen::MatrixXd& H) {
+  const int32_t q = nb * p;
+  G.setZero(q, q);
+  H.setZero(q, q);
+  std::vector<const double*> v(q), sv(q);
+  for (int32_t b = 0; b < nb; ++b) {
+    for (int32_t c = 0; c < p; ++c) {
+      v[b * p + c] = blocks[b]->col(c).data();
+      sv[b * p + c] = products[b]->col(c).data();
+    }
+  }
+  using ConstSegment = Eigen::Map<const Eigen::VectorXd>;
+  const Eigen::Index n = blocks[0]->rows();
+  for (Eigen::Index r0 = 0; r0 < n; r0 += kRowChunk) {
+    const Eigen::Index len = std::min(kRowChunk, n - r0);
+    for (int32_t i = 0; i < q; ++i) {
+      const ConstSegment vi(v[i] + r0, len);
+      for (int32_t j = i; j < q; ++j) G(i, j) += vi.dot(ConstSegment(v[j] + r0, len));
+      for (int32_t j = 0; j < q; ++j) H(i, j) += vi.dot(ConstSegment(sv[j] + r0, len));
+    }
+  }
+  G.triangularView<Eigen::StrictlyLower>() = G.transpose();
+}
+
+// W <- W - X (X^T W) and SW <- SW - SX (X^T W): W made orthogonal to X's columns (orthonormal),
+// with its product carried along; chunk by chunk of rows as InnerProducts.
+void ProjectOut(const Eigen::MatrixXd& X, const Eigen::MatrixXd& SX, Eigen::MatrixXd& W,
+                Eigen::MatrixXd& SW) {
+  const Eigen::Index p = X.cols();
+  Eigen::MatrixXd a(p, W.cols());
+  InnerProducts(X, W, a);
+  const Eigen::Index n = X.rows();
+  for (Eigen::Index r0 = 0; r0 < n; r0 += kRowChunk) {
+    const Eigen::Index len = std::min(kRowChunk, n - r0);
+    for (Eigen::Index c = 0; c < W.cols(); ++c) {
+      auto w = W.col(c).segment(r0, len);
+      auto sw = SW.col(c).segment(r0, len);
+      for (Eigen::Index k = 0; k < p; ++k) {
+        w -= a(k, c) * X.col(k).segment(r0, len);
+        sw -= a(k, c) * SX.col(k).segment(r0, len);
+      }
+    }
   }
 }
 
@@ -204,7 +267,8 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
   op.ApplyStiffness(X, &SX);
   Eigen::VectorXd theta;
   {
-    Eigen::MatrixXd H = X.transpose() * SX;
+    Eigen::MatrixXd H(p, p);
+    InnerProducts(X, SX, H);
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (H + H.transpose()));
     X = X * es.eigenvectors();
     SX = SX * es.eigenvectors();
@@ -242,11 +306,7 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
       }
     }
     op.ApplyShiftInverseAndStiffness(R, &W, &SW);
-    {
-      const Eigen::MatrixXd a = X.transpose() * W;
-      W.noalias() -= X * a;
-      SW.noalias() -= SX * a;
-    }
+    ProjectOut(X, SX, W, SW);
     for (int32_t c = 0; c < p; ++c) {
       const double norm = W.col(c).norm();
       if (norm > 0) {
@@ -268,19 +328,8 @@ absl::StatusOr<LocalEigenResult> SolveLocalEigenproblem(LocalOperator& op,
       const bool with_p = attempt == 0 && P.cols() > 0;
       if (attempt == 1 && P.cols() == 0) break;
       const int32_t nb = with_p ? 3 : 2;  // blocks in the trial basis
-      const int32_t q = nb * p;
-      Eigen::MatrixXd G(q, q), H(q, q);
-      for (int32_t i = 0; i < nb; ++i) {
-        for (int32_t j = 0; j < nb; ++j) {
-          if (j > i) {
-            InnerProducts(*blocks[i], *blocks[j], G.block(i * p, j * p, p, p));
-            G.block(j * p, i * p, p, p) = G.block(i * p, j * p, p, p).transpose();
-          } else if (j == i) {
-            InnerProducts(*blocks[i], *blocks[i], G.block(i * p, i * p, p, p));
-          }
-          InnerProducts(*blocks[i], *products[j], H.block(i * p, j * p, p, p));
-        }
-      }
+      Eigen::MatrixXd G, H;
+      TrialGram(blocks, products, nb, p, G, H);
       H = 0.5 * (H + H.transpose()).eval();
       Eigen::LLT<Eigen::MatrixXd> llt(G);
       if (llt.info() != Eigen::Success) continue;
