@@ -8,6 +8,7 @@
 #include "Eigen/SparseCore"
 #include "absl/strings/str_cat.h"
 #include "core/common/random.h"
+#include "core/common/status_macros.h"
 #include "core/operators/vector_laplacian.h"
 #include "tbb/blocked_range.h"
 #include "tbb/parallel_for.h"
@@ -434,7 +435,8 @@ absl::Status HodgeLocalOperator::PrepareShiftInverse(const CancelToken& cancel) 
   UpperCsc K;
   AssembleUpper(num_nodes_, cols, rows, vals, tau_, ws_.marker, &K);
   ReleaseTriplets(cols, rows, vals);
-  absl::Status factored = ws_.cholesky.Factorize(K, cancel);
+  RETURN_IF_ERROR(InducedNodeOrder(K, num_vertices_, b_cols_, ws_));
+  absl::Status factored = ws_.cholesky.Factorize(K, cancel, &ws_.order);
   if (!factored.ok()) return factored;
   // Number the nodes as the factor does: B_D^T x is then solved where it is accumulated.
   const std::vector<int32_t>& order = ws_.cholesky.inverse_permutation();
@@ -456,6 +458,70 @@ void HodgeLocalOperator::ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::Matr
   *Y = X;
   ApplyB(Y, /*subtract=*/true);
   *Y /= tau_;
+}
+
+absl::Status InducedNodeOrder(const UpperCsc& K, int32_t num_vertices,
+                              const std::vector<int32_t>& face_nodes, RegionWorkspace& ws) {
+  const int32_t nv = num_vertices;
+  const int32_t ne = K.n - nv;
+  const int32_t nfr = static_cast<int32_t>(face_nodes.size() / 6);
+  if (nv < 0 || ne < 0 || face_nodes.size() % 6 != 0) {
+    return absl::InvalidArgumentError("induced order: inconsistent node counts");
+  }
+  // K's vertex block is its leading one.
+  std::vector<int32_t>& vertex_order = ws.vertex_order;
+  RETURN_IF_ERROR(ws.cholesky.MinimumDegreeOrder(K, nv, &vertex_order));
+  std::vector<int32_t>& rank = ws.rank;
+  rank.resize(nv);
+  for (int32_t k = 0; k < nv; ++k) rank[vertex_order[k]] = k;
+  // Each edge's endpoints by rank (edge 3 + k of a face is opposite its vertex k).
+  std::vector<int32_t>& low = ws.edge_low;
+  std::vector<int32_t>& high = ws.edge_high;
+  low.assign(ne, -1);
+  high.resize(ne);
+  for (int32_t i = 0; i < nfr; ++i) {
+    const int32_t* c = &face_nodes[6 * i];
+    for (int k = 0; k < 3; ++k) {
+      if (c[k] < 0 || c[k] >= nv || c[3 + k] < nv || c[3 + k] >= K.n) {
+        return absl::InvalidArgumentError("induced order: a face's node out of range");
+      }
+    }
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = rank[c[(k + 1) % 3]];
+      const int32_t b = rank[c[(k + 2) % 3]];
+      low[c[3 + k] - nv] = std::min(a, b);
+      high[c[3 + k] - nv] = std::max(a, b);
+    }
+  }
+  if (std::find(low.begin(), low.end(), -1) != low.end()) {
+    return absl::InvalidArgumentError("induced order: an edge in no face");
+  }
+  // The edges bucketed by their earlier endpoint (counting sort), each bucket (about three
+  // edges) sorted by the later one; then the order: each vertex's bucket, then the vertex.
+  std::vector<int32_t>& start = ws.bucket;
+  start.assign(static_cast<size_t>(nv) + 1, 0);
+  for (int32_t e = 0; e < ne; ++e) ++start[low[e] + 1];
+  for (int32_t r = 0; r < nv; ++r) start[r + 1] += start[r];
+  std::vector<int32_t>& order = ws.order;
+  order.resize(K.n);
+  {
+    // Edges go to order[start[r] + r ...]: bucket r is preceded by r vertices.
+    std::vector<int32_t>& cursor = rank;  // the ranks are in low / high now
+    for (int32_t r = 0; r < nv; ++r) cursor[r] = start[r] + r;
+    for (int32_t e = 0; e < ne; ++e) order[cursor[low[e]]++] = nv + e;
+  }
+  for (int32_t r = 0; r < nv; ++r) {
+    int32_t* bucket = order.data() + start[r] + r;
+    const int32_t size = start[r + 1] - start[r];
+    for (int32_t a = 1; a < size; ++a) {
+      const int32_t node = bucket[a];
+      int32_t b = a;
+      for (; b > 0 && high[bucket[b - 1] - nv] > high[node - nv]; --b) bucket[b] = bucket[b - 1];
+      bucket[b] = node;
+    }
+    bucket[size] = vertex_order[r];
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace fieldspace::basis_internal

@@ -34,6 +34,8 @@ struct RegionWorkspace {
   std::vector<int32_t> touched;
   std::vector<int32_t> marker;     // assembly scratch
   std::vector<int32_t> outer_map;  // k, global DOF -> row of S~ V outside the region (clamped)
+  // The Hodge factor's order of K (InducedNodeOrder) and its scratch.
+  std::vector<int32_t> order, vertex_order, rank, edge_low, edge_high, bucket;
 };
 
 // The generic local problem (any field type): S_bar = V^T S V extracted from the global S by a
@@ -63,6 +65,19 @@ class RestrictedLocalOperator final : public LocalOperator {
   std::vector<int32_t> outer_, inner_;  // S_bar, both triangles, CSC, sorted rows
   std::vector<double> values_;
 };
+
+// The order HodgeLocalOperator factors its K = tau I + B_D^T B_D in, into ws.order. K's nodes
+// are numbered vertices first (0 .. num_vertices - 1), then edges; `face_nodes` holds each face's
+// three vertices and then the three edges opposite them (6 per face). AMD orders K's vertex block
+// alone, and each edge is eliminated right before the earlier of its two endpoints (edges with
+// the same earlier endpoint in the order of their later one). On a triangle mesh the edges
+// between the vertices of a separator of the vertex graph separate the edge graph (two edges are
+// coupled only through a face, and a face with edges on both sides would have vertices on both
+// sides), and the two blocks are coupled only at the region's boundary, so the induced order
+// keeps the fill of AMD on the whole of K (a little less: bench/RESULTS.md, Session 31) for the
+// cost of AMD on a quarter of its nodes and a third of its couplings.
+absl::Status InducedNodeOrder(const UpperCsc& K, int32_t num_vertices,
+                              const std::vector<int32_t>& face_nodes, RegionWorkspace& ws);
 
 // Global data for the vector Hodge Laplacian's factored form S = B B^T (docs/conventions.md,
 // Vector Hodge Laplacian): B has one column per vertex (M J-rotated hat gradients, scaled by

@@ -94,26 +94,42 @@ constexpr decltype(&Substitute<0>) kSubstitute[kNumSubstitute] = {
 LocalCholesky::LocalCholesky() = default;
 LocalCholesky::~LocalCholesky() = default;
 
-absl::Status LocalCholesky::Analyze(const UpperCsc& A) {
-  const int32_t n = A.n;
-  // AMD (amd_2 directly: the pattern of A + A^T without the diagonal, with elbow room; AMD's
-  // default dense-row threshold and aggressive absorption).
-  std::vector<int32_t>& len = len_;
-  len.assign(n, 0);
+absl::Status LocalCholesky::BuildAdjacency(const UpperCsc& A, int32_t n) {
+  // Counts first, then positions: AMD's elbow room below must fit 32-bit indices too.
+  adj_outer_.assign(static_cast<size_t>(n) + 1, 0);
   int64_t nz = 0;
   for (int32_t j = 0; j < n; ++j) {
     for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
       const int32_t i = A.inner[p];
       if (i == j) continue;
-      ++len[i];
-      ++len[j];
+      ++adj_outer_[i + 1];
+      ++adj_outer_[j + 1];
       nz += 2;
     }
   }
-  const int64_t iwlen = nz + nz / 5 + n;
-  if (iwlen > std::numeric_limits<int32_t>::max() - 1) {
+  if (nz + nz / 5 + n > std::numeric_limits<int32_t>::max() - 1) {
     return absl::ResourceExhaustedError("local system too large for 32-bit indices");
   }
+  for (int32_t i = 0; i < n; ++i) adj_outer_[i + 1] += adj_outer_[i];
+  adj_.resize(adj_outer_[n]);
+  std::vector<int32_t>& cursor = len_;
+  cursor.assign(adj_outer_.begin(), adj_outer_.end() - 1);
+  for (int32_t j = 0; j < n; ++j) {
+    for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
+      const int32_t i = A.inner[p];
+      if (i == j) continue;
+      adj_[cursor[i]++] = j;
+      adj_[cursor[j]++] = i;
+    }
+  }
+  return absl::OkStatus();
+}
+
+void LocalCholesky::Amd(int32_t n, std::vector<int32_t>* order) {
+  // amd_2 directly: the adjacency with elbow room (amd_2 overwrites it), AMD's default dense-row
+  // threshold and aggressive absorption.
+  const int64_t nz = adj_outer_[n];
+  const int64_t iwlen = nz + nz / 5 + n;  // within 32 bits: BuildAdjacency checked
   amd_work_.resize(8 * static_cast<size_t>(n));
   int32_t* pe = amd_work_.data();
   int32_t* nv = pe + n;
@@ -124,33 +140,52 @@ absl::Status LocalCholesky::Analyze(const UpperCsc& A) {
   int32_t* degree = elen + n;
   int32_t* w = degree + n;
   iw_.resize(iwlen);
-  {
-    int32_t start = 0;
-    for (int32_t i = 0; i < n; ++i) {
-      pe[i] = start;
-      w[i] = start;
-      start += len[i];
-    }
-    for (int32_t j = 0; j < n; ++j) {
-      for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
-        const int32_t i = A.inner[p];
-        if (i == j) continue;
-        iw_[w[i]++] = j;
-        iw_[w[j]++] = i;
-      }
-    }
+  std::copy(adj_.begin(), adj_.begin() + nz, iw_.begin());
+  len_.resize(n);
+  for (int32_t i = 0; i < n; ++i) {
+    pe[i] = adj_outer_[i];
+    len_[i] = adj_outer_[i + 1] - adj_outer_[i];
   }
-  // The adjacency of A + A^T as CSC (amd_2 overwrites iw_ and pe): the elimination tree below
-  // walks it in the permuted order.
-  adj_outer_.resize(static_cast<size_t>(n) + 1);
-  for (int32_t i = 0; i < n; ++i) adj_outer_[i] = pe[i];
-  adj_outer_[n] = static_cast<int32_t>(nz);
-  adj_.assign(iw_.begin(), iw_.begin() + nz);
   double control[AMD_CONTROL], info[AMD_INFO];
   amd_defaults(control);
-  amd_2(n, pe, iw_.data(), len.data(), static_cast<int32_t>(iwlen), static_cast<int32_t>(nz), nv,
+  amd_2(n, pe, iw_.data(), len_.data(), static_cast<int32_t>(iwlen), static_cast<int32_t>(nz), nv,
         amd_next, amd_last, head, elen, degree, w, control, info);
-  perm_.assign(amd_last, amd_last + n);
+  order->assign(amd_last, amd_last + n);
+}
+
+absl::Status LocalCholesky::MinimumDegreeOrder(const UpperCsc& A, int32_t n,
+                                               std::vector<int32_t>* order) {
+  if (n < 0 || n > A.n) {
+    return absl::InvalidArgumentError("leading block larger than the matrix");
+  }
+  if (n == 0) {
+    order->clear();
+    return absl::OkStatus();
+  }
+  if (absl::Status built = BuildAdjacency(A, n); !built.ok()) return built;
+  Amd(n, order);
+  return absl::OkStatus();
+}
+
+absl::Status LocalCholesky::Analyze(const UpperCsc& A, const std::vector<int32_t>* order) {
+  const int32_t n = A.n;
+  // The adjacency of A + A^T as CSC: the elimination tree below walks it in the permuted order.
+  if (absl::Status built = BuildAdjacency(A, n); !built.ok()) return built;
+  if (order == nullptr) {
+    Amd(n, &perm_);
+  } else {
+    if (static_cast<int32_t>(order->size()) != n) {
+      return absl::InvalidArgumentError("the given order is not a permutation of the rows");
+    }
+    std::vector<int32_t>& seen = len_;
+    seen.assign(n, 0);
+    for (int32_t i : *order) {
+      if (i < 0 || i >= n || seen[i]++ != 0) {
+        return absl::InvalidArgumentError("the given order is not a permutation of the rows");
+      }
+    }
+    perm_ = *order;
+  }
 
   // The elimination tree of P A P^T (Liu's algorithm: for each row k, the entries left of the
   // diagonal, each followed to the root of its current subtree, path-compressed), a postorder of
@@ -363,13 +398,14 @@ void LocalCholesky::PermuteLower(const UpperCsc& A) {
   }
 }
 
-absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& cancel) {
+absl::Status LocalCholesky::Factorize(const UpperCsc& A, const CancelToken& cancel,
+                                      const std::vector<int32_t>* order) {
   n_ = A.n;
   nsuper_ = 0;
   lx_.clear();
   const int32_t n = A.n;
   if (n == 0) return absl::OkStatus();
-  if (absl::Status analyzed = Analyze(A); !analyzed.ok()) {
+  if (absl::Status analyzed = Analyze(A, order); !analyzed.ok()) {
     nsuper_ = 0;
     return analyzed;
   }

@@ -25,11 +25,12 @@ struct UpperCsc {
 // Why not CHOLMOD: our platform's BLAS is the unoptimized reference BLAS, so CHOLMOD's supernodal
 // kernels run at ~1 GFlop/s and its simplicial one is no faster; and its analysis around the
 // ordering (transposes, a copy, a second postorder) cost as much as AMD itself on these small
-// systems. Here the ordering is AMD's (amd_2 on the pattern of A + A^T), the analysis the
-// elimination tree, column counts and fundamental supernodes of the permuted matrix, and the
-// numeric factorization a left-looking supernodal method (as CHOLMOD's) on Eigen's vectorized
-// dense kernels, sequential: the regions themselves run in parallel. One instance per thread,
-// reused for region after region (its workspace only grows).
+// systems. Here the ordering is AMD's (amd_2 on the pattern of A + A^T) or one the caller
+// derives from AMD on a block of A (MinimumDegreeOrder), the analysis the elimination tree,
+// column counts and fundamental supernodes of the permuted matrix, and the numeric factorization
+// a left-looking supernodal method (as CHOLMOD's) on Eigen's vectorized dense kernels,
+// sequential: the regions themselves run in parallel. One instance per thread, reused for region
+// after region (its workspace only grows).
 class LocalCholesky {
  public:
   LocalCholesky();
@@ -44,8 +45,19 @@ class LocalCholesky {
   // it, and on the coarse levels' regions of up to ~1.5M rows it would otherwise stay beside the
   // factor through the eigensolve (179 MiB of the 1.38M-face low-modes build's peak;
   // bench/RESULTS.md, Session 28).
-  absl::Status Factorize(const UpperCsc& A, const CancelToken& cancel);
+  //
+  // With `order` (a permutation of A's rows: row k of the factored system is row (*order)[k] of
+  // A, up to a postorder of the elimination tree) that order is factored instead of AMD's, e.g.
+  // one induced from MinimumDegreeOrder of a block of A (HodgeLocalOperator). InvalidArgument
+  // when it is not a permutation of A's rows.
+  absl::Status Factorize(const UpperCsc& A, const CancelToken& cancel,
+                         const std::vector<int32_t>* order = nullptr);
   static constexpr int32_t kReleaseScratchRows = 1 << 18;
+
+  // AMD's fill-reducing order of the leading n x n block of A (the pattern of that block's
+  // A + A^T): (*order)[k] is its k-th row eliminated. Uses this instance's workspace, which the
+  // next Factorize overwrites. ResourceExhausted as Factorize.
+  absl::Status MinimumDegreeOrder(const UpperCsc& A, int32_t n, std::vector<int32_t>* order);
 
   // X <- A^-1 X in place; X is n x p, column-major with leading dimension n.
   void SolveInPlace(double* X, int32_t p);
@@ -66,8 +78,13 @@ class LocalCholesky {
   double flops() const { return flops_; }
 
  private:
-  // The ordering and the supernodal structure below, and C.
-  absl::Status Analyze(const UpperCsc& A);
+  // The pattern of the leading n x n block of A + A^T without the diagonal, as CSC, into
+  // adj_outer_ and adj_. ResourceExhausted when AMD's workspace for it would pass 32-bit indices.
+  absl::Status BuildAdjacency(const UpperCsc& A, int32_t n);
+  // AMD on adj_outer_ / adj_ (n nodes) into `order`.
+  void Amd(int32_t n, std::vector<int32_t>* order);
+  // The ordering (AMD's, or `order` when given) and the supernodal structure below, and C.
+  absl::Status Analyze(const UpperCsc& A, const std::vector<int32_t>* order);
   // C = P A P^T (lower triangle, CSC) for perm_; sets pinv_.
   void PermuteLower(const UpperCsc& A);
   // Frees everything but the factor, its order and the solves' scratch.

@@ -160,6 +160,26 @@ TEST(LocalCholeskyTest, SolvesRightHandSidesKeptInTheFactorsOrder) {
   }
 }
 
+// The upper triangle of a dense symmetric matrix, the diagonal first in each column.
+UpperCsc UpperFromDense(const Eigen::MatrixXd& dense) {
+  const int n = static_cast<int>(dense.rows());
+  UpperCsc A;
+  A.n = n;
+  A.outer.push_back(0);
+  for (int j = 0; j < n; ++j) {
+    A.inner.push_back(j);
+    A.values.push_back(dense(j, j));
+    for (int i = 0; i < j; ++i) {
+      if (dense(i, j) != 0.0) {
+        A.inner.push_back(i);
+        A.values.push_back(dense(i, j));
+      }
+    }
+    A.outer.push_back(static_cast<int32_t>(A.inner.size()));
+  }
+  return A;
+}
+
 // A random symmetric positive definite matrix: `components` blocks of random sparse graphs
 // (about `degree` neighbours a row), one row per block coupled to a tenth of its block (AMD's
 // dense-row handling), a few diagonal-only rows; strictly diagonally dominant.
@@ -192,21 +212,44 @@ UpperCsc RandomMatrix(int block, int components, int degree, uint32_t seed,
     (*dense)(i, i) = 0.0;
     (*dense)(i, i) = dense->row(i).cwiseAbs().sum() + 0.5;
   }
-  UpperCsc A;
-  A.n = n;
-  A.outer.push_back(0);
-  for (int j = 0; j < n; ++j) {
-    A.inner.push_back(j);  // the diagonal first this time
-    A.values.push_back((*dense)(j, j));
-    for (int i = 0; i < j; ++i) {
-      if ((*dense)(i, j) != 0.0) {
-        A.inner.push_back(i);
-        A.values.push_back((*dense)(i, j));
-      }
-    }
-    A.outer.push_back(static_cast<int32_t>(A.inner.size()));
+  return UpperFromDense(*dense);
+}
+
+// Checks the factorization's analysis against the dense Cholesky factor of the matrix permuted
+// as the factorization says it is (permutation()): the column counts (through flops(), the sum
+// of their squares) are the dense factor's and the supernodal storage holds its nonzeros plus at
+// most the upper triangles of the diagonal blocks (`slack` times the nonzeros: a quarter for
+// fill-reducing orders, whose supernodes are narrow). Returns the dense factor's nonzeros.
+int64_t ExpectAnalysisMatchesDenseFactor(const LocalCholesky& chol, const Eigen::MatrixXd& dense,
+                                         double slack = 0.25) {
+  const int n = static_cast<int>(dense.rows());
+  const std::vector<int32_t>& perm = chol.permutation();
+  EXPECT_EQ(perm.size(), static_cast<size_t>(n));
+  if (perm.size() != static_cast<size_t>(n)) return 0;
+  std::vector<int> seen(n, 0);
+  for (int32_t p : perm) {
+    EXPECT_GE(p, 0);
+    EXPECT_LT(p, n);
+    if (p >= 0 && p < n) ++seen[p];
   }
-  return A;
+  EXPECT_EQ(*std::min_element(seen.begin(), seen.end()), 1);
+  Eigen::MatrixXd permuted(n, n);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) permuted(i, j) = dense(perm[i], perm[j]);
+  }
+  const Eigen::MatrixXd L = permuted.llt().matrixL();
+  int64_t nonzeros = 0;
+  double squares = 0;
+  for (int j = 0; j < n; ++j) {
+    int64_t count = 0;
+    for (int i = j; i < n; ++i) count += L(i, j) != 0.0;
+    nonzeros += count;
+    squares += static_cast<double>(count) * count;
+  }
+  EXPECT_EQ(chol.flops(), squares);
+  EXPECT_GE(chol.factor_nonzeros(), nonzeros);
+  EXPECT_LE(chol.factor_nonzeros(), nonzeros + slack * nonzeros);
+  return nonzeros;
 }
 
 // The symbolic analysis (AMD order, elimination tree, column counts, fundamental supernodes and
@@ -216,42 +259,112 @@ UpperCsc RandomMatrix(int block, int components, int degree, uint32_t seed,
 // are exact.
 TEST(LocalCholeskyTest, AnalysisMatchesTheDenseFactor) {
   for (uint32_t seed : {1u, 2u, 3u}) {
+    SCOPED_TRACE(seed);
     Eigen::MatrixXd dense;
     const UpperCsc A = RandomMatrix(150, 3, 6, seed, &dense);
     LocalCholesky chol;
     ASSERT_TRUE(chol.Factorize(A, nullptr).ok());
-    const std::vector<int32_t>& perm = chol.permutation();
-    ASSERT_EQ(perm.size(), static_cast<size_t>(A.n));
-    std::vector<int> seen(A.n, 0);
-    for (int32_t p : perm) {
-      ASSERT_GE(p, 0);
-      ASSERT_LT(p, A.n);
-      ++seen[p];
-    }
-    EXPECT_EQ(*std::min_element(seen.begin(), seen.end()), 1);
-    Eigen::MatrixXd permuted(A.n, A.n);
-    for (int i = 0; i < A.n; ++i) {
-      for (int j = 0; j < A.n; ++j) permuted(i, j) = dense(perm[i], perm[j]);
-    }
-    const Eigen::MatrixXd L = permuted.llt().matrixL();
-    int64_t nonzeros = 0;
-    double squares = 0;
-    for (int j = 0; j < A.n; ++j) {
-      int64_t count = 0;
-      for (int i = j; i < A.n; ++i) count += L(i, j) != 0.0;
-      nonzeros += count;
-      squares += static_cast<double>(count) * count;
-    }
-    EXPECT_EQ(chol.flops(), squares) << "seed " << seed;
-    EXPECT_GE(chol.factor_nonzeros(), nonzeros);
-    EXPECT_LT(chol.factor_nonzeros(), nonzeros + nonzeros / 4);
+    const int64_t nonzeros = ExpectAnalysisMatchesDenseFactor(chol, dense);
     // Fill well below the dense triangle's (the order is fill-reducing).
     EXPECT_LT(nonzeros, int64_t{A.n} * A.n / 8);
     const Eigen::MatrixXd B = Eigen::MatrixXd::Random(A.n, 4);
     Eigen::MatrixXd X = B;
     chol.SolveInPlace(X.data(), 4);
-    EXPECT_LT((dense * X - B).norm() / B.norm(), 1e-13) << "seed " << seed;
+    EXPECT_LT((dense * X - B).norm() / B.norm(), 1e-13);
   }
+}
+
+// A caller's order instead of AMD's: natural, reversed, shuffled and AMD's own (through
+// MinimumDegreeOrder) all factor and solve exactly, each analyzed as its own permutation says
+// (up to the postorder the analysis applies, which keeps the fill), and the natural order of a
+// grid (a band) fills more than AMD's.
+TEST(LocalCholeskyTest, FactorsAGivenOrder) {
+  Eigen::MatrixXd dense;
+  const UpperCsc A = GridMatrix(23, 17, 0.1, &dense);
+  const int32_t n = A.n;
+  std::vector<int32_t> natural(n), reversed(n), shuffled(n), amd;
+  for (int32_t i = 0; i < n; ++i) natural[i] = reversed[n - 1 - i] = shuffled[i] = i;
+  uint64_t state = 7;
+  for (int32_t i = n - 1; i > 0; --i) {
+    state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+    std::swap(shuffled[i], shuffled[static_cast<int32_t>((state >> 33) % (i + 1))]);
+  }
+  LocalCholesky chol;
+  ASSERT_TRUE(chol.MinimumDegreeOrder(A, n, &amd).ok());
+  std::vector<int64_t> fill;
+  for (const std::vector<int32_t>* order : {&natural, &reversed, &shuffled, &amd}) {
+    SCOPED_TRACE(fill.size());
+    ASSERT_TRUE(chol.Factorize(A, nullptr, order).ok());
+    // (A random order's supernodes near the root are wide: their upper triangles add more.)
+    fill.push_back(ExpectAnalysisMatchesDenseFactor(chol, dense, order == &shuffled ? 1.0 : 0.25));
+    const Eigen::MatrixXd B = Eigen::MatrixXd::Random(n, 2);
+    Eigen::MatrixXd X = B;
+    chol.SolveInPlace(X.data(), 2);
+    EXPECT_LT((dense * X - B).norm() / B.norm(), 1e-12);
+  }
+  // A band of width 23: about 23 entries a column.
+  EXPECT_GT(fill[0], 20 * n);
+  EXPECT_LT(fill[3], fill[0] * 2 / 3);
+  // AMD's order given is AMD's order taken.
+  ASSERT_TRUE(chol.Factorize(A, nullptr).ok());
+  EXPECT_EQ(chol.factor_nonzeros(), [&] {
+    LocalCholesky given;
+    EXPECT_TRUE(given.Factorize(A, nullptr, &amd).ok());
+    return given.factor_nonzeros();
+  }());
+}
+
+TEST(LocalCholeskyTest, RejectsOrdersThatAreNotPermutations) {
+  Eigen::MatrixXd dense;
+  const UpperCsc A = GridMatrix(6, 5, 0.1, &dense);
+  std::vector<int32_t> order(A.n);
+  for (int32_t i = 0; i < A.n; ++i) order[i] = i;
+  std::vector<std::vector<int32_t>> bad(4, order);
+  bad[0].pop_back();      // too short
+  bad[1][3] = bad[1][4];  // a duplicate
+  bad[2][0] = A.n;        // out of range
+  bad[3][A.n - 1] = -1;   // negative
+  LocalCholesky chol;
+  for (const std::vector<int32_t>& b : bad) {
+    EXPECT_EQ(chol.Factorize(A, nullptr, &b).code(), absl::StatusCode::kInvalidArgument);
+  }
+  // The instance is still good for the next system.
+  ASSERT_TRUE(chol.Factorize(A, nullptr, &order).ok());
+  Eigen::VectorXd x = Eigen::VectorXd::Ones(A.n);
+  chol.SolveInPlace(x.data(), 1);
+  EXPECT_LT((dense * x - Eigen::VectorXd::Ones(A.n)).norm(), 1e-12);
+}
+
+// AMD on the leading block of a matrix orders that block as AMD on the block alone does: the
+// rows after it, coupled to it and to each other, do not enter.
+TEST(LocalCholeskyTest, MinimumDegreeOrderOfTheLeadingBlock) {
+  Eigen::MatrixXd grid;
+  GridMatrix(12, 9, 0.1, &grid);
+  // Through UpperFromDense as A below: AMD breaks ties by the order of the adjacency lists.
+  const UpperCsc G = UpperFromDense(grid);
+  const int n1 = G.n, n = n1 + 40;
+  Eigen::MatrixXd dense = Eigen::MatrixXd::Zero(n, n);
+  dense.topLeftCorner(n1, n1) = grid;
+  for (int t = 0; t < 40; ++t) {
+    const int i = n1 + t;
+    dense(i, (7 * t) % n1) = dense((7 * t) % n1, i) = -0.5;
+    if (t + 1 < 40) dense(i, i + 1) = dense(i + 1, i) = -0.5;
+    dense(i, i) = 3.0;
+  }
+  for (int i = 0; i < n1; ++i) dense(i, i) += 1.0;
+  const UpperCsc A = UpperFromDense(dense);
+  LocalCholesky chol;
+  std::vector<int32_t> of_block, of_grid;
+  ASSERT_TRUE(chol.MinimumDegreeOrder(A, n1, &of_block).ok());
+  ASSERT_TRUE(chol.MinimumDegreeOrder(G, n1, &of_grid).ok());
+  EXPECT_EQ(of_block, of_grid);
+  std::vector<int32_t> sorted = of_block;
+  std::sort(sorted.begin(), sorted.end());
+  for (int i = 0; i < n1; ++i) ASSERT_EQ(sorted[i], i);
+  std::vector<int32_t> none = {1, 2};
+  ASSERT_TRUE(chol.MinimumDegreeOrder(A, 0, &none).ok());
+  EXPECT_TRUE(none.empty());
+  EXPECT_EQ(chol.MinimumDegreeOrder(A, n + 1, &none).code(), absl::StatusCode::kInvalidArgument);
 }
 
 // Systems without off-diagonal entries: one row, and a diagonal (every column its own
