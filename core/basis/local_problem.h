@@ -34,7 +34,8 @@ struct RegionWorkspace {
   std::vector<int32_t> touched;
   std::vector<int32_t> marker;     // assembly scratch
   std::vector<int32_t> outer_map;  // k, global DOF -> row of S~ V outside the region (clamped)
-  // The Hodge factor's order of K (InducedNodeOrder) and its scratch.
+  // The order the local system is factored in (InducedNodeOrder for the Hodge factor's K,
+  // LocalCholesky::BlockMinimumDegreeOrder otherwise) and its scratch.
   std::vector<int32_t> order, vertex_order, rank, edge_low, edge_high, bucket;
 };
 
@@ -56,10 +57,15 @@ class RestrictedLocalOperator final : public LocalOperator {
   void ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;
   absl::Status PrepareShiftInverse(const CancelToken& cancel) override;
   void ApplyShiftInverse(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y) override;
+  // (S_bar + tau I) Y = X, so S_bar Y = X - tau Y without a product with S_bar: its rounding is
+  // the factorization's, of the order of the product's own (|S_bar| eps |Y|).
+  void ApplyShiftInverseAndStiffness(const Eigen::MatrixXd& X, Eigen::MatrixXd* Y,
+                                     Eigen::MatrixXd* SY) override;
   double shift() const override { return tau_; }
 
  private:
   int32_t n_ = 0;
+  int32_t dofs_per_face_ = 1;  // the factorization orders the faces, each face's DOFs together
   double tau_ = 0;
   RegionWorkspace& ws_;
   std::vector<int32_t> outer_, inner_;  // S_bar, both triangles, CSC, sorted rows

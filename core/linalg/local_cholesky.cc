@@ -167,6 +167,41 @@ absl::Status LocalCholesky::MinimumDegreeOrder(const UpperCsc& A, int32_t n,
   return absl::OkStatus();
 }
 
+absl::Status LocalCholesky::BlockMinimumDegreeOrder(const UpperCsc& A, int32_t block,
+                                                    std::vector<int32_t>* order) {
+  if (block < 1 || A.n % block != 0) {
+    return absl::InvalidArgumentError("the block size does not divide the matrix");
+  }
+  if (block == 1) return MinimumDegreeOrder(A, A.n, order);
+  // The blocks' upper pattern (each coupling once, by a marker per block column), then AMD on it.
+  const int32_t nb = A.n / block;
+  UpperCsc& quotient = quotient_;
+  quotient.n = nb;
+  quotient.outer.assign(1, 0);
+  quotient.inner.clear();
+  std::vector<int32_t>& marker = head_;
+  marker.assign(nb, -1);
+  for (int32_t jb = 0; jb < nb; ++jb) {
+    for (int32_t j = jb * block; j < (jb + 1) * block; ++j) {
+      for (int32_t p = A.outer[j]; p < A.outer[j + 1]; ++p) {
+        const int32_t ib = A.inner[p] / block;
+        if (ib >= jb || marker[ib] == jb) continue;
+        marker[ib] = jb;
+        quotient.inner.push_back(ib);
+      }
+    }
+    quotient.outer.push_back(static_cast<int32_t>(quotient.inner.size()));
+  }
+  std::vector<int32_t>& block_order = next_;
+  if (absl::Status built = BuildAdjacency(quotient, nb); !built.ok()) return built;
+  Amd(nb, &block_order);
+  order->resize(A.n);
+  for (int32_t k = 0; k < nb; ++k) {
+    for (int32_t c = 0; c < block; ++c) (*order)[k * block + c] = block_order[k] * block + c;
+  }
+  return absl::OkStatus();
+}
+
 absl::Status LocalCholesky::Analyze(const UpperCsc& A, const std::vector<int32_t>* order) {
   const int32_t n = A.n;
   // The adjacency of A + A^T as CSC: the elimination tree below walks it in the permuted order.
@@ -544,6 +579,8 @@ void LocalCholesky::ReleaseScratch() {
   }
   std::vector<double>().swap(c_values_);
   std::vector<double>().swap(update_);
+  std::vector<int32_t>().swap(quotient_.outer);
+  std::vector<int32_t>().swap(quotient_.inner);
 }
 
 void LocalCholesky::SolveInPlace(double* X, int32_t p) {
