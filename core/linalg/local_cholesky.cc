@@ -172,7 +172,7 @@ absl::Status LocalCholesky::BlockMinimumDegreeOrder(const UpperCsc& A, int32_t b
   if (block < 1 || A.n % block != 0) {
     return absl::InvalidArgumentError("the block size does not divide the matrix");
   }
-  if (block == 1) return MinimumDegreeOrder(A, A.n, order);
+  if (block == 1 || A.n == 0) return MinimumDegreeOrder(A, A.n, order);
   // The blocks' upper pattern (each coupling once, by a marker per block column), then AMD on it.
   const int32_t nb = A.n / block;
   UpperCsc& quotient = quotient_;
