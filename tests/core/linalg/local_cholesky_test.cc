@@ -416,6 +416,11 @@ TEST(LocalCholeskyTest, BlockMinimumDegreeOrderKeepsBlocksTogether) {
   EXPECT_EQ(ones, plain);
   EXPECT_EQ(chol.BlockMinimumDegreeOrder(A, 3, &order).code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(chol.BlockMinimumDegreeOrder(A, 0, &order).code(), absl::StatusCode::kInvalidArgument);
+  // No rows: no order.
+  UpperCsc empty;
+  empty.outer = {0};
+  ASSERT_TRUE(chol.BlockMinimumDegreeOrder(empty, 2, &order).ok());
+  EXPECT_TRUE(order.empty());
 }
 
 // Systems without off-diagonal entries: one row, and a diagonal (every column its own
