@@ -40,20 +40,24 @@ Eigen::MatrixXd Orthonormalize(const Eigen::MatrixXd& B) {
 // every product streaming two whole columns from memory (a region's blocks are 0.3-1 MB each).
 constexpr Eigen::Index kRowChunk = 512;
 
+// f(first, length) for consecutive chunks of kRowChunk rows covering [0, n).
+template <typename F>
+void ForRowChunks(Eigen::Index n, F&& f) {
+  for (Eigen::Index r0 = 0; r0 < n; r0 += kRowChunk) f(r0, std::min(kRowChunk, n - r0));
+}
+
 // out = A^T B for tall blocks A, B (n x p each, p small), chunk by chunk of rows, one vectorized
 // dot product per entry and chunk. (Eigen's matrix product packs both operands for such shapes
 // and was twice as slow here.)
 template <typename Out>
 void InnerProducts(const Eigen::MatrixXd& A, const Eigen::MatrixXd& B, Out&& out) {
   out.setZero();
-  const Eigen::Index n = A.rows();
-  for (Eigen::Index r0 = 0; r0 < n; r0 += kRowChunk) {
-    const Eigen::Index len = std::min(kRowChunk, n - r0);
+  ForRowChunks(A.rows(), [&](Eigen::Index r0, Eigen::Index len) {
     for (Eigen::Index r = 0; r < A.cols(); ++r) {
       const auto a = A.col(r).segment(r0, len);
       for (Eigen::Index c = 0; c < B.cols(); ++c) out(r, c) += a.dot(B.col(c).segment(r0, len));
     }
-  }
+  });
 }
 
 // The Gram matrices of LOBPCG's trial basis V = [X, W, P] (the first nb of `blocks`, n x p
@@ -73,15 +77,13 @@ void TrialGram(const std::array<const Eigen::MatrixXd*, 3>& blocks,
     }
   }
   using ConstSegment = Eigen::Map<const Eigen::VectorXd>;
-  const Eigen::Index n = blocks[0]->rows();
-  for (Eigen::Index r0 = 0; r0 < n; r0 += kRowChunk) {
-    const Eigen::Index len = std::min(kRowChunk, n - r0);
+  ForRowChunks(blocks[0]->rows(), [&](Eigen::Index r0, Eigen::Index len) {
     for (int32_t i = 0; i < q; ++i) {
       const ConstSegment vi(v[i] + r0, len);
       for (int32_t j = i; j < q; ++j) G(i, j) += vi.dot(ConstSegment(v[j] + r0, len));
       for (int32_t j = 0; j < q; ++j) H(i, j) += vi.dot(ConstSegment(sv[j] + r0, len));
     }
-  }
+  });
   G.triangularView<Eigen::StrictlyLower>() = G.transpose();
 }
 
@@ -92,9 +94,7 @@ void ProjectOut(const Eigen::MatrixXd& X, const Eigen::MatrixXd& SX, Eigen::Matr
   const Eigen::Index p = X.cols();
   Eigen::MatrixXd a(p, W.cols());
   InnerProducts(X, W, a);
-  const Eigen::Index n = X.rows();
-  for (Eigen::Index r0 = 0; r0 < n; r0 += kRowChunk) {
-    const Eigen::Index len = std::min(kRowChunk, n - r0);
+  ForRowChunks(X.rows(), [&](Eigen::Index r0, Eigen::Index len) {
     for (Eigen::Index c = 0; c < W.cols(); ++c) {
       auto w = W.col(c).segment(r0, len);
       auto sw = SW.col(c).segment(r0, len);
@@ -103,7 +103,7 @@ void ProjectOut(const Eigen::MatrixXd& X, const Eigen::MatrixXd& SX, Eigen::Matr
         sw -= a(k, c) * SX.col(k).segment(r0, len);
       }
     }
-  }
+  });
 }
 
 // LOBPCG's update of its blocks from the Ritz coefficients C = [C_X; C_W; C_P] (q x p, C_P only
