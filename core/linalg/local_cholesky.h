@@ -26,11 +26,11 @@ struct UpperCsc {
 // kernels run at ~1 GFlop/s and its simplicial one is no faster; and its analysis around the
 // ordering (transposes, a copy, a second postorder) cost as much as AMD itself on these small
 // systems. Here the ordering is AMD's (amd_2 on the pattern of A + A^T) or one the caller
-// derives from AMD on a block of A (MinimumDegreeOrder), the analysis the elimination tree,
-// column counts and fundamental supernodes of the permuted matrix, and the numeric factorization
-// a left-looking supernodal method (as CHOLMOD's) on Eigen's vectorized dense kernels,
-// sequential: the regions themselves run in parallel. One instance per thread, reused for region
-// after region (its workspace only grows).
+// derives from AMD on a part of A (MinimumDegreeOrder, BlockMinimumDegreeOrder), the analysis
+// the elimination tree, column counts and fundamental supernodes of the permuted matrix, and the
+// numeric factorization a left-looking supernodal method (as CHOLMOD's) on Eigen's vectorized
+// dense kernels, sequential: the regions themselves run in parallel. One instance per thread,
+// reused for region after region (its workspace only grows).
 class LocalCholesky {
  public:
   LocalCholesky();
