@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <iostream>
+#include <mutex>
 
 #include "absl/strings/str_cat.h"
 #include "client/cli_commands.h"
@@ -93,6 +94,8 @@ int Build(Cli& cli, const CommandLine& a) {
   absl::StatusOr<v1::BasisInfo> info =
       cli.client().BuildBasis(request, [&](const v1::BuildBasisProgress& progress) {
         interrupt.Name(progress.basis_id(), progress.joined());
+        // Not inside the Ctrl-C message (the interrupt writes to the same stream).
+        const std::lock_guard<std::mutex> output(interrupt.output_mutex());
         const double overall = progress.overall_fraction();
         const int percent = static_cast<int>(std::floor(100 * overall));
         if (tty) {
@@ -124,8 +127,11 @@ int Build(Cli& cli, const CommandLine& a) {
         last_decile = percent / 10;
         last_waiting_for = progress.waiting_for();
       });
-  if (tty) cli.err() << "\n";
-  if (!info.ok()) return cli.Fail(info.status(), "BuildBasis");
+  {
+    const std::lock_guard<std::mutex> output(interrupt.output_mutex());
+    if (tty) cli.err() << "\n";
+    if (!info.ok()) return cli.Fail(info.status(), "BuildBasis");
+  }
   JsonWriter j;
   WriteBasisInfo(j, *info);
   cli.Emit(j);

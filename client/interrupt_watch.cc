@@ -32,6 +32,7 @@ InterruptWatch::InterruptWatch(Callback on_interrupt) : on_interrupt_(std::move(
       basis_id = basis_id_;
       joined = joined_;
     }
+    const std::lock_guard<std::mutex> output(output_mutex_);
     on_interrupt_(basis_id, joined);
     std::_Exit(130);
   });

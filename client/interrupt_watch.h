@@ -26,11 +26,17 @@ class InterruptWatch {
   // The build the stream is about (from its first message on).
   void Name(const std::string& basis_id, bool joined);
 
+  // Held while on_interrupt runs and until the exit after it. The owner takes it around its own
+  // writes to the stream on_interrupt writes to (build progress on stderr), so that a line of
+  // one never lands inside a line of the other.
+  std::mutex& output_mutex() { return output_mutex_; }
+
  private:
   Callback on_interrupt_;
   struct sigaction previous_ = {};
   std::atomic<bool> stopping_{false};
   std::mutex mutex_;
+  std::mutex output_mutex_;
   std::string basis_id_;
   bool joined_ = false;
   std::thread thread_;
