@@ -72,6 +72,7 @@ namespace {
 using basis_internal::DiskEigenvalueEstimate;
 using basis_internal::HodgeFactorData;
 using basis_internal::HodgeLocalOperator;
+using basis_internal::kPrefetchFaces;
 using basis_internal::LocalEigenOptions;
 using basis_internal::LocalEigenResult;
 using basis_internal::ProgressTicker;
@@ -133,9 +134,17 @@ Eigen::MatrixXd SmoothStartFields(const TriangleMesh& mesh, const FieldType& typ
   const int32_t nfr = static_cast<int32_t>(faces.size());
   const Eigen::Vector3d cs = mesh.face_barycenters().row(sample).transpose();
   const Eigen::Vector3d dir = mesh.frame_x().row(sample).transpose();
+  // The region's faces are ascending but scattered over the mesh's rows (on a subdivided mesh
+  // nearly one cache line per face): their rows are prefetched kPrefetchFaces ahead.
+  const VertexMatrix& barycenters = mesh.face_barycenters();
+  const VertexMatrix& normals = mesh.face_normals();
+  const VertexMatrix& frame_x = mesh.frame_x();
+  const VertexMatrix& frame_y = mesh.frame_y();
+  const Eigen::VectorXd& areas = mesh.face_areas();
   double rmax = 0;
-  for (int32_t f : faces) {
-    rmax = std::max(rmax, (mesh.face_barycenters().row(f).transpose() - cs).norm());
+  for (int32_t i = 0; i < nfr; ++i) {
+    if (i + kPrefetchFaces < nfr) __builtin_prefetch(&barycenters(faces[i + kPrefetchFaces], 0));
+    rmax = std::max(rmax, (barycenters.row(faces[i]).transpose() - cs).norm());
   }
   const int32_t cols = std::min(m, type.kind == FieldKind::kTensor ? 3 : 2);
   Eigen::MatrixXd X(static_cast<Eigen::Index>(dpf) * nfr, cols);
@@ -143,14 +152,21 @@ Eigen::MatrixXd SmoothStartFields(const TriangleMesh& mesh, const FieldType& typ
                         : type.kind == FieldKind::kTensor ? 2
                                                           : 1;
   for (int32_t i = 0; i < nfr; ++i) {
+    if (i + kPrefetchFaces < nfr) {
+      const int32_t g = faces[i + kPrefetchFaces];
+      __builtin_prefetch(&barycenters(g, 0));
+      __builtin_prefetch(&normals(g, 0));
+      __builtin_prefetch(&frame_x(g, 0));
+      __builtin_prefetch(&frame_y(g, 0));
+      __builtin_prefetch(&areas[g]);
+    }
     const int32_t f = faces[i];
-    const Eigen::Vector3d c = mesh.face_barycenters().row(f).transpose();
-    const Eigen::Vector3d nf = mesh.face_normals().row(f).transpose();
+    const Eigen::Vector3d c = barycenters.row(f).transpose();
+    const Eigen::Vector3d nf = normals.row(f).transpose();
     const double t = rmax > 0 ? (c - cs).norm() / rmax : 0.0;
-    const double bump = std::cos(0.5 * M_PI * std::min(t, 1.0)) * std::sqrt(mesh.face_areas()[f]);
+    const double bump = std::cos(0.5 * M_PI * std::min(t, 1.0)) * std::sqrt(areas[f]);
     const Eigen::Vector3d d = dir - dir.dot(nf) * nf;
-    const double angle =
-        turns * std::atan2(d.dot(mesh.frame_y().row(f)), d.dot(mesh.frame_x().row(f)));
+    const double angle = turns * std::atan2(d.dot(frame_y.row(f)), d.dot(frame_x.row(f)));
     const double ca = std::cos(angle), sa = std::sin(angle);
     if (type.kind == FieldKind::kTensor) {
       // Mandel-Voigt (a11, a22, sqrt(2) a12): identity, and d d^T - I/2 at two angles.
@@ -318,8 +334,12 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
   const int32_t* outer = U.outerIndexPtr();
   auto solve_region = [&](int32_t r, RegionWorkspace& ws) -> absl::Status {
     const std::vector<int32_t>& faces = (*regions)[r];
+    const int32_t nfr = static_cast<int32_t>(faces.size());
     double region_area = 0.0;
-    for (int32_t f : faces) region_area += area[f];
+    for (int32_t i = 0; i < nfr; ++i) {
+      if (i + kPrefetchFaces < nfr) __builtin_prefetch(&area[faces[i + kPrefetchFaces]]);
+      region_area += area[faces[i]];
+    }
     const double lambda = DiskEigenvalueEstimate(region_area);
     const Eigen::MatrixXd start =
         SmoothStartFields(mesh, op.type, faces, basis.sample_faces[r], fields_of(r));
@@ -362,7 +382,6 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     if (res->lanczos_fallback) lanczos.fetch_add(1, std::memory_order_relaxed);
     iterations.fetch_add(res->iterations, std::memory_order_relaxed);
     const int32_t first_col = r * m;
-    const int32_t nfr = static_cast<int32_t>(faces.size());
     const int32_t count = eo.count;
     std::array<double, kMaxFieldsPerRegion> sign;
     for (int32_t c = 0; c < count; ++c) {
@@ -376,7 +395,20 @@ absl::StatusOr<Basis> Build(const TriangleMesh& mesh, const FieldOperator& op,
     // region's rows are scattered through it).
     const double* phi = res->vectors.data();
     const int64_t ld = res->vectors.rows();
+    // Each face's rows of U are a cache miss or two (U is hundreds of MB): their row offsets are
+    // prefetched 2 kPrefetchFaces faces ahead, the entries themselves kPrefetchFaces ahead.
     for (int32_t i = 0; i < nfr; ++i) {
+      if (i + 2 * kPrefetchFaces < nfr) {
+        __builtin_prefetch(&outer[dpf * static_cast<int64_t>(faces[i + 2 * kPrefetchFaces])]);
+      }
+      if (i + kPrefetchFaces < nfr) {
+        const int64_t g = faces[i + kPrefetchFaces];
+        for (int32_t q = 0; q < dpf; ++q) {
+          const int64_t pos = outer[dpf * g + q] + slot[r][i + kPrefetchFaces];
+          __builtin_prefetch(values + pos, 1);
+          __builtin_prefetch(columns + pos, 1);
+        }
+      }
       const int64_t f = faces[i];
       for (int32_t q = 0; q < dpf; ++q) {
         const int64_t row = dpf * f + q;

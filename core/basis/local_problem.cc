@@ -329,7 +329,21 @@ HodgeLocalOperator::HodgeLocalOperator(const TriangleMesh& mesh, const HodgeFact
   local_vertices.reserve(nfr / 2 + 16);
   local_edges.reserve(3 * nfr / 2 + 16);
   b_cols_.resize(6 * static_cast<size_t>(nfr));
+  // The faces' rows (F, FE, then the vertex and edge maps they index) are prefetched ahead: the
+  // region's faces, vertices and edges are scattered over the mesh's arrays.
   for (int32_t i = 0; i < nfr; ++i) {
+    if (i + 2 * kPrefetchFaces < nfr) {
+      const int32_t g = faces[i + 2 * kPrefetchFaces];
+      __builtin_prefetch(&F(g, 0));
+      __builtin_prefetch(&FE(g, 0));
+    }
+    if (i + kPrefetchFaces < nfr) {
+      const int32_t g = faces[i + kPrefetchFaces];
+      for (int k = 0; k < 3; ++k) {
+        __builtin_prefetch(&ws.vertex_map[F(g, k)], 1);
+        __builtin_prefetch(&ws.edge_map[FE(g, k)], 1);
+      }
+    }
     const int32_t f = faces[i];
     for (int k = 0; k < 3; ++k) {
       int32_t& lv = ws.vertex_map[F(f, k)];
@@ -353,7 +367,19 @@ HodgeLocalOperator::HodgeLocalOperator(const TriangleMesh& mesh, const HodgeFact
   boundary_edge_.resize(local_edges.size());
   for (size_t e = 0; e < local_edges.size(); ++e) boundary_edge_[e] = edge_count[e] == 1;
   b_vals_.resize(12 * static_cast<size_t>(nfr));
+  const VertexMatrix& X = mesh.vertices();
   for (int32_t i = 0; i < nfr; ++i) {
+    if (i + kPrefetchFaces < nfr) {
+      const int32_t g = faces[i + kPrefetchFaces];
+      __builtin_prefetch(&area[g]);
+      __builtin_prefetch(&mesh.frame_x()(g, 0));
+      __builtin_prefetch(&mesh.frame_y()(g, 0));
+      for (int k = 0; k < 3; ++k) {
+        __builtin_prefetch(&X(F(g, k), 0));
+        __builtin_prefetch(&data.inv_sqrt_vertex_mass[F(g, k)]);
+        __builtin_prefetch(&data.inv_sqrt_edge_mass[FE(g, k)]);
+      }
+    }
     const int32_t f = faces[i];
     const double s = 1.0 / std::sqrt(area[f]);  // V = M^-1/2
     double* row0 = &b_vals_[12 * i];

@@ -23,6 +23,11 @@ inline double DiskEigenvalueEstimate(double area) {
   return 5.783185962946784 * 3.141592653589793 / area;
 }
 
+// How far ahead (in faces) the per-face loops over a region prefetch the rows they will read: a
+// region's faces are ascending but scattered over the mesh's arrays (on a subdivided mesh, nearly
+// one cache line per face; bench/RESULTS.md, Session 32).
+inline constexpr int32_t kPrefetchFaces = 8;
+
 // Per-thread scratch reused from region to region: index maps that are -1 everywhere except
 // while a region is being built (reset through touched lists, O(region) per region), and the
 // sparse Cholesky workspace.
