@@ -151,25 +151,32 @@ TEST(SamplingTest, CancelledThroughPoll) {
 }
 
 TEST(RegionsTest, RegionsAreDualDisks) {
+  // 1,280 faces (the faces' indices sorted in one radix pass) and 20,480 (two passes).
+  for (int level : {3, 5}) {
+    const TriangleMesh mesh = Icosphere(level);
+    auto g = BuildDualGraph(mesh, {});
+    const std::vector<int32_t> samples = {0, 100, 700, mesh.num_faces() - 1};
+    RegionOptions options;
+    options.radius = 0.5;
+    auto regions = GrowRegions(*g, samples, options, nullptr);
+    ASSERT_TRUE(regions.ok());
+    for (size_t i = 0; i < samples.size(); ++i) {
+      const std::vector<double> d = DualDistances(mesh, samples[i]);
+      std::vector<int32_t> expected;
+      for (int32_t f = 0; f < mesh.num_faces(); ++f) {
+        if (d[f] <= 0.5) expected.push_back(f);
+      }
+      EXPECT_EQ((*regions)[i], expected) << "level " << level << ", sample " << samples[i];
+    }
+  }
   const TriangleMesh mesh = Icosphere(3);
   auto g = BuildDualGraph(mesh, {});
   const std::vector<int32_t> samples = {0, 100, 700};
   RegionOptions options;
-  options.radius = 0.5;
-  auto regions = GrowRegions(*g, samples, options, nullptr);
-  ASSERT_TRUE(regions.ok());
-  for (size_t i = 0; i < samples.size(); ++i) {
-    const std::vector<double> d = DualDistances(mesh, samples[i]);
-    std::vector<int32_t> expected;
-    for (int32_t f = 0; f < mesh.num_faces(); ++f) {
-      if (d[f] <= 0.5) expected.push_back(f);
-    }
-    EXPECT_EQ((*regions)[i], expected);
-  }
   // Tiny radius: only the sample, unless a minimum size is asked for.
   options.radius = 1e-9;
   options.min_faces = 4;
-  regions = GrowRegions(*g, samples, options, nullptr);
+  auto regions = GrowRegions(*g, samples, options, nullptr);
   ASSERT_TRUE(regions.ok());
   EXPECT_EQ((*regions)[0].size(), 4u);
   EXPECT_THAT(GrowRegions(*g, samples, options, &kCancelled),
