@@ -16,65 +16,6 @@
 namespace fieldspace::basis_internal {
 namespace {
 
-// Builds one triangle (in CSC) of a symmetric n x n matrix from unsorted (i, j) entries, each
-// pair once in either order, summing duplicates, and adds `diagonal_shift` to every diagonal
-// entry (creating it when absent). The upper triangle (row <= column) is what CHOLMOD's analysis
-// uses directly; storing the lower one costs it an extra transpose. `marker` is scratch of size
-// >= n, all -1 on entry and on exit.
-void AssembleUpper(int32_t n, const std::vector<int32_t>& cols, const std::vector<int32_t>& rows,
-                   const std::vector<double>& vals, double diagonal_shift,
-                   std::vector<int32_t>& marker, UpperCsc* out) {
-  const size_t m = cols.size();
-  std::vector<int32_t> start(static_cast<size_t>(n) + 1, 0);
-  for (size_t t = 0; t < m; ++t) ++start[std::max(cols[t], rows[t]) + 1];
-  for (int32_t j = 0; j < n; ++j) start[j + 1] += start[j];
-  std::vector<int32_t> bucket_rows(m);
-  std::vector<double> bucket_vals(m);
-  {
-    std::vector<int32_t> cursor(start.begin(), start.end() - 1);
-    for (size_t t = 0; t < m; ++t) {
-      const int32_t q = cursor[std::max(cols[t], rows[t])]++;
-      bucket_rows[q] = std::min(cols[t], rows[t]);
-      bucket_vals[q] = vals[t];
-    }
-  }
-  out->n = n;
-  out->outer.assign(static_cast<size_t>(n) + 1, 0);
-  out->inner.clear();
-  out->values.clear();
-  out->inner.reserve(m / 2 + n);
-  out->values.reserve(m / 2 + n);
-  for (int32_t j = 0; j < n; ++j) {
-    const size_t col_begin = out->inner.size();
-    marker[j] = static_cast<int32_t>(col_begin);
-    out->inner.push_back(j);
-    out->values.push_back(diagonal_shift);
-    for (int32_t q = start[j]; q < start[j + 1]; ++q) {
-      const int32_t r = bucket_rows[q];
-      if (marker[r] < 0) {
-        marker[r] = static_cast<int32_t>(out->inner.size());
-        out->inner.push_back(r);
-        out->values.push_back(bucket_vals[q]);
-      } else {
-        out->values[marker[r]] += bucket_vals[q];
-      }
-    }
-    for (size_t q = col_begin; q < out->inner.size(); ++q) marker[out->inner[q]] = -1;
-    out->outer[j + 1] = static_cast<int32_t>(out->inner.size());
-  }
-}
-
-// Frees the triplets AssembleUpper has consumed before the factorization starts: they take more
-// than the assembled matrix (up to 13 entries of 16 bytes per face for the Hodge factor's K,
-// whose duplicates AssembleUpper sums), and the factorization, with L and its own copies of K,
-// is where a region's memory peaks.
-void ReleaseTriplets(std::vector<int32_t>& cols, std::vector<int32_t>& rows,
-                     std::vector<double>& vals) {
-  std::vector<int32_t>().swap(cols);
-  std::vector<int32_t>().swap(rows);
-  std::vector<double>().swap(vals);
-}
-
 // The order's scratch, given back after a system as large as those whose factorization gives
 // back its own (LocalCholesky::kReleaseScratchRows): not kept beside a coarse region's factor.
 void ReleaseOrderScratch(int32_t rows, RegionWorkspace& ws) {
@@ -195,23 +136,28 @@ void RestrictedLocalOperator::ApplyStiffness(const Eigen::MatrixXd& X, Eigen::Ma
 }
 
 absl::Status RestrictedLocalOperator::PrepareShiftInverse(const CancelToken& cancel) {
-  std::vector<int32_t> cols, rows;
-  std::vector<double> vals;
-  cols.reserve(inner_.size() / 2 + n_);
-  rows.reserve(inner_.size() / 2 + n_);
-  vals.reserve(inner_.size() / 2 + n_);
-  for (int32_t j = 0; j < n_; ++j) {
-    for (int32_t q = outer_[j]; q < outer_[j + 1]; ++q) {
-      if (inner_[q] < j) continue;
-      cols.push_back(j);
-      rows.push_back(inner_[q]);
-      vals.push_back(values_[q]);
-    }
-  }
-  if (ws_.marker.size() < static_cast<size_t>(n_)) ws_.marker.resize(n_, -1);
+  // S_bar + tau I's upper triangle is S_bar's columns (both triangles, rows sorted) cut at the
+  // diagonal: each column's diagonal first (created when S_bar has none), then its rows above.
   UpperCsc A;
-  AssembleUpper(n_, cols, rows, vals, tau_, ws_.marker, &A);
-  ReleaseTriplets(cols, rows, vals);
+  A.n = n_;
+  A.outer.resize(static_cast<size_t>(n_) + 1);
+  A.outer[0] = 0;
+  A.inner.reserve(inner_.size() / 2 + n_);
+  A.values.reserve(inner_.size() / 2 + n_);
+  for (int32_t j = 0; j < n_; ++j) {
+    const size_t diagonal = A.inner.size();
+    A.inner.push_back(j);
+    A.values.push_back(tau_);
+    for (int32_t q = outer_[j]; q < outer_[j + 1] && inner_[q] <= j; ++q) {
+      if (inner_[q] == j) {
+        A.values[diagonal] += values_[q];
+      } else {
+        A.inner.push_back(inner_[q]);
+        A.values.push_back(values_[q]);
+      }
+    }
+    A.outer[j + 1] = static_cast<int32_t>(A.inner.size());
+  }
   // AMD on the faces (a face's DOFs couple to the same neighbours): the fill of AMD on the DOFs
   // for dofs_per_face^2 times fewer entries to read (bench/RESULTS.md, Session 31).
   RETURN_IF_ERROR(ws_.cholesky.BlockMinimumDegreeOrder(A, dofs_per_face_, &ws_.order));
@@ -465,44 +411,70 @@ void HodgeLocalOperator::ApplyStiffness(const Eigen::MatrixXd& X, Eigen::MatrixX
   ApplyB(Y, /*subtract=*/false);
 }
 
-absl::Status HodgeLocalOperator::PrepareShiftInverse(const CancelToken& cancel) {
-  // K = tau I + B_D^T B_D from each face's 2 x 6 block: vertex-vertex and edge-edge products
-  // always, vertex-edge products only for region-boundary edges (elsewhere the two faces of the
-  // edge cancel exactly: the discrete gradients and co-gradients are orthogonal), and never for
-  // a vertex with its opposite edge (J t . t = 0).
+UpperCsc HodgeLocalOperator::AssembleK() {
+  // From each face's 2 x 6 block, entry by entry, without sorting or summing duplicates:
+  // vertex-vertex products along the region's edges (one entry per edge, from its one or two
+  // faces), edge-edge products within a face (one entry per face and pair: two edges share at most
+  // one face), vertex-edge products only for the region-boundary edges and their endpoints
+  // (elsewhere the edge's two faces cancel exactly: the discrete gradients and co-gradients are
+  // orthogonal), never a vertex with its opposite edge (J t . t = 0).
   const int32_t nfr = n_ / 2;
-  std::vector<int32_t> cols, rows;
-  std::vector<double> vals;
-  cols.reserve(13 * static_cast<size_t>(nfr));
-  rows.reserve(13 * static_cast<size_t>(nfr));
-  vals.reserve(13 * static_cast<size_t>(nfr));
-  auto add = [&](int32_t a, int32_t b, double v) {
-    cols.push_back(std::min(a, b));
-    rows.push_back(std::max(a, b));
-    vals.push_back(v);
-  };
+  const int32_t nv = num_vertices_;
+  const int32_t ne = num_nodes_ - nv;
+  std::vector<double> diagonal(num_nodes_, tau_);
+  std::vector<double> along_edge(ne, 0.0);  // K(a, b) for the edge's endpoints a, b
+  std::vector<int32_t> low(ne), high(ne);   // its endpoints
+  UpperCsc K;
+  K.n = num_nodes_;
+  K.outer.assign(static_cast<size_t>(num_nodes_) + 1, 0);
+  int32_t* count = K.outer.data() + 1;  // entries per column, then their offsets
   for (int32_t i = 0; i < nfr; ++i) {
     const int32_t* c = &b_cols_[6 * i];
     const double* r0 = &b_vals_[12 * i];
     const double* r1 = r0 + 6;
-    for (int j = 0; j < 3; ++j) {
-      for (int k = j; k < 3; ++k) {
-        add(c[j], c[k], r0[j] * r0[k] + r1[j] * r1[k]);
-        add(c[3 + j], c[3 + k], r0[3 + j] * r0[3 + k] + r1[3 + j] * r1[3 + k]);
-      }
-    }
+    for (int j = 0; j < 6; ++j) diagonal[c[j]] += r0[j] * r0[j] + r1[j] * r1[j];
     for (int k = 0; k < 3; ++k) {
-      if (!boundary_edge_[c[3 + k] - num_vertices_]) continue;
+      const int32_t e = c[3 + k] - nv;
+      const int a = (k + 1) % 3, b = (k + 2) % 3;  // the edge opposite vertex k joins a and b
+      along_edge[e] += r0[a] * r0[b] + r1[a] * r1[b];
+      low[e] = std::min(c[a], c[b]);
+      high[e] = std::max(c[a], c[b]);
+      ++count[std::max(c[3 + a], c[3 + b])];  // the pair of edges opposite a and b
+      if (boundary_edge_[e]) count[c[3 + k]] += 2;
+    }
+  }
+  for (int32_t e = 0; e < ne; ++e) ++count[high[e]];
+  for (int32_t j = 0; j < num_nodes_; ++j) ++count[j];  // the diagonal
+  for (int32_t j = 0; j < num_nodes_; ++j) K.outer[j + 1] += K.outer[j];
+  K.inner.resize(K.outer[num_nodes_]);
+  K.values.resize(K.outer[num_nodes_]);
+  std::vector<int32_t>& cursor = ws_.cursor;
+  cursor.assign(K.outer.begin(), K.outer.end() - 1);
+  auto put = [&](int32_t row, int32_t col, double v) {
+    const int32_t q = cursor[col]++;
+    K.inner[q] = row;
+    K.values[q] = v;
+  };
+  for (int32_t j = 0; j < num_nodes_; ++j) put(j, j, diagonal[j]);
+  for (int32_t e = 0; e < ne; ++e) put(low[e], high[e], along_edge[e]);
+  for (int32_t i = 0; i < nfr; ++i) {
+    const int32_t* c = &b_cols_[6 * i];
+    const double* r0 = &b_vals_[12 * i];
+    const double* r1 = r0 + 6;
+    for (int k = 0; k < 3; ++k) {
+      const int a = 3 + (k + 1) % 3, b = 3 + (k + 2) % 3;
+      put(std::min(c[a], c[b]), std::max(c[a], c[b]), r0[a] * r0[b] + r1[a] * r1[b]);
+      if (!boundary_edge_[c[3 + k] - nv]) continue;
       for (int j = 0; j < 3; ++j) {
-        if (j == k) continue;
-        add(c[j], c[3 + k], r0[j] * r0[3 + k] + r1[j] * r1[3 + k]);
+        if (j != k) put(c[j], c[3 + k], r0[j] * r0[3 + k] + r1[j] * r1[3 + k]);
       }
     }
   }
-  if (ws_.marker.size() < static_cast<size_t>(num_nodes_)) ws_.marker.resize(num_nodes_, -1);
-  UpperCsc K;
-  AssembleUpper(num_nodes_, cols, rows, vals, tau_, ws_.marker, &K);
-  ReleaseTriplets(cols, rows, vals);
+  return K;
+}
+
+absl::Status HodgeLocalOperator::PrepareShiftInverse(const CancelToken& cancel) {
+  const UpperCsc K = AssembleK();
   RETURN_IF_ERROR(InducedNodeOrder(K, num_vertices_, b_cols_, ws_));
   absl::Status factored = ws_.cholesky.Factorize(K, cancel, &ws_.order);
   ReleaseOrderScratch(num_nodes_, ws_);

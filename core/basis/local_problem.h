@@ -37,7 +37,7 @@ struct RegionWorkspace {
   std::vector<int32_t> edge_map;    // #E
   LocalCholesky cholesky;
   std::vector<int32_t> touched;
-  std::vector<int32_t> marker;     // assembly scratch
+  std::vector<int32_t> cursor;     // assembly scratch
   std::vector<int32_t> outer_map;  // k, global DOF -> row of S~ V outside the region (clamped)
   // The order the local system is factored in (InducedNodeOrder for the Hodge factor's K,
   // LocalCholesky::BlockMinimumDegreeOrder otherwise) and its scratch.
@@ -133,6 +133,8 @@ class HodgeLocalOperator final : public LocalOperator {
   double shift() const override { return tau_; }
 
  private:
+  // K = tau I + B_D^T B_D (upper triangle, nodes numbered vertices first, then edges).
+  UpperCsc AssembleK();
   // zr_ = B_D^T X (N x p).
   void ApplyBt(const Eigen::MatrixXd& X);
   // Y = B_D zr_ (n x p), or Y -= B_D zr_.

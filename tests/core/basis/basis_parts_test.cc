@@ -4,6 +4,8 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <numeric>
 #include <set>
 #include <utility>
 #include <vector>
@@ -28,13 +30,18 @@
 namespace fieldspace {
 namespace {
 
+using basis_internal::BuildHodgeFactorData;
+using basis_internal::HodgeFactorData;
+using basis_internal::HodgeLocalOperator;
 using basis_internal::InducedNodeOrder;
 using basis_internal::LocalEigenOptions;
 using basis_internal::LocalOperator;
 using basis_internal::RegionWorkspace;
+using basis_internal::RestrictedLocalOperator;
 using ::fieldspace::testing::StatusIs;
 using testing::DualDistances;
 using testing::Icosphere;
+using testing::MustBuildOperator;
 using testing::TwoSpheres;
 
 // A flag that is already set: the cancellation paths return at their first check.
@@ -181,6 +188,52 @@ TEST(RegionsTest, RegionsAreDualDisks) {
   EXPECT_EQ((*regions)[0].size(), 4u);
   EXPECT_THAT(GrowRegions(*g, samples, options, &kCancelled),
               StatusIs(absl::StatusCode::kCancelled));
+}
+
+// The local problems' shift-inverses solve (S_bar + tau I) Y = X, with S_bar taken from their own
+// ApplyStiffness: the Hodge factor's K = tau I + B_D^T B_D assembled entry by entry from the faces
+// (whose rim couples the boundary edges with their endpoints), and S_bar + tau I cut from S (also
+// clamped), on a cap of the sphere and on the whole closed sphere.
+TEST(LocalOperatorTest, ShiftInverseSolvesTheShiftedSystem) {
+  const TriangleMesh mesh = Icosphere(4);
+  const FieldOperator op = MustBuildOperator(mesh, FieldType::Vector());
+  const Eigen::VectorXd inv_sqrt_mass = op.mass.cwiseSqrt().cwiseInverse();
+  const HodgeFactorData hodge = BuildHodgeFactorData(mesh);
+  auto g = BuildDualGraph(mesh, {});
+  ASSERT_TRUE(g.ok());
+  RegionOptions options;
+  options.radius = 0.8;
+  auto cap = GrowRegions(*g, {0}, options, nullptr);
+  ASSERT_TRUE(cap.ok());
+  std::vector<int32_t> sphere(mesh.num_faces());
+  std::iota(sphere.begin(), sphere.end(), 0);
+  ASSERT_GT((*cap)[0].size(), 300u);
+  ASSERT_LT((*cap)[0].size(), sphere.size() / 2);
+  for (const std::vector<int32_t>* faces : {&(*cap)[0], &sphere}) {
+    for (int kind = 0; kind < 3; ++kind) {
+      SCOPED_TRACE(::testing::Message() << faces->size() << " faces, operator " << kind);
+      RegionWorkspace ws;
+      const double tau = 0.5;
+      std::unique_ptr<LocalOperator> local;
+      if (kind == 0) {
+        local = std::make_unique<HodgeLocalOperator>(mesh, hodge, *faces, tau, ws);
+      } else {
+        local = std::make_unique<RestrictedLocalOperator>(op, inv_sqrt_mass, *faces, tau, ws,
+                                                          /*clamped=*/kind == 2);
+      }
+      ASSERT_EQ(local->size(), 2 * static_cast<int32_t>(faces->size()));
+      ASSERT_TRUE(local->PrepareShiftInverse(nullptr).ok());
+      const Eigen::MatrixXd X = Eigen::MatrixXd::Random(local->size(), 3);
+      Eigen::MatrixXd Y, SY, Y2, SY2;
+      local->ApplyShiftInverse(X, &Y);
+      local->ApplyStiffness(Y, &SY);
+      const double scale = X.cwiseAbs().maxCoeff() + SY.cwiseAbs().maxCoeff();
+      EXPECT_LE((SY + tau * Y - X).cwiseAbs().maxCoeff(), 1e-9 * scale);
+      local->ApplyShiftInverseAndStiffness(X, &Y2, &SY2);
+      EXPECT_LE((Y2 - Y).cwiseAbs().maxCoeff(), 1e-9 * Y.cwiseAbs().maxCoeff());
+      EXPECT_LE((SY2 - SY).cwiseAbs().maxCoeff(), 1e-9 * scale);
+    }
+  }
 }
 
 // S = 1D Dirichlet Laplacian (tridiagonal 2, -1): eigenvalues 2 - 2 cos(k pi / (n + 1)).
