@@ -166,8 +166,22 @@ Eigen::MatrixXd SmoothStartFields(const TriangleMesh& mesh, const FieldType& typ
     const double t = rmax > 0 ? (c - cs).norm() / rmax : 0.0;
     const double bump = std::cos(0.5 * M_PI * std::min(t, 1.0)) * std::sqrt(areas[f]);
     const Eigen::Vector3d d = dir - dir.dot(nf) * nf;
-    const double angle = turns * std::atan2(d.dot(frame_y.row(f)), d.dot(frame_x.row(f)));
-    const double ca = std::cos(angle), sa = std::sin(angle);
+    // (cos, sin) of `turns` times the angle of d in the face's frame: the unit complex number
+    // of that direction to the power `turns`, by squaring (no trigonometry; turns <= 64).
+    const double dx = d.dot(frame_x.row(f)), dy = d.dot(frame_y.row(f));
+    const double norm = std::sqrt(dx * dx + dy * dy);
+    double zr = norm > 0.0 ? dx / norm : 1.0, zi = norm > 0.0 ? dy / norm : 0.0;
+    double ca = 1.0, sa = 0.0;
+    for (int32_t e = turns; e > 0; e >>= 1) {
+      if (e & 1) {
+        const double r = ca * zr - sa * zi;
+        sa = ca * zi + sa * zr;
+        ca = r;
+      }
+      const double r = zr * zr - zi * zi;
+      zi = 2.0 * zr * zi;
+      zr = r;
+    }
     if (type.kind == FieldKind::kTensor) {
       // Mandel-Voigt (a11, a22, sqrt(2) a12): identity, and d d^T - I/2 at two angles.
       const double fields[3][3] = {{1.0, 1.0, 0.0},
