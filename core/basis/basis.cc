@@ -23,6 +23,7 @@
 #include "core/common/random.h"
 #include "core/common/status_macros.h"
 #include "core/common/timing.h"
+#include "core/operators/complex_power.h"
 #include "core/operators/kernel_fields.h"
 #include "tbb/blocked_range.h"
 #include "tbb/enumerable_thread_specific.h"
@@ -166,22 +167,12 @@ Eigen::MatrixXd SmoothStartFields(const TriangleMesh& mesh, const FieldType& typ
     const double t = rmax > 0 ? (c - cs).norm() / rmax : 0.0;
     const double bump = std::cos(0.5 * M_PI * std::min(t, 1.0)) * std::sqrt(areas[f]);
     const Eigen::Vector3d d = dir - dir.dot(nf) * nf;
-    // (cos, sin) of `turns` times the angle of d in the face's frame: the unit complex number
-    // of that direction to the power `turns`, by squaring (no trigonometry; turns <= 64).
+    // (cos, sin) of `turns` times the angle of d in the face's frame, without trigonometry.
     const double dx = d.dot(frame_x.row(f)), dy = d.dot(frame_y.row(f));
     const double norm = std::sqrt(dx * dx + dy * dy);
-    double zr = norm > 0.0 ? dx / norm : 1.0, zi = norm > 0.0 ? dy / norm : 0.0;
-    double ca = 1.0, sa = 0.0;
-    for (int32_t e = turns; e > 0; e >>= 1) {
-      if (e & 1) {
-        const double r = ca * zr - sa * zi;
-        sa = ca * zi + sa * zr;
-        ca = r;
-      }
-      const double r = zr * zr - zi * zi;
-      zi = 2.0 * zr * zi;
-      zr = r;
-    }
+    const Eigen::Vector2d w =
+        norm > 0.0 ? UnitComplexPower({dx / norm, dy / norm}, turns) : Eigen::Vector2d(1.0, 0.0);
+    const double ca = w[0], sa = w[1];
     if (type.kind == FieldKind::kTensor) {
       // Mandel-Voigt (a11, a22, sqrt(2) a12): identity, and d d^T - I/2 at two angles.
       const double fields[3][3] = {{1.0, 1.0, 0.0},
